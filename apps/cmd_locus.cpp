@@ -1,0 +1,137 @@
+// flatland locus: the butterfly solutions k(2T) over a range of durations (paper Fig. 7).
+#include "common.hpp"
+
+#include <chrono>
+#include <iostream>
+#include <memory>
+#include <sstream>
+
+namespace flatland::app {
+
+namespace {
+
+struct LocusOptions {
+  CommonOptions common;
+  double from = 1.1, to = 3.0, tolerance = 1e-9;
+  int n = 20;
+};
+
+std::string locus_csv(const std::vector<sim::SolveReport>& points) {
+  std::string s = "period,k,fn_min_ratio,fn_apex_ratio,mu_required,s_end,sdot_end\n";
+  for (const auto& p : points)
+    s += format_number(p.period) + "," + format_number(p.k) + "," + format_number(p.fn_min_ratio) +
+         "," + format_number(p.fn_apex_ratio) + "," + format_number(p.mu_required) + "," +
+         format_number(p.s_end) + "," + format_number(p.sdot_end) + "\n";
+  return s;
+}
+
+void run_locus(const LocusOptions& o) {
+  Scene scene = load_scene_with_overrides(o.common);
+  sim::SimulationSpec& spec = scene.sim;
+  spec.motion.kind = sim::MotionSpec::Kind::kButterfly;
+  require_positive("--from", o.from, "2T in s");
+  require_positive("--to", o.to, "2T in s");
+  require_increasing("--from", o.from, "--to", o.to);
+  if (o.n < 1) throw UsageError("--n: must be at least 1, got " + std::to_string(o.n));
+  require_positive("--tolerance", o.tolerance, "");
+  spec.motion.period = o.from;
+  sim::build_problem(spec);
+  const fs::path dir = o.common.out;
+  if (!dir.empty() && fs::exists(dir) && !fs::is_directory(dir))
+    throw UsageError("--out: not a directory: " + o.common.out);
+  const bool plots = !dir.empty() && !o.common.no_plot;
+  if (plots) require_gnuplot();
+
+  sim::SearchSettings settings;
+  settings.tolerance = o.tolerance;
+  std::cerr << "flatland: solving the locus at " << o.n << " periods in [" << format_number(o.from)
+            << ", " << format_number(o.to) << "] s\n";
+  const auto start = std::chrono::steady_clock::now();
+  std::vector<sim::SolveReport> points;
+  {
+    ProgressBar bar("locus");
+    points = sim::locus(spec, o.from, o.to, o.n, settings, bar.callback());
+  }
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+
+  OutputSet outputs;
+  std::string csv_path, png_path;
+  if (!dir.empty()) {
+    outputs.ensure_directory(dir);
+    outputs.stage(dir / "locus.csv", locus_csv(points));
+    csv_path = (dir / "locus.csv").string();
+    if (plots) {
+      run_plot(outputs, dir,
+               {"locus.gp", "locus.csv", "locus.png",
+                "set multiplot layout 2,1 title 'Butterfly solutions (paper Fig. 7)'\n"
+                "set grid\n"
+                "set xlabel '2T (s)'\n"
+                "set ylabel 'k'\n"
+                "plot datafile skip 1 using 1:2 with linespoints lw 2 pt 7 title 'k solving s_h(T) "
+                "= 0'\n"
+                "set ylabel 'min f_n / (m g)'\n"
+                "set key bottom right\n"
+                "plot datafile skip 1 using 1:3 with linespoints lw 2 pt 7 title 'minimum normal "
+                "force ratio', "
+                "0 with lines lc 'black' notitle\n"
+                "unset multiplot\n"});
+      png_path = (dir / "locus.png").string();
+    }
+    outputs.commit();
+  }
+
+  if (o.common.json) {
+    Json j;
+    Json arr = Json::array();
+    for (const auto& p : points) {
+      Json q;
+      q["period"] = number(p.period);
+      q["k"] = number(p.k);
+      q["fn_min_ratio"] = number(p.fn_min_ratio);
+      q["mu_required"] = number(p.mu_required);
+      q["contact_lost"] = p.fn_min_ratio < 0;
+      arr.push_back(q);
+    }
+    j["points"] = arr;
+    j["csv"] = csv_path.empty() ? Json(nullptr) : Json(csv_path);
+    j["png"] = png_path.empty() ? Json(nullptr) : Json(png_path);
+    j["seconds"] = seconds;
+    emit_json(j);
+    return;
+  }
+  std::ostringstream os;
+  os << "flatland locus: " << points.size() << " solutions (" << scene.origin << ")\n"
+     << "      2T (s)            k   min f_n/mg  required mu\n";
+  for (const auto& p : points) {
+    char line[128];
+    std::snprintf(line, sizeof line, "  %10.5f  %11.6f  %11.5f  %11.5f%s\n", p.period, p.k,
+                  p.fn_min_ratio, p.mu_required, p.fn_min_ratio < 0 ? "  contact lost" : "");
+    os << line;
+  }
+  for (const auto& p : outputs.paths()) os << "  wrote " << p << "\n";
+  std::cout << os.str();
+}
+
+}  // namespace
+
+Command add_locus_command(CLI::App& app) {
+  auto o = std::make_shared<LocusOptions>();
+  CLI::App* cmd = app.add_subcommand(
+      "locus",
+      "Solve the butterfly for N durations 2T evenly spaced over [FROM, TO] (paper Fig. 7): k "
+      "against 2T and the minimum normal force ratio of each solution.");
+  add_common_options(*cmd, o->common,
+                     "Directory for locus.csv (period in s, k, fn_min_ratio, fn_apex_ratio, "
+                     "mu_required, s_end, sdot_end in 1/s) and locus.png with its gnuplot script; "
+                     "created if missing. Default: no files",
+                     true);
+  cmd->add_option("--from", o->from, "Shortest duration 2T, s (> 0). Default: 1.1 s");
+  cmd->add_option("--to", o->to, "Longest duration 2T, s (> FROM). Default: 3.0 s");
+  cmd->add_option("--n", o->n, "Number of durations (>= 1; 1 solves at FROM only). Default: 20");
+  cmd->add_option("--tolerance", o->tolerance,
+                  "Root bracket width in k (dimensionless, > 0). Default: 1e-9");
+  return {cmd, [o] { run_locus(*o); }};
+}
+
+}  // namespace flatland::app

@@ -1,0 +1,102 @@
+// flatland solve: the butterfly solution for one period (paper section 4.3): the k (or hand shape
+// d) that brings the disk to s_h(T) = 0.
+#include "common.hpp"
+
+#include <iostream>
+#include <memory>
+
+namespace flatland::app {
+
+namespace {
+
+struct SolveOptions {
+  CommonOptions common;
+  double period = 0, k = 0, tolerance = 1e-9;
+  std::string solve_for = "k";
+  CLI::Option* period_opt = nullptr;
+  CLI::Option* k_opt = nullptr;
+};
+
+void run_solve(const SolveOptions& o) {
+  Scene scene = load_scene_with_overrides(o.common);
+  sim::SimulationSpec& spec = scene.sim;
+  spec.motion.kind = sim::MotionSpec::Kind::kButterfly;  // the search is over butterfly motions
+  if (o.period_opt->count()) {
+    require_positive("--period", o.period, "2T in s");
+    spec.motion.period = o.period;
+  }
+  if (o.k_opt->count()) {
+    require_finite("--k", o.k);
+    spec.motion.k = o.k;
+  }
+  require_positive("--tolerance", o.tolerance, "");
+  std::vector<std::pair<std::string, std::string>> given;
+  if (o.k_opt->count()) given.emplace_back("motion.k", "--k");
+  if (o.period_opt->count()) given.emplace_back("motion.period", "--period");
+  build_problem_checked(spec, given);  // the scene with the overrides must be valid
+  const bool plots = !o.common.out.empty() && !o.common.no_plot;
+  const fs::path dir = o.common.out;
+  if (!dir.empty() && fs::exists(dir) && !fs::is_directory(dir))
+    throw UsageError("--out: not a directory: " + o.common.out);
+  if (plots) require_gnuplot();
+
+  sim::SearchSettings settings;
+  settings.tolerance = o.tolerance;
+  const bool for_d = o.solve_for == "d";
+  std::cerr << "flatland: solving for " << o.solve_for
+            << " at 2T = " << format_number(spec.motion.period) << " s (" << scene.origin << ")\n";
+  const sim::SolveReport r = for_d ? sim::solve_d(spec, spec.motion.period, spec.motion.k, settings)
+                                   : sim::solve_k(spec, spec.motion.period, settings);
+
+  OutputSet outputs;
+  if (!dir.empty()) {
+    write_solution_outputs(outputs, dir, r.run, o.common.no_plot);
+    outputs.commit();
+  }
+  if (o.common.json) {
+    Json j = solve_report_json(r);
+    if (for_d) j["d"] = number(r.d);
+    j["files"] = outputs.paths();
+    emit_json(j);
+    return;
+  }
+  std::cout << "flatland solve: butterfly solution (" << scene.origin << ")\n"
+            << solve_report_text(r);
+  if (for_d) std::cout << "  hand shape d       " << format_number(r.d) << " m\n";
+  for (const auto& p : outputs.paths()) std::cout << "  wrote              " << p << "\n";
+}
+
+}  // namespace
+
+Command add_solve_command(CLI::App& app) {
+  auto o = std::make_shared<SolveOptions>();
+  CLI::App* cmd = app.add_subcommand(
+      "solve",
+      "Find the butterfly solution for one duration 2T: the dip k (or, with --solve-for d, the "
+      "hand shape parameter d) for which the disk is at the fingertip, s_h = 0, at t = T, so that "
+      "it comes to rest on the back of the hand at t = 2T (paper section 4.3; 2T = 1.181 s gives "
+      "k = -1.1393). Reports the contact forces of the solution.");
+  add_common_options(*cmd, o->common,
+                     "Directory for trajectory.csv (the solution every 1 ms; SI units), "
+                     "trajectory.png (theta and s_h against t) and forces.png (contact force "
+                     "ratios, required mu), with their gnuplot scripts; created if missing. "
+                     "Default: no files",
+                     true);
+  o->period_opt = cmd->add_option("--period", o->period,
+                                  "Butterfly duration 2T, s (> 0). Default: the scene's "
+                                  "motion.period (paper: 1.181 s)");
+  o->k_opt = cmd->add_option("--k", o->k,
+                             "Dip parameter k (dimensionless, not -2). Solving for k: the starting "
+                             "guess; solving for d: the motion's k. Default: the scene's motion.k "
+                             "(paper: -1.1393)");
+  cmd->add_option("--solve-for", o->solve_for,
+                  "Unknown: k (the motion's dip) or d (the hand shape's cubic coefficient, m, with "
+                  "a, b, c from the scene). Default: k")
+      ->check(CLI::IsMember({"k", "d"}));
+  cmd->add_option("--tolerance", o->tolerance,
+                  "Root bracket width: in k (dimensionless), or for d relative to max(|a|, |b|) "
+                  "(> 0). Default: 1e-9");
+  return {cmd, [o] { run_solve(*o); }};
+}
+
+}  // namespace flatland::app

@@ -1,0 +1,86 @@
+// flatland time-optimal: the fastest butterfly that keeps contact (paper section 4.3: 2T = 1.095 s,
+// k = -1.1493, the normal force reaching 0 at the apex).
+#include "common.hpp"
+
+#include <iostream>
+#include <memory>
+
+namespace flatland::app {
+
+namespace {
+
+struct TimeOptimalOptions {
+  CommonOptions common;
+  double from = 0.9, to = 1.5, period_tolerance = 1e-7, tolerance = 1e-9;
+};
+
+void run_time_optimal(const TimeOptimalOptions& o) {
+  Scene scene = load_scene_with_overrides(o.common);
+  sim::SimulationSpec& spec = scene.sim;
+  spec.motion.kind = sim::MotionSpec::Kind::kButterfly;
+  require_positive("--from", o.from, "2T in s");
+  require_positive("--to", o.to, "2T in s");
+  require_increasing("--from", o.from, "--to", o.to);
+  require_positive("--period-tolerance", o.period_tolerance, "s");
+  require_positive("--tolerance", o.tolerance, "");
+  spec.motion.period = o.from;
+  sim::build_problem(spec);
+  const fs::path dir = o.common.out;
+  if (!dir.empty() && fs::exists(dir) && !fs::is_directory(dir))
+    throw UsageError("--out: not a directory: " + o.common.out);
+  if (!dir.empty() && !o.common.no_plot) require_gnuplot();
+
+  sim::SearchSettings settings;
+  settings.tolerance = o.tolerance;
+  std::cerr << "flatland: searching the fastest contact-keeping butterfly in ["
+            << format_number(o.from) << ", " << format_number(o.to) << "] s\n";
+  const sim::TimeOptimalReport r =
+      sim::time_optimal(spec, o.from, o.to, o.period_tolerance, settings);
+
+  OutputSet outputs;
+  if (!dir.empty()) {
+    write_solution_outputs(outputs, dir, r.solution.run, o.common.no_plot);
+    outputs.commit();
+  }
+  if (o.common.json) {
+    Json j;
+    j["period"] = number(r.period);
+    j["k"] = number(r.k);
+    j["fn_min_ratio"] = number(r.fn_min_ratio);
+    j["solves"] = r.solves;
+    j["contact_lost"] = r.fn_min_ratio < 0;
+    j["solution"] = solve_report_json(r.solution);
+    j["files"] = outputs.paths();
+    emit_json(j);
+    return;
+  }
+  std::cout << "flatland time-optimal: fastest butterfly keeping f_n >= 0 (" << scene.origin
+            << "), " << r.solves << " solves\n"
+            << solve_report_text(r.solution);
+  for (const auto& p : outputs.paths()) std::cout << "  wrote              " << p << "\n";
+}
+
+}  // namespace
+
+Command add_time_optimal_command(CLI::App& app) {
+  auto o = std::make_shared<TimeOptimalOptions>();
+  CLI::App* cmd = app.add_subcommand(
+      "time-optimal",
+      "Find the shortest duration 2T in [FROM, TO] whose butterfly solution keeps the normal "
+      "force >= 0 throughout (paper section 4.3: 2T = 1.095 s, k = -1.1493). The minimum normal "
+      "force of the solutions must be < 0 at FROM and > 0 at TO.");
+  add_common_options(*cmd, o->common,
+                     "Directory for the solution's trajectory.csv (every 1 ms; SI units), "
+                     "trajectory.png and forces.png with their gnuplot scripts; created if "
+                     "missing. Default: no files",
+                     true);
+  cmd->add_option("--from", o->from, "Lower end of the 2T bracket, s (> 0). Default: 0.9 s");
+  cmd->add_option("--to", o->to, "Upper end of the 2T bracket, s (> FROM). Default: 1.5 s");
+  cmd->add_option("--period-tolerance", o->period_tolerance,
+                  "Bracket width at which the search in 2T stops, s (> 0). Default: 1e-7 s");
+  cmd->add_option("--tolerance", o->tolerance,
+                  "Root bracket width in k for each solve (dimensionless, > 0). Default: 1e-9");
+  return {cmd, [o] { run_time_optimal(*o); }};
+}
+
+}  // namespace flatland::app

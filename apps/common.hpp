@@ -1,0 +1,178 @@
+// Helpers shared by the `flatland` commands: options every command takes, scene loading with
+// command-line overrides, JSON and CSV output, staged (atomic) output files, progress bar, gnuplot.
+#pragma once
+
+#include "flatland/scene/scene.hpp"
+#include "flatland/sim/search.hpp"
+#include "flatland/sim/simulate.hpp"
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include <filesystem>
+#include <functional>
+#include <mutex>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace flatland::app {
+
+namespace fs = std::filesystem;
+using Json = nlohmann::ordered_json;
+
+/// Bad command-line input that CLI11 itself does not catch (exit code 2, like SceneError).
+class UsageError : public std::invalid_argument {
+ public:
+  using std::invalid_argument::invalid_argument;
+};
+
+/// Options every command has; the integrator ones override the scene's `simulator` settings.
+struct CommonOptions {
+  std::string scene;  ///< empty: default_scene_path()
+  bool json = false;
+  std::string out;  ///< empty: no files
+  bool no_plot = false;
+  double rtol = 0, atol = 0, step = 0;
+  std::string method, formulation;
+  // Set by add_common_options; count() tells whether the user gave the option.
+  CLI::Option* rtol_opt = nullptr;
+  CLI::Option* atol_opt = nullptr;
+  CLI::Option* step_opt = nullptr;
+  CLI::Option* method_opt = nullptr;
+  CLI::Option* formulation_opt = nullptr;
+};
+
+/// What `out_help` says about --out for this command.
+void add_common_options(CLI::App& cmd, CommonOptions& o, const std::string& out_help, bool plots);
+
+/// Load the scene (SceneError on bad input) and apply the integrator overrides.
+Scene load_scene_with_overrides(const CommonOptions& o);
+
+/// sim::build_problem, with " (set by --opt)" added to its message when the field it names was
+/// given on the command line: `given` pairs a scene field ("motion.k") with its option ("--k").
+std::shared_ptr<const sim::RollingProblem> build_problem_checked(
+    const sim::SimulationSpec& spec, const std::vector<std::pair<std::string, std::string>>& given);
+
+/// UsageError unless v is finite (and, with `positive`, > 0). `what` names the option and unit.
+void require_finite(const std::string& option, double v);
+void require_positive(const std::string& option, double v, const std::string& unit);
+/// UsageError unless from < to.
+void require_increasing(const std::string& from_option, double from, const std::string& to_option,
+                        double to);
+
+/// A JSON number, or null when it is inf/NaN (JSON has no such numbers).
+Json number(double v);
+/// Print the one JSON object on stdout.
+void emit_json(const Json& j);
+
+/// Shortest round-trip text for a double; "nan", "inf", "-inf" for non-finite values.
+std::string format_number(double v);
+
+/// Columns of a trajectory CSV (one per Sample field; SI units).
+const std::vector<std::string>& sample_columns();
+/// 1-based column of `name` in sample_columns() (for gnuplot `using`).
+int sample_column(const std::string& name);
+/// The whole CSV (header + one row per sample).
+std::string samples_csv(const std::vector<sim::Sample>& samples);
+
+/// Files a command writes, staged so that a failure leaves nothing behind: each file is first
+/// written as "<file>.tmp-<pid>", and commit() renames them all into place. Until then the
+/// destructor removes the temporaries and any directory this set created (if left empty), so an
+/// exception anywhere removes every output of the command.
+class OutputSet {
+ public:
+  OutputSet() = default;
+  OutputSet(const OutputSet&) = delete;
+  OutputSet& operator=(const OutputSet&) = delete;
+  ~OutputSet();
+
+  /// Create `dir` (and missing parents), remembering which directories were new.
+  void ensure_directory(const fs::path& dir);
+  /// Stage `content` for `final_path` (its directory must exist). Returns the temporary path.
+  fs::path stage(const fs::path& final_path, const std::string& content);
+  /// Reserve a temporary path for a file another program writes (gnuplot's PNGs).
+  fs::path reserve(const fs::path& final_path);
+  /// Rename every staged file into place.
+  void commit();
+  /// The final paths, in staging order.
+  std::vector<std::string> paths() const;
+
+ private:
+  std::vector<std::pair<fs::path, fs::path>> files_;  // (temporary, final)
+  std::vector<fs::path> created_dirs_;                // outermost first
+  bool committed_ = false;
+};
+
+/// A progress bar on stderr, drawn only when stderr is a terminal. Safe to call from threads.
+class ProgressBar {
+ public:
+  explicit ProgressBar(std::string label);
+  ~ProgressBar();
+  void update(long done, long total);
+  /// The callback the sim searches take.
+  sim::Progress callback() {
+    return [this](long done, long total) { update(done, total); };
+  }
+
+ private:
+  std::string label_;
+  bool enabled_;
+  int last_percent_ = -1;
+  bool drawn_ = false;
+  std::mutex mutex_;
+};
+
+/// True if a `gnuplot` executable is on PATH.
+bool gnuplot_available();
+/// std::runtime_error (exit 1) naming the Debian package unless gnuplot is available. Called
+/// before any work so that a missing plotter fails fast.
+void require_gnuplot();
+
+/// One gnuplot plot: a script kept next to the data (DIR/<name>.gp) that reads `data_name` and
+/// writes `png_name`, both relative to DIR. The script's `datafile` and `outfile` variables can be
+/// overridden with -e, which is how it is run on the staged temporaries.
+struct PlotJob {
+  std::string script_name;  ///< e.g. "locus.gp"
+  std::string data_name;    ///< e.g. "locus.csv" (already staged in `outputs`)
+  std::string png_name;     ///< e.g. "locus.png"
+  std::string body;         ///< plot commands using `datafile` and `outfile`
+};
+/// Stage the script and the PNG, run gnuplot in `dir`; std::runtime_error if it fails.
+void run_plot(OutputSet& outputs, const fs::path& dir, const PlotJob& job);
+/// The terminal line shared by all plots: pngcairo if this gnuplot has it, else png.
+std::string gnuplot_terminal(int width, int height);
+
+/// Quote for /bin/sh.
+std::string shell_quote(const std::string& s);
+/// Quote for a gnuplot single-quoted string.
+std::string gnuplot_quote(const std::string& s);
+
+/// s_h(T) from the dense output (NaN when the run does not cover t = T or the motion is not the
+/// butterfly).
+double s_at_half_period(const sim::SimulationSpec& spec, const sim::RunResult& r);
+
+/// Keys shared by the solve and time-optimal reports.
+Json solve_report_json(const sim::SolveReport& r);
+/// Human-readable lines for a solve report (stdout when not --json).
+std::string solve_report_text(const sim::SolveReport& r);
+
+/// Write DIR/trajectory.csv (every 1 ms) and, unless no_plot, DIR/trajectory.png and
+/// DIR/forces.png for a solved motion.
+void write_solution_outputs(OutputSet& outputs, const fs::path& dir, const sim::RunResult& run,
+                            bool no_plot);
+
+/// Registered command: its CLI11 subcommand and what to run when it was selected.
+struct Command {
+  CLI::App* app;
+  std::function<void()> run;
+};
+
+Command add_simulate_command(CLI::App& app);
+Command add_solve_command(CLI::App& app);
+Command add_locus_command(CLI::App& app);
+Command add_surface_command(CLI::App& app);
+Command add_time_optimal_command(CLI::App& app);
+
+}  // namespace flatland::app

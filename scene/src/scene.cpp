@@ -1,0 +1,422 @@
+// Scene loading: YAML text -> validated sim::SimulationSpec. Schema, errors: docs/SCENE.md.
+//
+// Strictness is the point: a typo in a key or a unit must not silently fall back to a default and
+// produce a plausible-looking but wrong simulation. Every error names the offending field and
+// echoes what the file said, on one line, so it can be read in a terminal or a log.
+#include "flatland/scene/scene.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <initializer_list>
+#include <limits>
+#include <numbers>
+#include <optional>
+#include <set>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+namespace flatland {
+
+namespace {
+
+constexpr double kDegToRad = std::numbers::pi / 180.0;
+
+/// what() must stay one line even when the input contains newlines (in keys, values or the path).
+std::string one_line(std::string s) {
+  std::string out;
+  out.reserve(s.size());
+  for (char ch : s) {
+    if (ch == '\n')
+      out += "\\n";
+    else if (ch == '\r')
+      out += "\\r";
+    else if (ch == '\t')
+      out += ' ';
+    else
+      out += ch;
+  }
+  return out;
+}
+
+[[noreturn]] void fail(const std::string& origin, const std::string& field,
+                       const std::string& reason) {
+  throw SceneError(one_line(origin + ": " + field + ": " + reason));
+}
+
+/// How a node looks to a user, for "expected X, got Y" messages. Long scalars are shortened.
+std::string describe(const YAML::Node& node) {
+  switch (node.Type()) {
+    case YAML::NodeType::Null:
+    case YAML::NodeType::Undefined:
+      return "an empty value";
+    case YAML::NodeType::Sequence:
+      return "a list";
+    case YAML::NodeType::Map:
+      return "a mapping";
+    case YAML::NodeType::Scalar:
+      break;
+  }
+  std::string s = node.Scalar();
+  if (s.size() > 40) s = s.substr(0, 37) + "...";
+  return "'" + s + "'";
+}
+
+/// YAML 1.2 core-schema float, without the hex/octal forms nobody writes in a scene. Parsed here
+/// rather than by yaml-cpp's stringstream conversion, which cannot tell "out of range" from "not a
+/// number" and whose result would depend on the stream's locale.
+enum class NumberParse { kOk, kNotANumber, kOutOfRange };
+NumberParse parse_number(const std::string& text, double& out) {
+  static const std::set<std::string> kPosInf = {".inf", ".Inf", ".INF", "+.inf", "+.Inf", "+.INF"};
+  static const std::set<std::string> kNegInf = {"-.inf", "-.Inf", "-.INF"};
+  static const std::set<std::string> kNaN = {".nan", ".NaN", ".NAN"};
+  if (kPosInf.count(text)) {
+    out = std::numeric_limits<double>::infinity();
+    return NumberParse::kOk;
+  }
+  if (kNegInf.count(text)) {
+    out = -std::numeric_limits<double>::infinity();
+    return NumberParse::kOk;
+  }
+  if (kNaN.count(text)) {
+    out = std::numeric_limits<double>::quiet_NaN();
+    return NumberParse::kOk;
+  }
+  std::string_view s = text;
+  if (!s.empty() && s.front() == '+') s.remove_prefix(1);  // from_chars rejects a leading '+'
+  // Only digits, sign, point and exponent: keeps from_chars' "inf"/"nan" spellings out.
+  if (s.empty() || s.find_first_not_of("0123456789.eE+-") != std::string_view::npos)
+    return NumberParse::kNotANumber;
+  if (s.find_first_of("0123456789") == std::string_view::npos) return NumberParse::kNotANumber;
+  const auto [ptr, ec] = std::from_chars(s.data(), s.data() + s.size(), out);
+  if (ec == std::errc::result_out_of_range) return NumberParse::kOutOfRange;
+  if (ec != std::errc() || ptr != s.data() + s.size()) return NumberParse::kNotANumber;
+  return NumberParse::kOk;
+}
+
+/// A YAML mapping at a field path ("" for the document, "object", ...). It rejects unknown and
+/// duplicate keys up front, so a misspelt key is reported as such rather than as a missing one.
+class MapReader {
+ public:
+  MapReader(const YAML::Node& node, std::string path, const std::string& origin,
+            std::initializer_list<const char*> allowed)
+      : node_(node), path_(std::move(path)), origin_(origin) {
+    if (!node_.IsMap())
+      fail(origin_, path_.empty() ? "(document)" : path_,
+           "expected a mapping of keys, got " + describe(node_));
+    std::set<std::string> seen;
+    for (const auto& kv : node_) {
+      if (!kv.first.IsScalar())
+        fail(origin_, path_.empty() ? "(document)" : path_,
+             "keys must be plain names, got " + describe(kv.first));
+      const std::string& key = kv.first.Scalar();
+      if (!seen.insert(key).second) fail(origin_, field(key), "duplicate key");
+      if (std::find_if(allowed.begin(), allowed.end(), [&](const char* a) { return key == a; }) ==
+          allowed.end()) {
+        std::string list;
+        for (const char* a : allowed) list += std::string(list.empty() ? "" : ", ") + a;
+        fail(origin_, field(key), "unknown key (allowed: " + list + ")");
+      }
+    }
+  }
+
+  std::string field(const std::string& key) const {
+    return path_.empty() ? key : path_ + "." + key;
+  }
+  [[noreturn]] void fail_at(const std::string& key, const std::string& reason) const {
+    fail(origin_, field(key), reason);
+  }
+  bool has(const char* key) const { return static_cast<bool>(node_[key]); }
+  const std::string& origin() const { return origin_; }
+
+  /// Required finite number.
+  double number(const char* key) const {
+    require(key);
+    return to_number(node_[key], field(key));
+  }
+  double number_or(const char* key, double fallback) const {
+    return has(key) ? number(key) : fallback;
+  }
+  std::optional<double> optional_number(const char* key) const {
+    if (!has(key)) return std::nullopt;
+    return number(key);
+  }
+  /// Required number > 0.
+  double positive(const char* key) const {
+    const double v = number(key);
+    if (!(v > 0)) fail_at(key, "must be positive, got " + node_[key].Scalar());
+    return v;
+  }
+  double positive_or(const char* key, double fallback) const {
+    return has(key) ? positive(key) : fallback;
+  }
+
+  bool boolean_or(const char* key, bool fallback) const {
+    if (!has(key)) return fallback;
+    const YAML::Node n = node_[key];
+    // YAML 1.2 core schema only: yaml-cpp would also take yes/no/on/off, which YAML 1.2 reads as
+    // strings and which are easy to write by accident.
+    if (n.IsScalar() && n.Tag() != "!") {
+      const std::string& s = n.Scalar();
+      if (s == "true" || s == "True" || s == "TRUE") return true;
+      if (s == "false" || s == "False" || s == "FALSE") return false;
+    }
+    fail_at(key, "expected true or false, got " + describe(n));
+  }
+
+  /// Required plain string (any scalar).
+  std::string text(const char* key) const {
+    require(key);
+    const YAML::Node n = node_[key];
+    if (!n.IsScalar()) fail_at(key, "expected a string, got " + describe(n));
+    return n.Scalar();
+  }
+  /// Required string from a fixed set of words.
+  std::string choice(const char* key, std::initializer_list<const char*> allowed) const {
+    const std::string s = text(key);
+    return check_choice(key, s, allowed);
+  }
+  std::string choice_or(const char* key, std::initializer_list<const char*> allowed,
+                        const char* fallback) const {
+    return has(key) ? choice(key, allowed) : std::string(fallback);
+  }
+
+  const YAML::Node node(const char* key) const { return node_[key]; }
+
+  MapReader section(const char* key, std::initializer_list<const char*> allowed) const {
+    if (!has(key)) fail_at(key, "missing required section");
+    return MapReader(node_[key], field(key), origin_, allowed);
+  }
+  std::optional<MapReader> optional_section(const char* key,
+                                            std::initializer_list<const char*> allowed) const {
+    if (!has(key)) return std::nullopt;
+    return MapReader(node_[key], field(key), origin_, allowed);
+  }
+
+  /// Key present but meaningless in this context (e.g. `radius` for an ellipse).
+  void reject_if_present(const char* key, const std::string& why) const {
+    if (has(key)) fail_at(key, why);
+  }
+
+  double to_number(const YAML::Node& n, const std::string& where) const {
+    if (!n.IsScalar()) fail(origin_, where, "expected a number, got " + describe(n));
+    // A quoted scalar is a string in YAML, even if it looks like a number.
+    if (n.Tag() == "!")
+      fail(origin_, where,
+           "expected a number, got the string " + describe(n) + " (remove the quotes)");
+    double v = 0;
+    switch (parse_number(n.Scalar(), v)) {
+      case NumberParse::kOk:
+        break;
+      case NumberParse::kNotANumber:
+        fail(origin_, where, "expected a number, got " + describe(n));
+      case NumberParse::kOutOfRange:
+        fail(origin_, where, "number out of range, got " + describe(n));
+    }
+    if (!std::isfinite(v)) fail(origin_, where, "must be a finite number, got " + n.Scalar());
+    return v;
+  }
+
+ private:
+  void require(const char* key) const {
+    if (!has(key)) fail_at(key, "missing required key");
+  }
+  std::string check_choice(const char* key, const std::string& s,
+                           std::initializer_list<const char*> allowed) const {
+    std::string list;
+    for (const char* a : allowed) {
+      if (s == a) return s;
+      list += std::string(list.empty() ? "" : ", ") + a;
+    }
+    fail_at(key, "unknown value '" + s + "' (allowed: " + list + ")");
+  }
+
+  YAML::Node node_;
+  std::string path_;
+  const std::string& origin_;
+};
+
+void read_gravity(const MapReader& root, sim::SimulationSpec& spec) {
+  const MapReader g = root.section("gravity", {"g", "tilt_deg"});
+  spec.gravity = g.positive("g");
+  const double tilt_deg = g.number_or("tilt_deg", 90.0);
+  // Tilts above 90 degrees would just mirror gravity; 0 would leave nothing to roll.
+  if (!(tilt_deg > 0 && tilt_deg <= 90))
+    g.fail_at("tilt_deg", "must be in (0, 90] degrees, got " + g.node("tilt_deg").Scalar());
+  spec.tilt = tilt_deg == 90.0 ? 0.5 * std::numbers::pi : tilt_deg * kDegToRad;
+}
+
+void read_hand(const MapReader& root, sim::SimulationSpec& spec) {
+  const MapReader h = root.section("hand", {"shape", "a", "b", "c", "d", "e", "f"});
+  // e and f are fixed by closing the outline (x(+-1) = 0, y'(+-1) = 0); a given value could only
+  // disagree with a, b, c, d.
+  h.reject_if_present("e", "is derived (e = -(a + c)), remove it");
+  h.reject_if_present("f", "is derived (f = -(b + 3 d) / 5), remove it");
+  h.choice("shape", {"polynomial"});
+  spec.hand.a = h.number("a");
+  spec.hand.b = h.number("b");
+  spec.hand.c = h.number("c");
+  spec.hand.d = h.number("d");
+}
+
+void read_object(const MapReader& root, sim::SimulationSpec& spec) {
+  const MapReader o = root.section("object", {"type", "radius", "semi_axes", "mass", "inertia"});
+  auto& obj = spec.object;
+  if (o.choice("type", {"disk", "ellipse"}) == "disk") {
+    o.reject_if_present("semi_axes", "only for type: ellipse (a disk has `radius`)");
+    obj.kind = sim::ObjectSpec::Kind::kDisk;
+    obj.radius = o.positive("radius");
+  } else {
+    o.reject_if_present("radius", "only for type: disk (an ellipse has `semi_axes`)");
+    obj.kind = sim::ObjectSpec::Kind::kEllipse;
+    if (!o.has("semi_axes")) o.fail_at("semi_axes", "missing required key");
+    const YAML::Node axes = o.node("semi_axes");
+    if (!axes.IsSequence() || axes.size() != 2)
+      o.fail_at("semi_axes", "expected a list of two numbers [x, y], got " +
+                                 (axes.IsSequence() ? "a list of " + std::to_string(axes.size())
+                                                    : describe(axes)));
+    double v[2];
+    for (std::size_t i = 0; i < 2; ++i) {
+      const std::string where = o.field("semi_axes") + "[" + std::to_string(i) + "]";
+      v[i] = o.to_number(axes[i], where);
+      if (!(v[i] > 0)) fail(o.origin(), where, "must be positive, got " + axes[i].Scalar());
+    }
+    obj.semi_axis_x = v[0];
+    obj.semi_axis_y = v[1];
+  }
+  obj.mass = o.positive_or("mass", 1.0);
+  if (o.has("inertia")) obj.inertia = o.positive("inertia");
+}
+
+void read_motion(const MapReader& root, sim::SimulationSpec& spec) {
+  const MapReader m = root.section("motion", {"type", "period", "k", "angle_deg"});
+  auto& mo = spec.motion;
+  if (m.choice("type", {"butterfly", "fixed"}) == "butterfly") {
+    m.reject_if_present("angle_deg", "only for type: fixed");
+    mo.kind = sim::MotionSpec::Kind::kButterfly;
+    mo.period = m.positive("period");
+    mo.k = m.number("k");  // k = -2 is rejected by build_problem, which owns the motion's maths
+  } else {
+    m.reject_if_present("period", "only for type: butterfly");
+    m.reject_if_present("k", "only for type: butterfly");
+    mo.kind = sim::MotionSpec::Kind::kFixed;
+    mo.angle = m.number_or("angle_deg", 0.0) * kDegToRad;
+  }
+}
+
+void read_initial(const MapReader& root, sim::SimulationSpec& spec) {
+  const auto in = root.optional_section("initial", {"s_h", "sdot_h", "s_o", "object_angle_deg"});
+  if (!in) return;
+  spec.initial.s_h = in->number_or("s_h", spec.initial.s_h);
+  spec.initial.sdot_h = in->number_or("sdot_h", spec.initial.sdot_h);
+  spec.initial.s_o = in->optional_number("s_o");
+  spec.initial.object_angle = in->number_or("object_angle_deg", 0.0) * kDegToRad;
+}
+
+void read_integrator(const MapReader& root, sim::SimulationSpec& spec) {
+  const auto it = root.optional_section(
+      "integrator", {"method", "rtol", "atol", "step", "max_step", "formulation"});
+  if (!it) return;
+  auto& s = spec.run.integrator;
+  s.method = it->choice_or("method", {"dopri5", "rk4"}, "dopri5") == "rk4"
+                 ? sim::Method::kRungeKutta4
+                 : sim::Method::kDormandPrince54;
+  s.rtol = it->positive_or("rtol", s.rtol);
+  s.atol = it->positive_or("atol", s.atol);
+  s.fixed_step = it->positive_or("step", s.fixed_step);
+  s.max_step = it->positive_or("max_step", s.max_step);
+  const std::string f = it->choice_or("formulation", {"auto", "general", "reduced"}, "auto");
+  spec.run.formulation = f == "general"   ? sim::Formulation::kGeneral
+                         : f == "reduced" ? sim::Formulation::kReduced
+                                          : sim::Formulation::kAuto;
+}
+
+void read_contact(const MapReader& root, sim::SimulationSpec& spec) {
+  const auto c =
+      root.optional_section("contact", {"mu", "stop_on_contact_loss", "event_tolerance"});
+  if (!c) return;
+  auto& ev = spec.run.events;
+  if (c->has("mu")) {
+    const double mu = c->number("mu");
+    if (!(mu >= 0)) c->fail_at("mu", "must be >= 0, got " + c->node("mu").Scalar());
+    ev.mu = mu;
+  }
+  ev.stop_on_contact_loss = c->boolean_or("stop_on_contact_loss", ev.stop_on_contact_loss);
+  ev.time_tolerance = c->positive_or("event_tolerance", ev.time_tolerance);
+}
+
+}  // namespace
+
+Scene parse_scene(const std::string& yaml_text, const std::string& origin) {
+  std::vector<YAML::Node> docs;
+  try {
+    docs = YAML::LoadAll(yaml_text);
+  } catch (const YAML::Exception& e) {
+    // yaml-cpp marks are 0-based; editors count from 1.
+    std::string where = e.mark.is_null() ? std::string("(document)")
+                                         : "line " + std::to_string(e.mark.line + 1) + ", column " +
+                                               std::to_string(e.mark.column + 1);
+    fail(origin, where, "invalid YAML: " + e.msg);
+  }
+  if (docs.empty()) fail(origin, "(document)", "empty scene (expected a mapping of sections)");
+  if (docs.size() > 1)
+    fail(origin, "(document)",
+         "contains " + std::to_string(docs.size()) + " YAML documents; a scene is exactly one");
+
+  Scene scene;
+  scene.origin = origin;
+  const MapReader root(docs.front(), "", origin,
+                       {"name", "gravity", "hand", "object", "motion", "initial", "duration",
+                        "integrator", "contact"});
+  if (root.has("name")) scene.name = root.text("name");
+  sim::SimulationSpec& spec = scene.sim;
+  read_gravity(root, spec);
+  read_hand(root, spec);
+  read_object(root, spec);
+  read_motion(root, spec);
+  read_initial(root, spec);
+  if (root.has("duration")) spec.duration = root.positive("duration");
+  read_integrator(root, spec);
+  read_contact(root, spec);
+
+  // Physics that needs more than one field (hand shape against the disk, k = -2, inertia bounds,
+  // formulation against the object) is validated where it is implemented; its messages already
+  // start with the field path.
+  try {
+    const auto problem = sim::build_problem(spec);
+    sim::resolve_formulation(*problem, spec.run.formulation);
+  } catch (const std::invalid_argument& e) {
+    throw SceneError(one_line(origin + ": " + e.what()));
+  }
+  return scene;
+}
+
+Scene load_scene(const std::string& path) {
+  // C stdio rather than ifstream: errno is reliably set, so the error can say why.
+  const auto unreadable = [&](int err) {
+    return SceneError(one_line(path + ": cannot read scene file (" + std::strerror(err) + ")"));
+  };
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f) throw unreadable(errno);
+  std::string text;
+  char buf[8192];
+  std::size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, f)) > 0) text.append(buf, n);
+  // A directory opens fine on Linux and only fails here, with EISDIR.
+  const bool bad = std::ferror(f);
+  const int err = errno;
+  std::fclose(f);
+  if (bad) throw unreadable(err);
+  return parse_scene(text, path);
+}
+
+std::string default_scene_path() { return FLATLAND_ASSET_DIR "/scenes/butterfly.yaml"; }
+
+}  // namespace flatland

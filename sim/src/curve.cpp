@@ -1,0 +1,197 @@
+#include "flatland/sim/curve.hpp"
+
+#include <cmath>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+
+namespace flatland::sim {
+
+namespace {
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+std::string fmt(double v) {
+  std::ostringstream os;
+  os.precision(6);
+  os << v;
+  return os.str();
+}
+}  // namespace
+
+CurveGeometry geometry_from_jet(const CurveJet& jet, int normal_side) {
+  CurveGeometry g;
+  g.point = jet.c;
+  g.jacobian = jet.d1;
+  g.jacobian_ds = jet.d2;
+  g.speed = jet.d1.norm();
+  const double inv_speed = 1.0 / g.speed;
+  g.tangent = jet.d1 * inv_speed;
+  g.normal = normal_side * perp(g.tangent);
+  g.speed_ds = jet.d1.dot(jet.d2) * inv_speed;
+  const double inv_speed3 = inv_speed * inv_speed * inv_speed;
+  const double c12 = cross2(jet.d1, jet.d2);
+  // Signed curvature is positive for a left turn; a body traversed with its outside on the left
+  // of travel (normal_side = -1) is convex where it turns left, hence the sign flip.
+  g.curvature = -normal_side * c12 * inv_speed3;
+  g.curvature_ds = -normal_side * (cross2(jet.d1, jet.d3) * inv_speed3 -
+                                   3.0 * c12 * jet.d1.dot(jet.d2) * inv_speed3 * inv_speed * inv_speed);
+  const double ks = g.curvature * g.speed;
+  g.normal_ds = ks * g.tangent;
+  const Vec2 tangent_ds = (jet.d2 - g.speed_ds * g.tangent) * inv_speed;
+  g.normal_dss = (g.curvature_ds * g.speed + g.curvature * g.speed_ds) * g.tangent + ks * tangent_ds;
+  return g;
+}
+
+CurveGeometry Curve::geometry(double s, int piece) const {
+  return geometry_from_jet(jet(s, piece), normal_side());
+}
+
+// ---------------------------------------------------------------------------------------------
+PolynomialHand::PolynomialHand(double a, double b, double c, double d)
+    : a_(a), b_(b), c_(c), d_(d), e_(-(a + c)), f_(-(b + 3.0 * d) / 5.0) {
+  for (double v : {a, b, c, d})
+    if (!std::isfinite(v)) throw std::invalid_argument("hand: shape coefficients must be finite");
+}
+
+int PolynomialHand::piece_at(double s, int direction) const {
+  const double x = (s + 1.0) / 2.0;
+  int m = static_cast<int>(std::floor(x));
+  if (direction < 0 && x == std::floor(x)) --m;  // exactly on breakpoint 2m - 1, moving down
+  return m;
+}
+
+PieceInterval PolynomialHand::piece_interval(int piece) const {
+  return {2.0 * piece - 1.0, 2.0 * piece + 1.0};
+}
+
+CurveJet PolynomialHand::jet(double s, int piece) const {
+  const bool mirrored = (piece % 2) != 0;
+  const double u = mirrored ? 2.0 * piece - s : s - 2.0 * piece;
+  const double du = mirrored ? -1.0 : 1.0;  // du/ds
+  const double mx = mirrored ? -1.0 : 1.0;  // x -> -x on the mirrored half
+  const double u2 = u * u, u3 = u2 * u, u4 = u2 * u2, u5 = u4 * u;
+  const double x0 = a_ + c_ * u2 + e_ * u4;
+  const double x1 = 2.0 * c_ * u + 4.0 * e_ * u3;
+  const double x2 = 2.0 * c_ + 12.0 * e_ * u2;
+  const double x3 = 24.0 * e_ * u;
+  const double y0 = b_ * u + d_ * u3 + f_ * u5;
+  const double y1 = b_ + 3.0 * d_ * u2 + 5.0 * f_ * u4;
+  const double y2 = 6.0 * d_ * u + 20.0 * f_ * u3;
+  const double y3 = 6.0 * d_ + 60.0 * f_ * u2;
+  CurveJet j;
+  j.c = {mx * x0, y0};
+  j.d1 = du * Vec2(mx * x1, y1);
+  j.d2 = Vec2(mx * x2, y2);
+  j.d3 = du * Vec2(mx * x3, y3);
+  return j;
+}
+
+std::string PolynomialHand::describe() const {
+  return "polynomial hand a=" + fmt(a_) + " b=" + fmt(b_) + " c=" + fmt(c_) + " d=" + fmt(d_) +
+         " m";
+}
+
+// ---------------------------------------------------------------------------------------------
+LineCurve::LineCurve(Vec2 origin, Vec2 direction) : origin_(origin), direction_(direction) {
+  const double n = direction_.norm();
+  if (!(n > 0) || !origin.allFinite() || !direction.allFinite())
+    throw std::invalid_argument("line: direction must be finite and non-zero");
+  direction_ /= n;
+}
+PieceInterval LineCurve::piece_interval(int) const { return {-kInf, kInf}; }
+CurveJet LineCurve::jet(double s, int) const {
+  return {origin_ + s * direction_, direction_, Vec2::Zero(), Vec2::Zero()};
+}
+std::string LineCurve::describe() const { return "straight line"; }
+
+// ---------------------------------------------------------------------------------------------
+CircleCurve::CircleCurve(Vec2 center, double radius, Side side)
+    : center_(center), radius_(radius), side_(side) {
+  if (!(radius > 0) || !std::isfinite(radius))
+    throw std::invalid_argument("circle: radius must be positive and finite, got " + fmt(radius));
+}
+PieceInterval CircleCurve::piece_interval(int) const { return {-kInf, kInf}; }
+CurveJet CircleCurve::jet(double s, int) const {
+  const double cs = std::cos(s), sn = std::sin(s), r = radius_;
+  if (side_ == Side::kConvexBody)
+    return {center_ + r * Vec2(cs, sn), r * Vec2(-sn, cs), r * Vec2(-cs, -sn), r * Vec2(sn, -cs)};
+  return {center_ + r * Vec2(sn, -cs), r * Vec2(cs, sn), r * Vec2(-sn, cs), r * Vec2(-cs, -sn)};
+}
+std::string CircleCurve::describe() const {
+  return std::string(side_ == Side::kConvexBody ? "circle" : "circular well") + " of radius " +
+         fmt(radius_) + " m";
+}
+
+// ---------------------------------------------------------------------------------------------
+EllipseCurve::EllipseCurve(double ax, double ay) : ax_(ax), ay_(ay) {
+  if (!(ax > 0) || !(ay > 0) || !std::isfinite(ax) || !std::isfinite(ay))
+    throw std::invalid_argument("ellipse: semi-axes must be positive and finite");
+}
+PieceInterval EllipseCurve::piece_interval(int) const { return {-kInf, kInf}; }
+CurveJet EllipseCurve::jet(double s, int) const {
+  const double cs = std::cos(s), sn = std::sin(s);
+  return {Vec2(ax_ * cs, ay_ * sn), Vec2(-ax_ * sn, ay_ * cs), Vec2(-ax_ * cs, -ay_ * sn),
+          Vec2(ax_ * sn, -ay_ * cs)};
+}
+std::string EllipseCurve::describe() const {
+  return "ellipse " + fmt(ax_) + " x " + fmt(ay_) + " m";
+}
+
+// ---------------------------------------------------------------------------------------------
+namespace {
+bool segments_intersect(const Vec2& p1, const Vec2& p2, const Vec2& q1, const Vec2& q2) {
+  const double d1 = cross2(q2 - q1, p1 - q1), d2 = cross2(q2 - q1, p2 - q1);
+  const double d3 = cross2(p2 - p1, q1 - p1), d4 = cross2(p2 - p1, q2 - p1);
+  return ((d1 > 0) != (d2 > 0)) && ((d3 > 0) != (d4 > 0));
+}
+std::string where(double s, const Vec2& p) {
+  return "at s_h=" + fmt(s) + " (x=" + fmt(p.x()) + " m, y=" + fmt(p.y()) + " m)";
+}
+}  // namespace
+
+void validate_hand_for_disk(const PolynomialHand& hand, double disk_radius) {
+  if (!(disk_radius > 0) || !std::isfinite(disk_radius))
+    throw std::invalid_argument("object.radius: must be positive and finite, got " +
+                                fmt(disk_radius));
+  if (!(hand.a() > 0))
+    throw std::invalid_argument("hand.a: the tip x(0) = a must be positive, got " + fmt(hand.a()));
+  // The right half is sampled densely; the left half is its mirror, so the checks below cover
+  // the whole outline.
+  constexpr int kSamples = 2000;
+  std::vector<Vec2> pts(kSamples + 1);
+  for (int i = 0; i <= kSamples; ++i) {
+    const double s = -1.0 + 2.0 * i / kSamples;
+    const CurveGeometry g = hand.geometry(s, 0);
+    pts[i] = g.point;
+    if (!(g.speed > 1e-9 * std::abs(hand.a())))
+      throw std::invalid_argument("hand: outline has a cusp (zero parametric speed) " +
+                                  where(s, g.point));
+    if (i > 0 && i < kSamples && !(g.point.x() > 0))
+      throw std::invalid_argument(
+          "hand: outline self-intersects (right half reaches its mirror image, x <= 0) " +
+          where(s, g.point));
+    if (g.curvature < 0 && !(disk_radius * -g.curvature < 1.0))
+      throw std::invalid_argument("hand: concave part too tight for the disk (curvature radius " +
+                                  fmt(-1.0 / g.curvature) + " m <= disk radius " +
+                                  fmt(disk_radius) + " m) " + where(s, g.point));
+  }
+  // Self-intersection of the right half on a coarser polyline (quadratic cost; shape searches
+  // validate every candidate).
+  constexpr int kStride = 4;
+  for (int i = 0; i + kStride <= kSamples; i += kStride)
+    for (int j = i + 2 * kStride; j + kStride <= kSamples; j += kStride)
+      if (segments_intersect(pts[i], pts[i + kStride], pts[j], pts[j + kStride]))
+        throw std::invalid_argument("hand: outline self-intersects between " +
+                                    where(-1.0 + 2.0 * i / kSamples, pts[i]) + " and " +
+                                    where(-1.0 + 2.0 * j / kSamples, pts[j]));
+  for (double s : {-1.0, 1.0}) {
+    const CurveGeometry g = hand.geometry(s, 0);
+    if (!(g.curvature < 0))
+      throw std::invalid_argument(std::string("hand: no well at the ") +
+                                  (s < 0 ? "palm" : "back") +
+                                  " (the outline must be concave there, curvature " +
+                                  fmt(g.curvature) + " 1/m) " + where(s, g.point));
+  }
+}
+
+}  // namespace flatland::sim

@@ -1,0 +1,319 @@
+#include "flatland/sim/search.hpp"
+
+#include "flatland/sim/roots.hpp"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <limits>
+#include <mutex>
+#include <sstream>
+#include <stdexcept>
+#include <thread>
+
+namespace flatland::sim {
+
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+// The validated hand and object are shared by every run of a search; only the motion changes.
+std::shared_ptr<const RollingProblem> with_motion(const std::shared_ptr<const RollingProblem>& base,
+                                                  double period, double k) {
+  auto pb = std::make_shared<RollingProblem>(*base);
+  pb->motion = std::make_shared<ButterflyMotion>(period, k);
+  return pb;
+}
+
+RunOptions search_options(const SimulationSpec& spec, double t_end) {
+  RunOptions o = spec.run;
+  o.t_end = t_end;
+  o.record = false;
+  o.events.stop_on_contact_loss = false;  // rolling is enforced; forces are checked afterwards
+  o.events.mu.reset();
+  // Past the mirrored tips (|s_h| = 3 is the far side of the outline) the disk has rolled off
+  // around the hand; stopping there keeps s_h(T) continuous (it ends at the bound) and avoids
+  // integrating an enforced roll that spins ever faster.
+  o.events.s_h_bounds = std::make_pair(-3.0, 3.0);
+  return o;
+}
+
+double s_at_half_period(const std::shared_ptr<const RollingProblem>& base, const SimulationSpec& spec,
+                        double period, double k, long* rhs_evals) {
+  const RunResult r =
+      simulate(with_motion(base, period, k), spec.initial, search_options(spec, spec.initial.t0 + 0.5 * period));
+  if (rhs_evals) *rhs_evals += r.stats.rhs_evals;
+  return r.final.s_h;
+}
+
+void check_period(double period) {
+  if (!(period > 0) || !std::isfinite(period))
+    throw std::invalid_argument("period: must be positive and finite (2T in s)");
+}
+
+std::string num(double v) {
+  std::ostringstream os;
+  os.precision(8);
+  os << v;
+  return os.str();
+}
+
+struct Bracket {
+  double a, b, fa, fb;
+};
+
+// Walk from x0 in steps that double until f changes sign, first in the direction in which |f|
+// decreases, then the other way. f may throw std::invalid_argument for a parameter outside its
+// domain (an invalid shape): that direction then ends there.
+std::optional<Bracket> find_bracket(const std::function<double(double)>& f, double x0, double fx0,
+                                    double step, double lo, double hi) {
+  if (fx0 == 0) return Bracket{x0, x0, 0.0, 0.0};
+  auto walk = [&](double dir) -> std::optional<Bracket> {
+    double a = x0, fa = fx0, h = step;
+    for (int i = 0; i < 60; ++i) {
+      double b = std::clamp(a + dir * h, lo, hi);
+      if (b == a) return std::nullopt;
+      double fb;
+      try {
+        fb = f(b);
+      } catch (const std::invalid_argument&) {
+        return std::nullopt;
+      }
+      if (!std::isfinite(fb)) return std::nullopt;
+      if ((fa > 0) != (fb > 0) || fb == 0) return Bracket{std::min(a, b), std::max(a, b), a < b ? fa : fb, a < b ? fb : fa};
+      a = b;
+      fa = fb;
+      h *= 2;
+    }
+    return std::nullopt;
+  };
+  // Probe the slope once to choose the first direction.
+  double first = +1;
+  try {
+    const double probe = std::clamp(x0 + 0.25 * step, lo, hi);
+    if (probe != x0) {
+      const double fp = f(probe);
+      if ((fp > 0) != (fx0 > 0)) return Bracket{std::min(x0, probe), std::max(x0, probe),
+                                                x0 < probe ? fx0 : fp, x0 < probe ? fp : fx0};
+      first = std::abs(fp) < std::abs(fx0) ? +1 : -1;
+    }
+  } catch (const std::invalid_argument&) {
+    first = -1;
+  }
+  if (auto b = walk(first)) return b;
+  return walk(-first);
+}
+
+}  // namespace
+
+double half_period_s_h(const SimulationSpec& spec, double period, double k, long* rhs_evals) {
+  check_period(period);
+  SimulationSpec s = spec;
+  s.motion.kind = MotionSpec::Kind::kButterfly;
+  s.motion.period = period;
+  s.motion.k = k;
+  return s_at_half_period(build_problem(s), s, period, k, rhs_evals);
+}
+
+SolveReport evaluate(const SimulationSpec& spec, double period, double k) {
+  check_period(period);
+  SimulationSpec s = spec;
+  s.motion.kind = MotionSpec::Kind::kButterfly;
+  s.motion.period = period;
+  s.motion.k = k;
+  RunOptions o = search_options(s, s.initial.t0 + period);
+  o.record = true;
+  SolveReport rep;
+  rep.period = period;
+  rep.k = k;
+  rep.d = s.hand.d;
+  rep.run = simulate(build_problem(s), s.initial, o);
+  const RunResult& r = rep.run;
+  const double T = s.initial.t0 + 0.5 * period;
+  rep.s_T = r.trajectory.s_h(T);
+  rep.s_end = r.final.s_h;
+  rep.sdot_end = r.final.sdot_h;
+  // A solution (s_h(T) = 0) is symmetric about T: reflecting the world and reversing time maps
+  // it onto itself, so its second half repeats the first. Forces are therefore taken over
+  // [0, T], where they are well conditioned; integrating a slow, nearly balanced roll on to 2T
+  // amplifies rounding exponentially (s_end shows it).
+  const Extrema x = find_extrema(r, s.initial.t0, std::min(T, r.final.t), o.events.time_tolerance);
+  rep.fn_apex_ratio = r.final.t >= T ? r.trajectory.sample(T).fn_ratio : kNaN;
+  rep.fn_min_ratio = x.fn_min_ratio;
+  rep.mu_required = x.mu_required;
+  rep.simulations += 1;
+  rep.rhs_evals += r.stats.rhs_evals;
+  return rep;
+}
+
+namespace {
+SolveReport solve_k_from(const SimulationSpec& spec, const std::shared_ptr<const RollingProblem>& base,
+                         double period, double k0, const SearchSettings& set) {
+  int sims = 0;
+  long rhs = 0;
+  auto f = [&](double k) {
+    ++sims;
+    return s_at_half_period(base, spec, period, k, &rhs);
+  };
+  // k = -2 is singular (P(1) = 0); beyond k = 2 the hand no longer dips at all.
+  const double lo = -2.0 + 1e-6, hi = 2.0;
+  k0 = std::clamp(k0, lo, hi);
+  const auto br = find_bracket(f, k0, f(k0), 0.02, lo, hi);
+  if (!br)
+    throw std::runtime_error("solve: no k in (-2, 2] brings the disk to s_h(T) = 0 for 2T = " +
+                             num(period) + " s");
+  const RootResult root = br->a == br->b ? RootResult{br->a, 0.0, 0, true}
+                                         : brent_root(f, br->a, br->b, br->fa, br->fb,
+                                                      set.tolerance, set.max_evaluations);
+  if (!root.converged)
+    throw std::runtime_error("solve: root finder did not converge for 2T = " + num(period) + " s");
+  SolveReport rep = evaluate(spec, period, root.x);
+  rep.simulations += sims;
+  rep.rhs_evals += rhs;
+  return rep;
+}
+}  // namespace
+
+SolveReport solve_k(const SimulationSpec& spec, double period, const SearchSettings& set) {
+  check_period(period);
+  SimulationSpec s = spec;
+  s.motion.kind = MotionSpec::Kind::kButterfly;
+  s.motion.period = period;
+  return solve_k_from(s, build_problem(s), period, spec.motion.k, set);
+}
+
+SolveReport solve_d(const SimulationSpec& spec, double period, double k, const SearchSettings& set) {
+  check_period(period);
+  SimulationSpec s = spec;
+  s.motion.kind = MotionSpec::Kind::kButterfly;
+  s.motion.period = period;
+  s.motion.k = k;
+  build_problem(s);  // the starting shape must be valid
+  int sims = 0;
+  long rhs = 0;
+  auto f = [&](double d) {
+    SimulationSpec sd = s;
+    sd.hand.d = d;
+    ++sims;
+    return s_at_half_period(build_problem(sd), sd, period, k, &rhs);  // validates the shape
+  };
+  const double scale = std::max(std::abs(s.hand.a), std::abs(s.hand.b));
+  const auto br = find_bracket(f, s.hand.d, f(s.hand.d), 0.01 * scale, s.hand.d - 10 * scale,
+                               s.hand.d + 10 * scale);
+  if (!br)
+    throw std::runtime_error("solve: no valid hand shape d brings the disk to s_h(T) = 0 for 2T = " +
+                             num(period) + " s, k = " + num(k));
+  const RootResult root = br->a == br->b ? RootResult{br->a, 0.0, 0, true}
+                                         : brent_root(f, br->a, br->b, br->fa, br->fb,
+                                                      set.tolerance * scale, set.max_evaluations);
+  if (!root.converged) throw std::runtime_error("solve: root finder did not converge for d");
+  s.hand.d = root.x;
+  SolveReport rep = evaluate(s, period, k);
+  rep.simulations += sims;
+  rep.rhs_evals += rhs;
+  return rep;
+}
+
+std::vector<SolveReport> locus(const SimulationSpec& spec, double from, double to, int n,
+                               const SearchSettings& set, const Progress& progress) {
+  check_period(from);
+  check_period(to);
+  if (n < 1) throw std::invalid_argument("n: must be at least 1");
+  if (n > 1 && !(to > from)) throw std::invalid_argument("to: must be larger than from");
+  SimulationSpec s = spec;
+  s.motion.kind = MotionSpec::Kind::kButterfly;
+  const auto base = build_problem(s);
+  std::vector<SolveReport> out;
+  double k0 = spec.motion.k;
+  for (int i = 0; i < n; ++i) {
+    const double period = n == 1 ? from : from + (to - from) * i / (n - 1);
+    out.push_back(solve_k_from(s, base, period, k0, set));
+    out.back().run = RunResult{};  // keep the locus light: the reports, not every trajectory
+    k0 = out.back().k;             // warm start: the locus is smooth
+    if (progress) progress(i + 1, n);
+  }
+  return out;
+}
+
+SurfaceResult surface(const SimulationSpec& spec, double k_lo, double k_hi, int nk, double p_lo,
+                      double p_hi, int np, int threads, const Progress& progress) {
+  if (nk < 2 || np < 2) throw std::invalid_argument("surface: nk and np must be at least 2");
+  if (!(k_hi > k_lo) || !std::isfinite(k_lo) || !std::isfinite(k_hi))
+    throw std::invalid_argument("k-to: must be larger than k-from");
+  if (k_lo <= -2 && k_hi >= -2)
+    throw std::invalid_argument("k-from/k-to: the range must not contain k = -2");
+  check_period(p_lo);
+  check_period(p_hi);
+  if (!(p_hi > p_lo)) throw std::invalid_argument("period-to: must be larger than period-from");
+  SimulationSpec s = spec;
+  s.motion.kind = MotionSpec::Kind::kButterfly;
+  const auto base = build_problem(s);
+  SurfaceResult res;
+  for (int i = 0; i < nk; ++i) res.k.push_back(k_lo + (k_hi - k_lo) * i / (nk - 1));
+  for (int j = 0; j < np; ++j) res.period.push_back(p_lo + (p_hi - p_lo) * j / (np - 1));
+  res.s_T.assign(static_cast<std::size_t>(nk) * np, kNaN);
+  const long total = static_cast<long>(nk) * np;
+  std::atomic<long> next{0}, done{0}, rhs{0};
+  std::mutex progress_mutex, error_mutex;
+  std::string error;
+  auto worker = [&] {
+    long local_rhs = 0;
+    for (long idx; (idx = next.fetch_add(1)) < total;) {
+      const int i = static_cast<int>(idx / np), j = static_cast<int>(idx % np);
+      try {
+        res.s_T[idx] = s_at_half_period(base, s, res.period[j], res.k[i], &local_rhs);
+      } catch (const std::exception& e) {
+        std::lock_guard lock(error_mutex);
+        if (error.empty()) error = e.what();
+        next = total;
+      }
+      const long d = ++done;
+      if (progress) {
+        std::lock_guard lock(progress_mutex);
+        progress(d, total);
+      }
+    }
+    rhs += local_rhs;
+  };
+  int nthreads = threads > 0 ? threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  nthreads = static_cast<int>(std::min<long>(nthreads, total));
+  std::vector<std::thread> pool;
+  for (int t = 1; t < nthreads; ++t) pool.emplace_back(worker);
+  worker();
+  for (auto& t : pool) t.join();
+  if (!error.empty()) throw std::runtime_error("surface: " + error);
+  res.rhs_evals = rhs;
+  return res;
+}
+
+TimeOptimalReport time_optimal(const SimulationSpec& spec, double lo, double hi,
+                               double period_tolerance, const SearchSettings& set) {
+  check_period(lo);
+  check_period(hi);
+  if (!(hi > lo)) throw std::invalid_argument("to: must be larger than from");
+  SimulationSpec s = spec;
+  s.motion.kind = MotionSpec::Kind::kButterfly;
+  const auto base = build_problem(s);
+  TimeOptimalReport rep;
+  double k0 = spec.motion.k;
+  auto g = [&](double period) {
+    ++rep.solves;
+    SolveReport r = solve_k_from(s, base, period, k0, set);
+    k0 = r.k;
+    return r.fn_min_ratio;
+  };
+  const double glo = g(lo), ghi = g(hi);
+  if (!(glo < 0 && ghi > 0))
+    throw std::runtime_error("time-optimal: [" + num(lo) + ", " + num(hi) +
+                             "] s does not bracket the fastest contact-keeping solution (minimum "
+                             "normal force ratio " + num(glo) + " at 2T = " + num(lo) + " s, " +
+                             num(ghi) + " at " + num(hi) + " s; it must go from < 0 to > 0)");
+  const RootResult root = brent_root(g, lo, hi, glo, ghi, period_tolerance, set.max_evaluations);
+  rep.solution = solve_k_from(s, base, root.x, k0, set);
+  rep.period = root.x;
+  rep.k = rep.solution.k;
+  rep.fn_min_ratio = rep.solution.fn_min_ratio;
+  return rep;
+}
+
+}  // namespace flatland::sim

@@ -1,0 +1,427 @@
+// End-to-end tests of the `flatland` program: run the built binary in a fresh temporary directory
+// and check exit codes, stdout JSON, stderr messages and the files it leaves behind. Reference
+// numbers come from the paper (section 4.3), never from the program's own output.
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+std::string read_text(const fs::path& p) {
+  std::ifstream f(p, std::ios::binary);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+void write_text(const fs::path& p, const std::string& s) {
+  std::ofstream f(p, std::ios::binary);
+  f << s;
+}
+
+std::string quote(const std::string& s) {
+  std::string q = "'";
+  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return q + "'";
+}
+
+std::vector<std::string> lines_of(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  for (std::string line; std::getline(ss, line);) out.push_back(line);
+  return out;
+}
+
+struct Result {
+  int code = -1;
+  std::string out, err;
+};
+
+// Every test gets its own empty working directory.
+class CliFixture : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    static int counter = 0;
+    dir_ = fs::temp_directory_path() /
+           ("flatland_cli_test_" + std::to_string(::getpid()) + "_" + std::to_string(counter++));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override {
+    std::error_code ec;
+    fs::remove_all(dir_, ec);
+  }
+
+  // `env` is prepended to the command line (e.g. "PATH=/nonexistent").
+  Result run(const std::string& args, const std::string& env = "") const {
+    const std::string cmd = "cd " + quote(dir_.string()) + " && " + env + (env.empty() ? "" : " ") +
+                            quote(FLATLAND_CLI_PATH) + " " + args + " > stdout.txt 2> stderr.txt";
+    const int status = std::system(cmd.c_str());
+    Result r;
+    r.code = status != -1 && WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    r.out = read_text(dir_ / "stdout.txt");
+    r.err = read_text(dir_ / "stderr.txt");
+    fs::remove(dir_ / "stdout.txt");
+    fs::remove(dir_ / "stderr.txt");
+    return r;
+  }
+
+  // A copy of the bundled paper scene with `from` replaced by `to` (which must occur).
+  fs::path scene_with(const std::string& name, const std::string& from,
+                      const std::string& to) const {
+    std::string text = read_text(fs::path(FLATLAND_ASSET_DIR) / "scenes" / "butterfly.yaml");
+    const auto pos = text.find(from);
+    EXPECT_NE(pos, std::string::npos) << "the bundled scene no longer contains '" << from << "'";
+    if (pos != std::string::npos) text.replace(pos, from.size(), to);
+    const fs::path p = dir_ / name;
+    write_text(p, text);
+    return p;
+  }
+
+  // Bad input: exit 2, one line "flatland: error: ..." naming `field`, nothing on stdout, and
+  // `out` (relative to the working directory) not created.
+  void expect_bad_input(const std::string& args, const std::string& field,
+                        const std::string& out) const {
+    const Result r = run(args);
+    EXPECT_EQ(r.code, 2) << args << "\nstderr: " << r.err;
+    const auto err = lines_of(r.err);
+    ASSERT_EQ(err.size(), 1u) << args << "\nstderr: " << r.err;
+    EXPECT_EQ(err[0].rfind("flatland: error: ", 0), 0u) << err[0];
+    EXPECT_NE(err[0].find(field), std::string::npos)
+        << "message does not name " << field << ": " << err[0];
+    EXPECT_TRUE(r.out.empty()) << r.out;
+    EXPECT_FALSE(fs::exists(dir_ / out)) << args << " created " << out;
+  }
+
+  static json parse_json(const Result& r) {
+    json j;
+    EXPECT_NO_THROW(j = json::parse(r.out)) << "stdout is not one JSON value:\n" << r.out;
+    EXPECT_TRUE(j.is_object());
+    return j;
+  }
+
+  static void expect_keys(const json& j, const std::set<std::string>& required,
+                          const std::set<std::string>& optional) {
+    for (const auto& k : required) EXPECT_TRUE(j.contains(k)) << "missing key " << k;
+    for (const auto& [k, v] : j.items())
+      EXPECT_TRUE(required.count(k) || optional.count(k)) << "unexpected key " << k;
+  }
+
+  // Files left in `d` whose name contains ".tmp-" (staging leftovers).
+  static int temporaries_in(const fs::path& d) {
+    int n = 0;
+    for (const auto& e : fs::recursive_directory_iterator(d))
+      if (e.path().filename().string().find(".tmp-") != std::string::npos) ++n;
+    return n;
+  }
+
+  static bool is_png(const fs::path& p) {
+    const std::string s = read_text(p);
+    return s.size() > 8 && s.compare(1, 3, "PNG") == 0;
+  }
+
+  static bool have_gnuplot() { return std::system("command -v gnuplot > /dev/null 2>&1") == 0; }
+
+  fs::path dir_;
+};
+
+using CliHelp = CliFixture;
+using CliSimulate = CliFixture;
+using CliSolve = CliFixture;
+using CliLocus = CliFixture;
+using CliSurface = CliFixture;
+using CliTimeOptimal = CliFixture;
+using CliBadInput = CliFixture;
+using CliRuntimeFailure = CliFixture;
+
+const char* const kTrajectoryHeader =
+    "t,theta,theta_dot,theta_ddot,s_h,sdot_h,sddot_h,s_o,sdot_o,x,y,object_angle,vx,vy,omega,f_n,f_"
+    "t,"
+    "fn_ratio,ft_ratio,mu_required,constraint_residual,redundant_residual";
+
+// ---- help -------------------------------------------------------------------------------------
+
+TEST_F(CliHelp, TopLevelListsCommandsAndUnits) {
+  const Result r = run("--help");
+  EXPECT_EQ(r.code, 0);
+  for (const char* cmd : {"simulate", "solve", "locus", "surface", "time-optimal"})
+    EXPECT_NE(r.out.find(cmd), std::string::npos) << cmd;
+  EXPECT_NE(r.out.find("lengths in m"), std::string::npos);
+  EXPECT_NE(r.out.find("times in s"), std::string::npos);
+  EXPECT_NE(r.out.find("Exit codes"), std::string::npos);
+}
+
+TEST_F(CliHelp, EveryCommandExplainsUnitsAndDefaults) {
+  for (const char* cmd : {"simulate", "solve", "locus", "surface", "time-optimal"}) {
+    const Result r = run(std::string(cmd) + " --help");
+    EXPECT_EQ(r.code, 0) << cmd;
+    EXPECT_NE(r.out.find("2T"), std::string::npos) << cmd;
+    EXPECT_NE(r.out.find(", s ("), std::string::npos) << cmd << ": no option states seconds";
+    EXPECT_NE(r.out.find("Default:"), std::string::npos) << cmd;
+    for (const char* opt : {"--scene", "--json", "--out"})
+      EXPECT_NE(r.out.find(opt), std::string::npos) << cmd << " " << opt;
+    // Every option line states its default.
+    for (const auto& line : lines_of(r.out)) {
+      if (line.rfind("  --", 0) == 0 && line.find("--help") == std::string::npos &&
+          line.find("{") == std::string::npos) {  // enum options wrap their help onto the next line
+        EXPECT_NE(line.find("Default"), std::string::npos) << cmd << ": " << line;
+      }
+    }
+  }
+}
+
+// ---- simulate ---------------------------------------------------------------------------------
+
+TEST_F(CliSimulate, JsonHasRequiredKeys) {
+  const Result r = run("simulate --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const json j = parse_json(r);
+  expect_keys(j,
+              {"period", "k", "s_T", "s_end", "sdot_end", "fn_apex_ratio", "fn_min_ratio",
+               "mu_required", "steps", "rhs_evals", "contact_lost"},
+              {"formulation", "method", "stop_reason", "rejected", "restarts", "junction_crossings",
+               "max_constraint_residual", "max_redundant_residual", "t_end", "csv"});
+  // The scene is the paper's Figure 2 motion: 2T = 1.181 s, k = -1.1393 (inputs, echoed).
+  EXPECT_DOUBLE_EQ(j["period"].get<double>(), 1.181);
+  EXPECT_DOUBLE_EQ(j["k"].get<double>(), -1.1393);
+  EXPECT_GT(j["steps"].get<long>(), 0);
+  // Paper: that motion keeps contact and brings the disk to the back of the hand (s_h = 1).
+  EXPECT_FALSE(j["contact_lost"].get<bool>());
+  EXPECT_NEAR(j["s_end"].get<double>(), 1.0, 0.05);
+}
+
+TEST_F(CliSimulate, FastMotionLosesContactAndReportsNull) {
+  // Paper: no motion faster than 2T = 1.095 s keeps contact. The run stops where contact is lost,
+  // before T, so s_h(T) does not exist: JSON null, not NaN.
+  const Result r = run("simulate --period 1.0 --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const json j = parse_json(r);
+  EXPECT_TRUE(j["contact_lost"].get<bool>());
+  EXPECT_TRUE(j["s_T"].is_null());
+  EXPECT_EQ(j["stop_reason"], "contact_lost");
+}
+
+TEST_F(CliSimulate, WritesSampledCsv) {
+  const Result r = run("simulate --out traj/run.csv --sample-dt 0.01");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto rows = lines_of(read_text(dir_ / "traj" / "run.csv"));
+  ASSERT_GE(rows.size(), 2u);
+  EXPECT_EQ(rows[0], kTrajectoryHeader);
+  // 0, 0.01, ..., 1.18 and the end time 1.181 s (the scene's duration).
+  EXPECT_GE(rows.size() - 1, 119u);
+  EXPECT_LE(rows.size() - 1, 121u);
+  EXPECT_EQ(rows[1].substr(0, 2), "0,");
+  EXPECT_NEAR(std::stod(rows.back().substr(0, rows.back().find(','))), 1.181, 1e-12);
+  EXPECT_EQ(temporaries_in(dir_), 0);
+}
+
+TEST_F(CliSimulate, HumanSummaryOnStdout) {
+  const Result r = run("simulate");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("required mu"), std::string::npos) << r.out;
+}
+
+// ---- solve ------------------------------------------------------------------------------------
+
+TEST_F(CliSolve, JsonMatchesPaper) {
+  const Result r = run("solve --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const json j = parse_json(r);
+  expect_keys(
+      j,
+      {"period", "k", "s_T", "s_end", "sdot_end", "fn_apex_ratio", "fn_min_ratio", "mu_required"},
+      {"simulations", "rhs_evals", "contact_lost", "files"});
+  // Paper section 4.3: 2T = 1.181 s is solved by k = -1.1393, with the normal force at the apex
+  // 17.5 % of m g and a required friction coefficient of 0.306.
+  EXPECT_NEAR(j["k"].get<double>(), -1.1393, 1e-3);
+  EXPECT_NEAR(j["fn_apex_ratio"].get<double>(), 0.175, 0.01);
+  EXPECT_NEAR(j["mu_required"].get<double>(), 0.306, 0.01);
+  // A solution is symmetric: at the fingertip at T, at rest on the back (s_h = 1) at 2T.
+  EXPECT_NEAR(j["s_T"].get<double>(), 0.0, 1e-6);
+  EXPECT_NEAR(j["s_end"].get<double>(), 1.0, 1e-4);
+  EXPECT_NEAR(j["sdot_end"].get<double>(), 0.0, 1e-3);
+  EXPECT_FALSE(j["contact_lost"].get<bool>());
+}
+
+TEST_F(CliSolve, WritesTrajectoryAndPlots) {
+  const bool plots = have_gnuplot();
+  const Result r = run(std::string("solve --out results/") + (plots ? "" : " --no-plot"));
+  ASSERT_EQ(r.code, 0) << r.err;
+  const fs::path d = dir_ / "results";
+  const auto rows = lines_of(read_text(d / "trajectory.csv"));
+  ASSERT_GE(rows.size(), 2u);
+  EXPECT_EQ(rows[0], kTrajectoryHeader);
+  EXPECT_NEAR(static_cast<double>(rows.size() - 1), 1182.0, 1.0);  // every 1 ms over 1.181 s
+  if (plots) {
+    EXPECT_TRUE(is_png(d / "trajectory.png"));
+    EXPECT_TRUE(is_png(d / "forces.png"));
+    EXPECT_TRUE(fs::exists(d / "trajectory.gp"));
+  }
+  EXPECT_EQ(temporaries_in(d), 0);
+}
+
+TEST_F(CliSolve, MissingGnuplotFailsNamingThePackage) {
+  const Result r = run("solve --out results", "PATH=/nonexistent");
+  EXPECT_EQ(r.code, 1) << r.err;
+  EXPECT_NE(r.err.find("gnuplot-nox"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "results"));
+  // --no-plot needs no gnuplot.
+  const Result ok = run("solve --out results --no-plot", "PATH=/nonexistent");
+  EXPECT_EQ(ok.code, 0) << ok.err;
+  EXPECT_TRUE(fs::exists(dir_ / "results" / "trajectory.csv"));
+  EXPECT_FALSE(fs::exists(dir_ / "results" / "trajectory.png"));
+}
+
+TEST_F(CliSolve, FailingGnuplotLeavesNoFiles) {
+  fs::create_directories(dir_ / "bin");
+  write_text(dir_ / "bin" / "gnuplot", "#!/bin/sh\nexit 3\n");
+  fs::permissions(dir_ / "bin" / "gnuplot", fs::perms::owner_all);
+  const Result r =
+      run("solve --out results/deep", "PATH=" + quote((dir_ / "bin").string()) + ":\"$PATH\"");
+  EXPECT_EQ(r.code, 1) << r.err;
+  EXPECT_NE(r.err.find("gnuplot"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "results"));
+}
+
+// ---- locus, surface, time-optimal ---------------------------------------------------------------
+
+TEST_F(CliLocus, KIncreasesWithPeriod) {
+  const bool plots = have_gnuplot();
+  const Result r = run(std::string("locus --from 1.2 --to 2.0 --n 3 --json --out loc") +
+                       (plots ? "" : " --no-plot"));
+  ASSERT_EQ(r.code, 0) << r.err;
+  const json j = parse_json(r);
+  expect_keys(j, {"points", "csv", "png"}, {"seconds"});
+  ASSERT_EQ(j["points"].size(), 3u);
+  // Paper: along the locus k increases with 2T (a smaller initial dip).
+  double prev = -1e9;
+  for (const auto& p : j["points"]) {
+    for (const char* k : {"period", "k", "fn_min_ratio", "mu_required"})
+      EXPECT_TRUE(p.contains(k)) << k;
+    EXPECT_GT(p["k"].get<double>(), prev);
+    prev = p["k"].get<double>();
+  }
+  EXPECT_DOUBLE_EQ(j["points"][0]["period"].get<double>(), 1.2);
+  EXPECT_DOUBLE_EQ(j["points"][2]["period"].get<double>(), 2.0);
+  const auto rows = lines_of(read_text(dir_ / "loc" / "locus.csv"));
+  ASSERT_EQ(rows.size(), 4u);
+  EXPECT_EQ(rows[0], "period,k,fn_min_ratio,fn_apex_ratio,mu_required,s_end,sdot_end");
+  if (plots) {
+    EXPECT_TRUE(is_png(dir_ / "loc" / "locus.png"));
+  }
+}
+
+TEST_F(CliSurface, SmallGrid) {
+  const bool plots = have_gnuplot();
+  const Result r = run(std::string("surface --nk 3 --np 4 --threads 2 --json --out surf") +
+                       (plots ? "" : " --no-plot"));
+  ASSERT_EQ(r.code, 0) << r.err;
+  const json j = parse_json(r);
+  expect_keys(j, {"nk", "np", "csv", "png", "rhs_evals", "seconds"}, {});
+  EXPECT_EQ(j["nk"], 3);
+  EXPECT_EQ(j["np"], 4);
+  const auto rows = lines_of(read_text(dir_ / "surf" / "surface.csv"));
+  ASSERT_EQ(rows.size(), 13u);
+  EXPECT_EQ(rows[0], "k,period,s_T");
+  EXPECT_EQ(rows[1].rfind("-1.6,0.8,", 0), 0u) << rows[1];  // the documented default corner
+  if (plots) {
+    EXPECT_TRUE(is_png(dir_ / "surf" / "surface.png"));
+  }
+}
+
+TEST_F(CliTimeOptimal, MatchesPaper) {
+  const Result r = run("time-optimal --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const json j = parse_json(r);
+  for (const char* k : {"period", "k", "fn_min_ratio", "solves"}) EXPECT_TRUE(j.contains(k)) << k;
+  // Paper section 4.3: the fastest contact-keeping butterfly is 2T = 1.095 s with k = -1.1493,
+  // the normal force reaching zero at the apex.
+  EXPECT_NEAR(j["period"].get<double>(), 1.095, 0.003);
+  EXPECT_NEAR(j["k"].get<double>(), -1.1493, 1e-3);
+  EXPECT_NEAR(j["fn_min_ratio"].get<double>(), 0.0, 1e-4);
+}
+
+// ---- bad input: exit 2, one line, no files
+// -------------------------------------------------------
+
+TEST_F(CliBadInput, MissingSceneFile) {
+  expect_bad_input("solve --scene no-such-scene.yaml --out out", "no-such-scene.yaml", "out");
+}
+
+TEST_F(CliBadInput, SceneWithUnknownKey) {
+  scene_with("unknown.yaml", "duration:", "bogus_key: 1\nduration:");
+  expect_bad_input("solve --scene unknown.yaml --out out", "bogus_key", "out");
+}
+
+TEST_F(CliBadInput, SceneWithNegativeRadius) {
+  scene_with("negative.yaml", "radius: 0.051", "radius: -0.051");
+  expect_bad_input("simulate --scene negative.yaml --out out/run.csv", "radius", "out");
+}
+
+TEST_F(CliBadInput, KMinusTwo) {
+  expect_bad_input("simulate --k -2 --out out/run.csv", "--k", "out");
+  expect_bad_input("solve --k -2 --out out", "--k", "out");
+}
+
+TEST_F(CliBadInput, NegativePeriod) {
+  expect_bad_input("simulate --period -1 --out out/run.csv", "--period", "out");
+  expect_bad_input("solve --period -1 --out out", "--period", "out");
+}
+
+TEST_F(CliBadInput, NonFiniteNumbers) {
+  expect_bad_input("simulate --period nan --out out/run.csv", "--period", "out");
+  expect_bad_input("simulate --k inf --out out/run.csv", "--k", "out");
+}
+
+TEST_F(CliBadInput, LocusZeroPoints) { expect_bad_input("locus --n 0 --out out", "--n", "out"); }
+
+TEST_F(CliBadInput, LocusEmptyRange) {
+  expect_bad_input("locus --from 2 --to 1.5 --out out", "--to", "out");
+}
+
+TEST_F(CliBadInput, SurfaceRangeContainingKMinusTwo) {
+  expect_bad_input("surface --k-from -2.5 --k-to -1.5 --out out", "--k-from", "out");
+}
+
+TEST_F(CliBadInput, UnknownMethod) {
+  expect_bad_input("simulate --method euler --out out/run.csv", "--method", "out");
+}
+
+TEST_F(CliBadInput, NonPositiveSampleInterval) {
+  expect_bad_input("simulate --sample-dt 0 --out out/run.csv", "--sample-dt", "out");
+}
+
+TEST_F(CliBadInput, UnknownCommandAndOption) {
+  expect_bad_input("frobnicate", "frobnicate", "out");
+  expect_bad_input("solve --frobnicate", "--frobnicate", "out");
+}
+
+// ---- runtime failure: exit 1, no files
+// ------------------------------------------------------------
+
+TEST_F(CliRuntimeFailure, TimeOptimalBracketWithoutTheOptimum) {
+  // Every solution in [1.3, 1.5] s keeps contact (the optimum is 1.095 s), so the bracket does not
+  // contain the point where the minimum normal force crosses zero.
+  const Result r = run("time-optimal --from 1.3 --to 1.5 --out out");
+  EXPECT_EQ(r.code, 1) << r.err;
+  const auto err = lines_of(r.err);
+  ASSERT_FALSE(err.empty());
+  EXPECT_EQ(err.back().rfind("flatland: error: ", 0), 0u) << err.back();
+  EXPECT_TRUE(r.out.empty());
+  EXPECT_FALSE(fs::exists(dir_ / "out"));
+}
+
+}  // namespace

@@ -1,0 +1,520 @@
+// Scene loading: the bundled scenes carry the paper's values in SI units, defaults are applied,
+// and every kind of bad input is a one-line SceneError naming the field.
+#include "flatland/scene/scene.hpp"
+#include "flatland/sim/curve.hpp"
+#include "flatland/sim/spec.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <numbers>
+#include <string>
+
+namespace {
+
+using flatland::parse_scene;
+using flatland::Scene;
+using flatland::SceneError;
+namespace sim = flatland::sim;
+
+constexpr double kPi = std::numbers::pi;
+
+// A complete, valid scene; error tests perturb one line of it.
+const std::string kBase = R"(name: test
+gravity:
+  g: 9.8
+  tilt_deg: 90
+hand:
+  shape: polynomial
+  a: 0.18
+  b: -0.18
+  c: -0.252
+  d: 0.216
+object:
+  type: disk
+  radius: 0.051
+  mass: 1.0
+motion:
+  type: butterfly
+  period: 1.181
+  k: -1.1393
+initial:
+  s_h: -1
+  sdot_h: 0
+duration: 1.181
+integrator:
+  method: dopri5
+  rtol: 1.0e-10
+  atol: 1.0e-12
+  formulation: auto
+contact:
+  stop_on_contact_loss: true
+  event_tolerance: 1.0e-12
+)";
+
+const std::string kHandSection =
+    "hand:\n  shape: polynomial\n  a: 0.18\n  b: -0.18\n  c: -0.252\n  d: 0.216\n";
+
+// The minimum a scene must say.
+const std::string kMinimal = R"(gravity:
+  g: 9.8
+hand:
+  shape: polynomial
+  a: 0.18
+  b: -0.18
+  c: -0.252
+  d: 0.216
+object:
+  type: disk
+  radius: 0.051
+motion:
+  type: butterfly
+  period: 1.181
+  k: -1.1393
+)";
+
+/// `text` with the first occurrence of `from` replaced; fails the test if `from` is absent, so a
+/// perturbation can never silently become a no-op.
+std::string with(const std::string& text, const std::string& from, const std::string& to) {
+  const auto pos = text.find(from);
+  EXPECT_NE(pos, std::string::npos) << "test bug: '" << from << "' not in the base scene";
+  if (pos == std::string::npos) return text;
+  std::string out = text;
+  out.replace(pos, from.size(), to);
+  return out;
+}
+
+std::string error_of(const std::string& yaml, const std::string& origin = "t.yaml") {
+  try {
+    parse_scene(yaml, origin);
+  } catch (const SceneError& e) {
+    return e.what();
+  } catch (const std::exception& e) {
+    return std::string("WRONG EXCEPTION TYPE: ") + e.what();
+  }
+  return "NO ERROR";
+}
+
+/// The error is one line and starts with "t.yaml: <field>: ".
+void expect_field_error(const std::string& yaml, const std::string& field,
+                        const std::string& reason_part = "") {
+  const std::string msg = error_of(yaml);
+  EXPECT_EQ(msg.rfind("t.yaml: " + field + ": ", 0), 0u) << msg;
+  EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
+  if (!reason_part.empty()) {
+    EXPECT_NE(msg.find(reason_part), std::string::npos) << msg;
+  }
+}
+
+// --------------------------------------------------------------------------------------------
+// Bundled scenes
+
+TEST(SceneTest, DefaultScenePathIsTheButterfly) {
+  const std::string p = flatland::default_scene_path();
+  EXPECT_EQ(p, std::string(FLATLAND_ASSET_DIR) + "/scenes/butterfly.yaml");
+  EXPECT_TRUE(std::filesystem::exists(p));
+}
+
+TEST(SceneTest, ButterflySceneHasThePapersValuesInSI) {
+  const std::string path = std::string(FLATLAND_ASSET_DIR) + "/scenes/butterfly.yaml";
+  const Scene s = flatland::load_scene(path);
+  EXPECT_EQ(s.origin, path);
+  EXPECT_EQ(s.name, "paper-butterfly");
+  const sim::SimulationSpec& sp = s.sim;
+  EXPECT_DOUBLE_EQ(sp.gravity, 9.8);
+  EXPECT_NEAR(sp.tilt, kPi / 2, 1e-15);
+  EXPECT_DOUBLE_EQ(sp.effective_gravity(), 9.8);
+  // Section 4.1 in cm -> m.
+  EXPECT_DOUBLE_EQ(sp.hand.a, 0.18);
+  EXPECT_DOUBLE_EQ(sp.hand.b, -0.18);
+  EXPECT_DOUBLE_EQ(sp.hand.c, -0.252);
+  EXPECT_DOUBLE_EQ(sp.hand.d, 0.216);
+  EXPECT_EQ(sp.object.kind, sim::ObjectSpec::Kind::kDisk);
+  EXPECT_DOUBLE_EQ(sp.object.radius, 0.051);
+  EXPECT_DOUBLE_EQ(sp.object.mass, 1.0);
+  EXPECT_FALSE(sp.object.inertia.has_value());
+  EXPECT_EQ(sp.motion.kind, sim::MotionSpec::Kind::kButterfly);
+  EXPECT_DOUBLE_EQ(sp.motion.period, 1.181);
+  EXPECT_DOUBLE_EQ(sp.motion.k, -1.1393);
+  EXPECT_DOUBLE_EQ(sp.initial.s_h, -1.0);
+  EXPECT_DOUBLE_EQ(sp.initial.sdot_h, 0.0);
+  EXPECT_FALSE(sp.initial.s_o.has_value());
+  ASSERT_TRUE(sp.duration.has_value());
+  EXPECT_DOUBLE_EQ(*sp.duration, 1.181);
+  EXPECT_EQ(sp.run.integrator.method, sim::Method::kDormandPrince54);
+  EXPECT_DOUBLE_EQ(sp.run.integrator.rtol, 1e-10);
+  EXPECT_DOUBLE_EQ(sp.run.integrator.atol, 1e-12);
+  EXPECT_EQ(sp.run.formulation, sim::Formulation::kAuto);
+  EXPECT_TRUE(sp.run.events.stop_on_contact_loss);
+  EXPECT_FALSE(sp.run.events.mu.has_value());
+  EXPECT_DOUBLE_EQ(sp.run.events.time_tolerance, 1e-12);
+
+  // e and f are derived from the loaded a..d (paper: e = 7.2 cm, f = -9.36 cm).
+  const auto problem = sim::build_problem(sp);
+  const auto* hand = dynamic_cast<const sim::PolynomialHand*>(problem->hand.get());
+  ASSERT_NE(hand, nullptr);
+  EXPECT_NEAR(hand->e(), 0.072, 1e-15);
+  EXPECT_NEAR(hand->f(), -0.0936, 1e-15);
+}
+
+TEST(SceneTest, AirTableSceneIsTheButterflyTimeScaledTo5Degrees) {
+  const Scene s =
+      flatland::load_scene(std::string(FLATLAND_ASSET_DIR) + "/scenes/airtable-5deg.yaml");
+  const sim::SimulationSpec& sp = s.sim;
+  EXPECT_NEAR(sp.tilt, 5.0 * kPi / 180.0, 1e-15);
+  EXPECT_NEAR(sp.effective_gravity(), 9.8 * std::sin(5.0 * kPi / 180.0), 1e-12);
+  EXPECT_DOUBLE_EQ(sp.object.radius, 0.051);
+  EXPECT_DOUBLE_EQ(sp.hand.c, -0.252);
+  EXPECT_DOUBLE_EQ(sp.hand.d, 0.216);
+  EXPECT_DOUBLE_EQ(sp.motion.k, -1.1393);
+  EXPECT_DOUBLE_EQ(sp.motion.period, 4.0);
+  // Section 5: 2T = kappa * 1.181 s, kappa = sqrt(1 / sin 5 deg), rounded to 4.0 s in the paper.
+  const double kappa = std::sqrt(1.0 / std::sin(5.0 * kPi / 180.0));
+  EXPECT_NEAR(kappa, 3.387, 5e-4);
+  EXPECT_NEAR(sp.motion.period, kappa * 1.181, 0.01);
+  EXPECT_DOUBLE_EQ(sp.end_time(), 4.0);
+}
+
+// --------------------------------------------------------------------------------------------
+// Defaults and variants
+
+TEST(SceneTest, MinimalSceneGetsDefaults) {
+  const Scene s = parse_scene(kMinimal);
+  EXPECT_EQ(s.origin, "<string>");
+  EXPECT_EQ(s.name, "");
+  const sim::SimulationSpec& sp = s.sim;
+  EXPECT_DOUBLE_EQ(sp.tilt, kPi / 2);
+  EXPECT_DOUBLE_EQ(sp.object.mass, 1.0);
+  EXPECT_FALSE(sp.object.inertia.has_value());
+  EXPECT_DOUBLE_EQ(sp.initial.s_h, -1.0);
+  EXPECT_DOUBLE_EQ(sp.initial.sdot_h, 0.0);
+  EXPECT_DOUBLE_EQ(sp.initial.object_angle, 0.0);
+  EXPECT_FALSE(sp.initial.s_o.has_value());
+  EXPECT_FALSE(sp.duration.has_value());
+  EXPECT_DOUBLE_EQ(sp.end_time(), 1.181);  // the butterfly's period
+  EXPECT_EQ(sp.run.integrator.method, sim::Method::kDormandPrince54);
+  EXPECT_DOUBLE_EQ(sp.run.integrator.rtol, 1e-10);
+  EXPECT_DOUBLE_EQ(sp.run.integrator.atol, 1e-12);
+  EXPECT_DOUBLE_EQ(sp.run.integrator.fixed_step, 1e-3);
+  EXPECT_TRUE(std::isinf(sp.run.integrator.max_step));
+  EXPECT_EQ(sp.run.formulation, sim::Formulation::kAuto);
+  EXPECT_TRUE(sp.run.events.stop_on_contact_loss);
+  EXPECT_FALSE(sp.run.events.mu.has_value());
+  EXPECT_DOUBLE_EQ(sp.run.events.time_tolerance, 1e-12);
+}
+
+TEST(SceneTest, OptionalSectionsOverrideDefaults) {
+  const std::string yaml = kMinimal + R"(name: custom
+initial:
+  s_h: -0.5
+  sdot_h: 2
+  s_o: 0.25
+  object_angle_deg: 90
+duration: 3
+integrator:
+  method: rk4
+  step: 2.0e-4
+  max_step: 0.01
+  formulation: general
+contact:
+  mu: 0.5
+  stop_on_contact_loss: false
+  event_tolerance: 1.0e-9
+)";
+  const Scene s = parse_scene(yaml);
+  const sim::SimulationSpec& sp = s.sim;
+  EXPECT_EQ(s.name, "custom");
+  EXPECT_DOUBLE_EQ(sp.initial.s_h, -0.5);
+  EXPECT_DOUBLE_EQ(sp.initial.sdot_h, 2.0);
+  ASSERT_TRUE(sp.initial.s_o.has_value());
+  EXPECT_DOUBLE_EQ(*sp.initial.s_o, 0.25);
+  EXPECT_NEAR(sp.initial.object_angle, kPi / 2, 1e-15);
+  ASSERT_TRUE(sp.duration.has_value());
+  EXPECT_DOUBLE_EQ(*sp.duration, 3.0);
+  EXPECT_EQ(sp.run.integrator.method, sim::Method::kRungeKutta4);
+  EXPECT_DOUBLE_EQ(sp.run.integrator.fixed_step, 2e-4);
+  EXPECT_DOUBLE_EQ(sp.run.integrator.max_step, 0.01);
+  EXPECT_EQ(sp.run.formulation, sim::Formulation::kGeneral);
+  ASSERT_TRUE(sp.run.events.mu.has_value());
+  EXPECT_DOUBLE_EQ(*sp.run.events.mu, 0.5);
+  EXPECT_FALSE(sp.run.events.stop_on_contact_loss);
+  EXPECT_DOUBLE_EQ(sp.run.events.time_tolerance, 1e-9);
+}
+
+TEST(SceneTest, IntegersAreAcceptedAsNumbers) {
+  const Scene s =
+      parse_scene(with(with(kMinimal, "g: 9.8", "g: 10"), "period: 1.181", "period: 2"));
+  EXPECT_DOUBLE_EQ(s.sim.gravity, 10.0);
+  EXPECT_DOUBLE_EQ(s.sim.motion.period, 2.0);
+}
+
+TEST(SceneTest, TiltDegreesBecomeRadians) {
+  const Scene s = parse_scene(with(kBase, "tilt_deg: 90", "tilt_deg: 30"));
+  EXPECT_NEAR(s.sim.tilt, kPi / 6, 1e-15);
+  EXPECT_NEAR(s.sim.effective_gravity(), 4.9, 1e-12);
+}
+
+TEST(SceneTest, FixedMotion) {
+  const Scene s = parse_scene(with(kMinimal, "  type: butterfly\n  period: 1.181\n  k: -1.1393\n",
+                                   "  type: fixed\n  angle_deg: 30\n"));
+  EXPECT_EQ(s.sim.motion.kind, sim::MotionSpec::Kind::kFixed);
+  EXPECT_NEAR(s.sim.motion.angle, kPi / 6, 1e-15);
+  EXPECT_DOUBLE_EQ(s.sim.end_time(), 1.0);  // no period to default to
+}
+
+TEST(SceneTest, EllipseObject) {
+  const Scene s =
+      parse_scene(with(kBase, "  type: disk\n  radius: 0.051\n",
+                       "  type: ellipse\n  semi_axes: [0.03, 0.02]\n  inertia: 2e-4\n"));
+  EXPECT_EQ(s.sim.object.kind, sim::ObjectSpec::Kind::kEllipse);
+  EXPECT_DOUBLE_EQ(s.sim.object.semi_axis_x, 0.03);
+  EXPECT_DOUBLE_EQ(s.sim.object.semi_axis_y, 0.02);
+  ASSERT_TRUE(s.sim.object.inertia.has_value());
+  EXPECT_DOUBLE_EQ(*s.sim.object.inertia, 2e-4);
+}
+
+// --------------------------------------------------------------------------------------------
+// Structural errors
+
+TEST(SceneTest, ExactMessageFormat) {
+  EXPECT_EQ(error_of(with(kBase, "radius: 0.051", "radius: -0.05"), "scenes/x.yaml"),
+            "scenes/x.yaml: object.radius: must be positive, got -0.05");
+  EXPECT_EQ(error_of(with(kBase, "k: -1.1393", "k: abc"), "x.yaml"),
+            "x.yaml: motion.k: expected a number, got 'abc'");
+  EXPECT_EQ(error_of(with(kBase, "gravity:\n  g: 9.8\n  tilt_deg: 90\n", ""), "x.yaml"),
+            "x.yaml: gravity: missing required section");
+}
+
+TEST(SceneTest, MissingSection) {
+  expect_field_error(with(kBase, "gravity:\n  g: 9.8\n  tilt_deg: 90\n", ""), "gravity",
+                     "missing required section");
+  expect_field_error(
+      with(kMinimal, "motion:\n  type: butterfly\n  period: 1.181\n  k: -1.1393\n", ""), "motion",
+      "missing");
+}
+
+TEST(SceneTest, MissingKey) {
+  expect_field_error(with(kBase, "  k: -1.1393\n", ""), "motion.k", "missing required key");
+  expect_field_error(with(kBase, "  g: 9.8\n", ""), "gravity.g", "missing");
+  expect_field_error(with(kBase, "  radius: 0.051\n", ""), "object.radius", "missing");
+  expect_field_error(with(kBase, "  shape: polynomial\n", ""), "hand.shape", "missing");
+  expect_field_error(with(kBase, "  type: disk\n", ""), "object.type", "missing");
+}
+
+TEST(SceneTest, UnknownKeys) {
+  expect_field_error(kBase + "colour: red\n", "colour", "unknown key");
+  expect_field_error(with(kBase, "  d: 0.216\n", "  d: 0.216\n  foo: 1\n"), "hand.foo",
+                     "unknown key");
+  // A typo is reported as the unknown key, not as the missing one.
+  expect_field_error(with(kBase, "radius: 0.051", "raduis: 0.051"), "object.raduis", "unknown key");
+  expect_field_error(with(kBase, "rtol: 1.0e-10", "rtoll: 1.0e-10"), "integrator.rtoll",
+                     "unknown key");
+  expect_field_error(with(kBase, "event_tolerance", "tolerance"), "contact.tolerance",
+                     "unknown key");
+}
+
+TEST(SceneTest, DuplicateKey) {
+  expect_field_error(with(kBase, "  a: 0.18\n", "  a: 0.18\n  a: 0.19\n"), "hand.a", "duplicate");
+}
+
+TEST(SceneTest, WrongTypes) {
+  expect_field_error(with(kBase, "k: -1.1393", "k: abc"), "motion.k", "expected a number");
+  expect_field_error(with(kBase, "g: 9.8", "g: [1, 2]"), "gravity.g",
+                     "expected a number, got a list");
+  expect_field_error(with(kBase, "g: 9.8", "g: {x: 1}"), "gravity.g", "expected a number");
+  expect_field_error(with(kBase, "radius: 0.051", "radius:"), "object.radius", "empty");
+  expect_field_error(with(kBase, "radius: 0.051", "radius: \"0.051\""), "object.radius", "string");
+  expect_field_error(with(kBase, "radius: 0.051", "radius: 0.051m"), "object.radius",
+                     "expected a number");
+  expect_field_error(with(kBase, "type: disk", "type: [disk]"), "object.type", "expected a string");
+  expect_field_error(with(kBase, kHandSection, "hand: 3\n"), "hand", "expected a mapping");
+  expect_field_error(with(kBase, kHandSection, "hand:\n"), "hand", "expected a mapping");
+  expect_field_error(with(kBase, "stop_on_contact_loss: true", "stop_on_contact_loss: yes"),
+                     "contact.stop_on_contact_loss", "true or false");
+  expect_field_error(with(kBase, "stop_on_contact_loss: true", "stop_on_contact_loss: 1"),
+                     "contact.stop_on_contact_loss", "true or false");
+}
+
+TEST(SceneTest, NonFiniteNumbers) {
+  expect_field_error(with(kBase, "radius: 0.051", "radius: .nan"), "object.radius", "finite");
+  expect_field_error(with(kBase, "period: 1.181", "period: .inf"), "motion.period", "finite");
+  expect_field_error(with(kBase, "k: -1.1393", "k: -.inf"), "motion.k", "finite");
+  expect_field_error(with(kBase, "s_h: -1", "s_h: .NaN"), "initial.s_h", "finite");
+  expect_field_error(with(kBase, "g: 9.8", "g: 1e999"), "gravity.g", "range");
+  expect_field_error(with(kBase, "  type: disk\n  radius: 0.051\n",
+                          "  type: ellipse\n  semi_axes: [0.03, .nan]\n"),
+                     "object.semi_axes[1]", "finite");
+}
+
+TEST(SceneTest, UnknownEnumValues) {
+  expect_field_error(with(kBase, "method: dopri5", "method: euler"), "integrator.method",
+                     "'euler' (allowed: dopri5, rk4)");
+  expect_field_error(with(kBase, "formulation: auto", "formulation: magic"),
+                     "integrator.formulation", "allowed: auto, general, reduced");
+  expect_field_error(with(kBase, "type: disk", "type: square"), "object.type", "disk, ellipse");
+  expect_field_error(with(kBase, "type: butterfly", "type: wave"), "motion.type",
+                     "butterfly, fixed");
+  expect_field_error(with(kBase, "shape: polynomial", "shape: circle"), "hand.shape",
+                     "allowed: polynomial");
+}
+
+TEST(SceneTest, DerivedCoefficientsCannotBeGiven) {
+  expect_field_error(with(kBase, "  d: 0.216\n", "  d: 0.216\n  e: 0.072\n"), "hand.e", "derived");
+  expect_field_error(with(kBase, "  d: 0.216\n", "  d: 0.216\n  f: -0.0936\n"), "hand.f",
+                     "derived");
+}
+
+TEST(SceneTest, KeysOfTheOtherVariant) {
+  expect_field_error(with(kBase, "  radius: 0.051\n", "  radius: 0.051\n  semi_axes: [1, 2]\n"),
+                     "object.semi_axes", "ellipse");
+  expect_field_error(with(kBase, "  type: disk\n", "  type: ellipse\n  semi_axes: [0.03, 0.02]\n"),
+                     "object.radius", "disk");
+  expect_field_error(with(kBase, "  k: -1.1393\n", "  k: -1.1393\n  angle_deg: 10\n"),
+                     "motion.angle_deg", "fixed");
+  expect_field_error(with(kBase, "type: butterfly", "type: fixed"), "motion.period", "butterfly");
+  expect_field_error(with(kBase, "  type: disk\n  radius: 0.051\n",
+                          "  type: ellipse\n  semi_axes: [0.03, 0.02, 0.01]\n"),
+                     "object.semi_axes", "two numbers");
+  expect_field_error(with(kBase, "  type: disk\n  radius: 0.051\n", "  type: ellipse\n"),
+                     "object.semi_axes", "missing");
+}
+
+// --------------------------------------------------------------------------------------------
+// Value errors
+
+TEST(SceneTest, OutOfRangeValues) {
+  expect_field_error(with(kBase, "radius: 0.051", "radius: -0.05"), "object.radius",
+                     "must be positive, got -0.05");
+  expect_field_error(with(kBase, "radius: 0.051", "radius: 0"), "object.radius", "positive");
+  expect_field_error(with(kBase, "period: 1.181", "period: 0"), "motion.period", "positive");
+  expect_field_error(with(kBase, "period: 1.181", "period: -1.181"), "motion.period", "positive");
+  expect_field_error(with(kBase, "g: 9.8", "g: -9.8"), "gravity.g", "positive");
+  expect_field_error(with(kBase, "tilt_deg: 90", "tilt_deg: 0"), "gravity.tilt_deg", "(0, 90]");
+  expect_field_error(with(kBase, "tilt_deg: 90", "tilt_deg: 95"), "gravity.tilt_deg", "(0, 90]");
+  expect_field_error(with(kBase, "mass: 1.0", "mass: 0"), "object.mass", "positive");
+  expect_field_error(with(kBase, "mass: 1.0", "mass: 1.0\n  inertia: -1"), "object.inertia",
+                     "positive");
+  expect_field_error(with(kBase, "duration: 1.181", "duration: 0"), "duration", "positive");
+  expect_field_error(with(kBase, "rtol: 1.0e-10", "rtol: 0"), "integrator.rtol", "positive");
+  expect_field_error(with(kBase, "atol: 1.0e-12", "atol: -1"), "integrator.atol", "positive");
+  expect_field_error(with(kBase, "formulation: auto", "formulation: auto\n  step: 0"),
+                     "integrator.step", "positive");
+  expect_field_error(with(kBase, "formulation: auto", "formulation: auto\n  max_step: -0.1"),
+                     "integrator.max_step", "positive");
+  expect_field_error(with(kBase, "stop_on_contact_loss: true", "mu: -0.1"), "contact.mu", ">= 0");
+  expect_field_error(with(kBase, "event_tolerance: 1.0e-12", "event_tolerance: 0"),
+                     "contact.event_tolerance", "positive");
+}
+
+// These come from sim::build_problem, re-prefixed with the origin.
+TEST(SceneTest, PhysicallyInvalidScenes) {
+  expect_field_error(with(kBase, "k: -1.1393", "k: -2"), "motion.k", "k = -2");
+  // A flat palm (d = 0) has no well to start in.
+  expect_field_error(with(kBase, "d: 0.216", "d: 0"), "hand", "no well");
+  // A disk wider than the palm well's curvature radius (r kappa >= 1).
+  expect_field_error(with(kBase, "radius: 0.051", "radius: 0.1"), "hand", "too tight");
+  // c = -0.5 pulls the outline across the axis of symmetry.
+  expect_field_error(with(kBase, "c: -0.252", "c: -0.5"), "hand", "self-intersects");
+  expect_field_error(with(kBase, "a: 0.18", "a: -0.18"), "hand.a", "positive");
+  // A ring is the most inertia a disk of that mass and radius can have.
+  expect_field_error(with(kBase, "mass: 1.0", "mass: 1.0\n  inertia: 0.01"), "object.inertia",
+                     "m r^2");
+  expect_field_error(with(with(kBase, "  type: disk\n  radius: 0.051\n",
+                               "  type: ellipse\n  semi_axes: [0.03, 0.02]\n"),
+                          "formulation: auto", "formulation: reduced"),
+                     "integrator.formulation", "disk");
+}
+
+// --------------------------------------------------------------------------------------------
+// Document-level errors
+
+TEST(SceneTest, YamlSyntaxErrorGivesTheLine) {
+  // Line 7 opens a flow sequence that is never closed.
+  const std::string msg = error_of(with(kBase, "a: 0.18", "a: [0.18"));
+  EXPECT_EQ(msg.rfind("t.yaml: line ", 0), 0u) << msg;
+  EXPECT_NE(msg.find("invalid YAML"), std::string::npos) << msg;
+  EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
+
+  // Bad indentation on line 3.
+  const std::string msg2 = error_of("gravity:\n  g: 9.8\n    tilt_deg: 90\n");
+  EXPECT_EQ(msg2.rfind("t.yaml: line 3, column", 0), 0u) << msg2;
+}
+
+TEST(SceneTest, DocumentShapeErrors) {
+  expect_field_error("", "(document)", "empty");
+  expect_field_error("- 1\n- 2\n", "(document)", "mapping");
+  expect_field_error("just a string\n", "(document)", "mapping");
+  expect_field_error(kBase + "---\n" + kBase, "(document)", "documents");
+}
+
+TEST(SceneTest, MessagesStayOnOneLineEvenForMultiLineInput) {
+  const std::string msg = error_of(with(kBase, "k: -1.1393", "k: |\n    two\n    lines"));
+  EXPECT_EQ(msg.rfind("t.yaml: motion.k: expected a number", 0), 0u) << msg;
+  EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
+}
+
+// --------------------------------------------------------------------------------------------
+// Files
+
+class SceneFileTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = std::filesystem::temp_directory_path() /
+           ("flatland_scene_test_" +
+            std::to_string(::testing::UnitTest::GetInstance()->random_seed()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    std::filesystem::create_directories(dir_);
+  }
+  void TearDown() override { std::filesystem::remove_all(dir_); }
+  std::string write(const std::string& name, const std::string& text) {
+    const auto p = dir_ / name;
+    std::ofstream(p) << text;
+    return p.string();
+  }
+  std::filesystem::path dir_;
+};
+
+TEST_F(SceneFileTest, LoadsAFileAndUsesItsPathAsOrigin) {
+  const std::string p = write("ok.yaml", kBase);
+  const Scene s = flatland::load_scene(p);
+  EXPECT_EQ(s.origin, p);
+  EXPECT_EQ(s.name, "test");
+}
+
+TEST_F(SceneFileTest, ErrorsInAFileNameThePath) {
+  const std::string p = write("bad.yaml", with(kBase, "radius: 0.051", "radius: -0.05"));
+  try {
+    flatland::load_scene(p);
+    FAIL() << "no error";
+  } catch (const SceneError& e) {
+    EXPECT_EQ(std::string(e.what()), p + ": object.radius: must be positive, got -0.05");
+  }
+}
+
+TEST_F(SceneFileTest, MissingFile) {
+  const std::string p = (dir_ / "does-not-exist.yaml").string();
+  try {
+    flatland::load_scene(p);
+    FAIL() << "no error";
+  } catch (const SceneError& e) {
+    EXPECT_EQ(std::string(e.what()),
+              p + ": cannot read scene file (" + std::strerror(ENOENT) + ")");
+  }
+}
+
+TEST_F(SceneFileTest, DirectoryIsUnreadable) {
+  try {
+    flatland::load_scene(dir_.string());
+    FAIL() << "no error";
+  } catch (const SceneError& e) {
+    const std::string msg = e.what();
+    EXPECT_EQ(msg.rfind(dir_.string() + ": cannot read scene file (", 0), 0u) << msg;
+  }
+}
+
+}  // namespace
