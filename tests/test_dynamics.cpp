@@ -52,8 +52,9 @@ class BothFormulations : public ::testing::TestWithParam<Formulation> {};
 // A uniform disk on a fixed incline of angle alpha: centre acceleration (2/3) g sin(alpha).
 TEST_P(BothFormulations, InclineAcceleration) {
   const double alpha = 0.3;
-  auto pb = problem(std::make_shared<LineCurve>(Vec2::Zero(), Vec2(std::cos(alpha), -std::sin(alpha))),
-                    make_uniform_disk(0.05), std::make_shared<FixedHand>(0.0));
+  auto pb =
+      problem(std::make_shared<LineCurve>(Vec2::Zero(), Vec2(std::cos(alpha), -std::sin(alpha))),
+              make_uniform_disk(0.05), std::make_shared<FixedHand>(0.0));
   InitialContact ic;
   ic.s_h = 0.0;
   const double t = 1.0;

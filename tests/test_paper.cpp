@@ -42,7 +42,8 @@ TEST(Paper, TimeOptimalSolution) {
   EXPECT_NEAR(r.period, 1.095, 0.003);
   EXPECT_NEAR(r.k, -1.1493, 0.001);
   EXPECT_NEAR(r.fn_min_ratio, 0.0, 1e-6);
-  // Just faster than it, the solution throws the disk (negative force needed); just slower keeps it.
+  // Just faster than it, the solution throws the disk (negative force needed); just slower keeps
+  // it.
   EXPECT_LT(solve_k(paper_spec(), r.period - 0.01).fn_min_ratio, 0.0);
   EXPECT_GT(solve_k(paper_spec(), r.period + 0.01).fn_min_ratio, 0.0);
 }

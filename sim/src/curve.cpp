@@ -33,12 +33,14 @@ CurveGeometry geometry_from_jet(const CurveJet& jet, int normal_side) {
   // Signed curvature is positive for a left turn; a body traversed with its outside on the left
   // of travel (normal_side = -1) is convex where it turns left, hence the sign flip.
   g.curvature = -normal_side * c12 * inv_speed3;
-  g.curvature_ds = -normal_side * (cross2(jet.d1, jet.d3) * inv_speed3 -
-                                   3.0 * c12 * jet.d1.dot(jet.d2) * inv_speed3 * inv_speed * inv_speed);
+  g.curvature_ds =
+      -normal_side * (cross2(jet.d1, jet.d3) * inv_speed3 -
+                      3.0 * c12 * jet.d1.dot(jet.d2) * inv_speed3 * inv_speed * inv_speed);
   const double ks = g.curvature * g.speed;
   g.normal_ds = ks * g.tangent;
   const Vec2 tangent_ds = (jet.d2 - g.speed_ds * g.tangent) * inv_speed;
-  g.normal_dss = (g.curvature_ds * g.speed + g.curvature * g.speed_ds) * g.tangent + ks * tangent_ds;
+  g.normal_dss =
+      (g.curvature_ds * g.speed + g.curvature * g.speed_ds) * g.tangent + ks * tangent_ds;
   return g;
 }
 
@@ -187,8 +189,7 @@ void validate_hand_for_disk(const PolynomialHand& hand, double disk_radius) {
   for (double s : {-1.0, 1.0}) {
     const CurveGeometry g = hand.geometry(s, 0);
     if (!(g.curvature < 0))
-      throw std::invalid_argument(std::string("hand: no well at the ") +
-                                  (s < 0 ? "palm" : "back") +
+      throw std::invalid_argument(std::string("hand: no well at the ") + (s < 0 ? "palm" : "back") +
                                   " (the outline must be concave there, curvature " +
                                   fmt(g.curvature) + " 1/m) " + where(s, g.point));
   }

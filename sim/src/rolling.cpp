@@ -100,7 +100,8 @@ GeneralRolling::State GeneralRolling::initial_state(const InitialContact& init) 
   y[9] = init.sdot_h;
   const int dir = init.sdot_h < 0 ? -1 : +1;
   const HandKinematics h = pb.motion->at(init.t0);
-  const Vec2 nh = rotation(h.angle) * pb.hand->geometry(init.s_h, pb.hand->piece_at(init.s_h, dir)).normal;
+  const Vec2 nh =
+      rotation(h.angle) * pb.hand->geometry(init.s_h, pb.hand->piece_at(init.s_h, dir)).normal;
   if (init.s_o) {
     y[3] = *init.s_o;
     y[2] = 0.0;
@@ -175,16 +176,16 @@ GeneralRolling::Assembled GeneralRolling::assemble_and_solve(double t, const Sta
   A.block<2, 1>(0, 2) = -perp(w.ro);
   A.block<2, 1>(0, 3) = -w.Jo;
   A.block<2, 1>(0, 4) = w.Jh;
-  b.segment<2>(0) = -(a_h + ah * perp(w.rh) - wh * wh * w.rh + 2.0 * wh * sdh * perp(w.Jh) +
-                      w.Jh_ds * sdh * sdh + wo * wo * w.ro - 2.0 * wo * sdo * perp(w.Jo) -
-                      w.Jo_ds * sdo * sdo);
+  b.segment<2>(0) =
+      -(a_h + ah * perp(w.rh) - wh * wh * w.rh + 2.0 * wh * sdh * perp(w.Jh) + w.Jh_ds * sdh * sdh +
+        wo * wo * w.ro - 2.0 * wo * sdo * perp(w.Jo) - w.Jo_ds * sdo * sdo);
   // (2) opposite unit normals, twice differentiated (2 rows; the one along n is redundant).
   A.block<2, 1>(2, 2) = perp(w.no);
   A.block<2, 1>(2, 3) = w.Ko;
   A.block<2, 1>(2, 4) = w.Kh;
-  b.segment<2>(2) = -(-wo * wo * w.no + 2.0 * wo * sdo * perp(w.Ko) + w.Ko_ds * sdo * sdo +
-                      ah * perp(w.nh) - wh * wh * w.nh + 2.0 * wh * sdh * perp(w.Kh) +
-                      w.Kh_ds * sdh * sdh);
+  b.segment<2>(2) =
+      -(-wo * wo * w.no + 2.0 * wo * sdo * perp(w.Ko) + w.Ko_ds * sdo * sdo + ah * perp(w.nh) -
+        wh * wh * w.nh + 2.0 * wh * sdh * perp(w.Kh) + w.Kh_ds * sdh * sdh);
   // (3) rolling: material contact points have equal tangential acceleration (row scaled by |J_h|).
   const Vec2 th = w.Jh / w.gh.speed;
   A.block<1, 2>(4, 0) = -th.transpose();
@@ -271,7 +272,8 @@ ReducedDiskRolling::State ReducedDiskRolling::initial_state(const InitialContact
     const int dir = init.sdot_h < 0 ? -1 : +1;
     const HandKinematics h = problem_->motion->at(init.t0);
     const Vec2 nh =
-        rotation(h.angle) * problem_->hand->geometry(init.s_h, problem_->hand->piece_at(init.s_h, dir)).normal;
+        rotation(h.angle) *
+        problem_->hand->geometry(init.s_h, problem_->hand->piece_at(init.s_h, dir)).normal;
     y[1] = angle_of(-nh) - *init.s_o;
   } else {
     y[1] = init.object_angle;
@@ -317,7 +319,8 @@ Sample ReducedDiskRolling::sample(double t, const State& y, const Pieces& p) con
   const double w = h.angular_velocity;
   // p'' = a_h + R [theta'' z x q - theta'^2 q + 2 theta' sigma s' z x t
   //                + (sigma' t - sigma kappa |J| n) s'^2 + sigma s'' t]
-  const Vec2 local = h.angular_acceleration * perp(q) - w * w * q + 2.0 * w * sigma * sd * perp(g.tangent) +
+  const Vec2 local = h.angular_acceleration * perp(q) - w * w * q +
+                     2.0 * w * sigma * sd * perp(g.tangent) +
                      (sigma_ds * g.tangent - sigma * g.curvature * g.speed * g.normal) * sd * sd +
                      sigma * sdd * g.tangent;
   Sample out;

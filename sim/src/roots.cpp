@@ -25,8 +25,12 @@ RootResult brent_root(const std::function<double(double)>& f, double a, double b
       d = e = b - a;
     }
     if (std::abs(fc) < std::abs(fb)) {
-      a = b; b = c; c = a;
-      fa = fb; fb = fc; fc = fa;
+      a = b;
+      b = c;
+      c = a;
+      fa = fb;
+      fb = fc;
+      fc = fa;
     }
     const double tol = 2.0 * eps * std::abs(b) + 0.5 * xtol;
     const double m = 0.5 * (c - b);
@@ -47,7 +51,10 @@ RootResult brent_root(const std::function<double(double)>& f, double a, double b
         p = s * (2.0 * m * qa * (qa - rr) - (b - a) * (rr - 1.0));
         q = (qa - 1.0) * (rr - 1.0) * (s - 1.0);
       }
-      if (p > 0) q = -q; else p = -p;
+      if (p > 0)
+        q = -q;
+      else
+        p = -p;
       if (2.0 * p < std::min(3.0 * m * q - std::abs(tol * q), std::abs(e * q))) {
         e = d;
         d = p / q;
@@ -89,7 +96,10 @@ MinResult brent_minimize(const std::function<double(double)>& f, double a, doubl
     if (std::abs(e) > tol1) {
       double rr = (x - w) * (fx - fv), q = (x - v) * (fx - fw), p = (x - v) * q - (x - w) * rr;
       q = 2.0 * (q - rr);
-      if (q > 0) p = -p; else q = -q;
+      if (q > 0)
+        p = -p;
+      else
+        q = -q;
       const double etemp = e;
       e = d;
       if (std::abs(p) < std::abs(0.5 * q * etemp) && p > q * (a - x) && p < q * (b - x)) {
@@ -107,14 +117,29 @@ MinResult brent_minimize(const std::function<double(double)>& f, double a, doubl
     const double fu = f(u);
     ++r.evaluations;
     if (fu <= fx) {
-      if (u >= x) a = x; else b = x;
-      v = w; fv = fw; w = x; fw = fx; x = u; fx = fu;
+      if (u >= x)
+        a = x;
+      else
+        b = x;
+      v = w;
+      fv = fw;
+      w = x;
+      fw = fx;
+      x = u;
+      fx = fu;
     } else {
-      if (u < x) a = u; else b = u;
+      if (u < x)
+        a = u;
+      else
+        b = u;
       if (fu <= fw || w == x) {
-        v = w; fv = fw; w = u; fw = fu;
+        v = w;
+        fv = fw;
+        w = u;
+        fw = fu;
       } else if (fu <= fv || v == x || v == w) {
-        v = u; fv = fu;
+        v = u;
+        fv = fu;
       }
     }
   }

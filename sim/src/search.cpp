@@ -38,10 +38,10 @@ RunOptions search_options(const SimulationSpec& spec, double t_end) {
   return o;
 }
 
-double s_at_half_period(const std::shared_ptr<const RollingProblem>& base, const SimulationSpec& spec,
-                        double period, double k, long* rhs_evals) {
-  const RunResult r =
-      simulate(with_motion(base, period, k), spec.initial, search_options(spec, spec.initial.t0 + 0.5 * period));
+double s_at_half_period(const std::shared_ptr<const RollingProblem>& base,
+                        const SimulationSpec& spec, double period, double k, long* rhs_evals) {
+  const RunResult r = simulate(with_motion(base, period, k), spec.initial,
+                               search_options(spec, spec.initial.t0 + 0.5 * period));
   if (rhs_evals) *rhs_evals += r.stats.rhs_evals;
   return r.final.s_h;
 }
@@ -80,7 +80,8 @@ std::optional<Bracket> find_bracket(const std::function<double(double)>& f, doub
         return std::nullopt;
       }
       if (!std::isfinite(fb)) return std::nullopt;
-      if ((fa > 0) != (fb > 0) || fb == 0) return Bracket{std::min(a, b), std::max(a, b), a < b ? fa : fb, a < b ? fb : fa};
+      if ((fa > 0) != (fb > 0) || fb == 0)
+        return Bracket{std::min(a, b), std::max(a, b), a < b ? fa : fb, a < b ? fb : fa};
       a = b;
       fa = fb;
       h *= 2;
@@ -93,8 +94,9 @@ std::optional<Bracket> find_bracket(const std::function<double(double)>& f, doub
     const double probe = std::clamp(x0 + 0.25 * step, lo, hi);
     if (probe != x0) {
       const double fp = f(probe);
-      if ((fp > 0) != (fx0 > 0)) return Bracket{std::min(x0, probe), std::max(x0, probe),
-                                                x0 < probe ? fx0 : fp, x0 < probe ? fp : fx0};
+      if ((fp > 0) != (fx0 > 0))
+        return Bracket{std::min(x0, probe), std::max(x0, probe), x0 < probe ? fx0 : fp,
+                       x0 < probe ? fp : fx0};
       first = std::abs(fp) < std::abs(fx0) ? +1 : -1;
     }
   } catch (const std::invalid_argument&) {
@@ -147,8 +149,9 @@ SolveReport evaluate(const SimulationSpec& spec, double period, double k) {
 }
 
 namespace {
-SolveReport solve_k_from(const SimulationSpec& spec, const std::shared_ptr<const RollingProblem>& base,
-                         double period, double k0, const SearchSettings& set) {
+SolveReport solve_k_from(const SimulationSpec& spec,
+                         const std::shared_ptr<const RollingProblem>& base, double period,
+                         double k0, const SearchSettings& set) {
   int sims = 0;
   long rhs = 0;
   auto f = [&](double k) {
@@ -160,8 +163,8 @@ SolveReport solve_k_from(const SimulationSpec& spec, const std::shared_ptr<const
   k0 = std::clamp(k0, lo, hi);
   const auto br = find_bracket(f, k0, f(k0), 0.02, lo, hi);
   if (!br)
-    throw std::runtime_error("solve: no k in (-2, 2] brings the disk to s_h(T) = 0 for 2T = " +
-                             num(period) + " s");
+    throw std::runtime_error(
+        "solve: no k in (-2, 2] brings the disk to s_h(T) = 0 for 2T = " + num(period) + " s");
   const RootResult root = br->a == br->b ? RootResult{br->a, 0.0, 0, true}
                                          : brent_root(f, br->a, br->b, br->fa, br->fb,
                                                       set.tolerance, set.max_evaluations);
@@ -182,7 +185,8 @@ SolveReport solve_k(const SimulationSpec& spec, double period, const SearchSetti
   return solve_k_from(s, build_problem(s), period, spec.motion.k, set);
 }
 
-SolveReport solve_d(const SimulationSpec& spec, double period, double k, const SearchSettings& set) {
+SolveReport solve_d(const SimulationSpec& spec, double period, double k,
+                    const SearchSettings& set) {
   check_period(period);
   SimulationSpec s = spec;
   s.motion.kind = MotionSpec::Kind::kButterfly;
@@ -201,8 +205,9 @@ SolveReport solve_d(const SimulationSpec& spec, double period, double k, const S
   const auto br = find_bracket(f, s.hand.d, f(s.hand.d), 0.01 * scale, s.hand.d - 10 * scale,
                                s.hand.d + 10 * scale);
   if (!br)
-    throw std::runtime_error("solve: no valid hand shape d brings the disk to s_h(T) = 0 for 2T = " +
-                             num(period) + " s, k = " + num(k));
+    throw std::runtime_error(
+        "solve: no valid hand shape d brings the disk to s_h(T) = 0 for 2T = " + num(period) +
+        " s, k = " + num(k));
   const RootResult root = br->a == br->b ? RootResult{br->a, 0.0, 0, true}
                                          : brent_root(f, br->a, br->b, br->fa, br->fb,
                                                       set.tolerance * scale, set.max_evaluations);
@@ -275,7 +280,8 @@ SurfaceResult surface(const SimulationSpec& spec, double k_lo, double k_hi, int 
     }
     rhs += local_rhs;
   };
-  int nthreads = threads > 0 ? threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  int nthreads =
+      threads > 0 ? threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   nthreads = static_cast<int>(std::min<long>(nthreads, total));
   std::vector<std::thread> pool;
   for (int t = 1; t < nthreads; ++t) pool.emplace_back(worker);
@@ -306,8 +312,9 @@ TimeOptimalReport time_optimal(const SimulationSpec& spec, double lo, double hi,
   if (!(glo < 0 && ghi > 0))
     throw std::runtime_error("time-optimal: [" + num(lo) + ", " + num(hi) +
                              "] s does not bracket the fastest contact-keeping solution (minimum "
-                             "normal force ratio " + num(glo) + " at 2T = " + num(lo) + " s, " +
-                             num(ghi) + " at " + num(hi) + " s; it must go from < 0 to > 0)");
+                             "normal force ratio " +
+                             num(glo) + " at 2T = " + num(lo) + " s, " + num(ghi) + " at " +
+                             num(hi) + " s; it must go from < 0 to > 0)");
   const RootResult root = brent_root(g, lo, hi, glo, ghi, period_tolerance, set.max_evaluations);
   rep.solution = solve_k_from(s, base, root.x, k0, set);
   rep.period = root.x;

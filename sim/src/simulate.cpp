@@ -10,23 +10,28 @@
 
 namespace flatland::sim {
 
-std::string to_string(Method m) {
-  return m == Method::kDormandPrince54 ? "dopri5" : "rk4";
-}
+std::string to_string(Method m) { return m == Method::kDormandPrince54 ? "dopri5" : "rk4"; }
 std::string to_string(Formulation f) {
   switch (f) {
-    case Formulation::kAuto: return "auto";
-    case Formulation::kGeneral: return "general";
-    case Formulation::kReduced: return "reduced";
+    case Formulation::kAuto:
+      return "auto";
+    case Formulation::kGeneral:
+      return "general";
+    case Formulation::kReduced:
+      return "reduced";
   }
   return "?";
 }
 std::string to_string(StopReason r) {
   switch (r) {
-    case StopReason::kEndTime: return "end_time";
-    case StopReason::kContactLost: return "contact_lost";
-    case StopReason::kSlip: return "slip";
-    case StopReason::kLeftBounds: return "left_bounds";
+    case StopReason::kEndTime:
+      return "end_time";
+    case StopReason::kContactLost:
+      return "contact_lost";
+    case StopReason::kSlip:
+      return "slip";
+    case StopReason::kLeftBounds:
+      return "left_bounds";
   }
   return "?";
 }
@@ -61,7 +66,8 @@ void Trajectory::interpolate(std::size_t i, double t, double* y) const {
   const double th = std::clamp((t - s.t0) / s.h, 0.0, 1.0), th1 = 1.0 - th;
   const double* c = coeffs_.data() + 5 * n_ * i;
   for (int k = 0; k < n_; ++k)
-    y[k] = c[k] + th * (c[n_ + k] + th1 * (c[2 * n_ + k] + th * (c[3 * n_ + k] + th1 * c[4 * n_ + k])));
+    y[k] = c[k] +
+           th * (c[n_ + k] + th1 * (c[2 * n_ + k] + th * (c[3 * n_ + k] + th1 * c[4 * n_ + k])));
 }
 
 Sample Trajectory::sample(double t) const {
@@ -134,10 +140,6 @@ class Integration {
   double attempt(double t, const State& y, const State& k1, double h, State& y1, State& k7,
                  Dense& rc);
   double initial_step(double t, const State& y, const State& f0, double t_stop);
-  static State interpolate(const Dense& rc, double theta) {
-    const double th1 = 1.0 - theta;
-    return rc[0] + theta * (rc[1] + th1 * (rc[2] + theta * (rc[3] + th1 * rc[4])));
-  }
   Sample sample(double t, const State& y) {
     ++st_.event_evals;
     return model_.sample(t, y, pieces_);
@@ -222,7 +224,6 @@ template <class Model>
 void Integration<Model>::record(double t, const State& y, const Sample* s) {
   if (!opt_.record) return;
   res_.steps.push_back(s ? *s : sample(t, y));
-  (void)t;
 }
 
 template <class Model>
@@ -232,7 +233,8 @@ void Integration<Model>::run(const InitialContact& init) {
   const bool rk4 = is.method == Method::kRungeKutta4;
   if (rk4 && !(is.fixed_step > 0 && std::isfinite(is.fixed_step)))
     throw std::invalid_argument("integrator.step: must be positive and finite");
-  if (!rk4 && (!(is.rtol > 0) || !(is.atol > 0) || !std::isfinite(is.rtol) || !std::isfinite(is.atol)))
+  if (!rk4 &&
+      (!(is.rtol > 0) || !(is.atol > 0) || !std::isfinite(is.rtol) || !std::isfinite(is.atol)))
     throw std::invalid_argument("integrator.rtol/atol: must be positive and finite");
   if (!std::isfinite(init.s_h) || !std::isfinite(init.sdot_h) || !std::isfinite(init.t0))
     throw std::invalid_argument("initial: s_h, sdot_h and t0 must be finite");
@@ -335,9 +337,10 @@ void Integration<Model>::run(const InitialContact& init) {
         model_.project(t + hh, out, pieces_);
         return out;
       };
-      auto locate = [&](const std::function<double(const State&, double)>& g, double g0, double g1) {
-        return t + brent_root([&](double hh) { return g(step_state(hh), t + hh); }, 0.0, h_full,
-                              g0, g1, ev.time_tolerance)
+      auto locate = [&](const std::function<double(const State&, double)>& g, double g0,
+                        double g1) {
+        return t + brent_root([&](double hh) { return g(step_state(hh), t + hh); }, 0.0, h_full, g0,
+                              g1, ev.time_tolerance)
                        .x;
       };
       if (s1 > iv.hi || s1 < iv.lo) {
@@ -345,19 +348,20 @@ void Integration<Model>::run(const InitialContact& init) {
         const double g0 = model_.s_h(y) - junction, g1 = s1 - junction;
         // A previous crossing may have landed a rounding error short of its junction; if the
         // disk turns back right there, it is already across at the start of this step.
-        const double tj = (g0 > 0) == (g1 > 0) || g0 == 0
-                              ? t
-                              : locate([&](const State& s, double) { return model_.s_h(s) - junction; },
-                                       g0, g1);
+        const double tj =
+            (g0 > 0) == (g1 > 0) || g0 == 0
+                ? t
+                : locate([&](const State& s, double) { return model_.s_h(s) - junction; }, g0, g1);
         if (tj < t_event || kind == kNone) t_event = tj, kind = kJunction;
       }
       if (ev.s_h_bounds && (s1 < ev.s_h_bounds->first || s1 > ev.s_h_bounds->second)) {
-        const double bound = s1 < ev.s_h_bounds->first ? ev.s_h_bounds->first : ev.s_h_bounds->second;
+        const double bound =
+            s1 < ev.s_h_bounds->first ? ev.s_h_bounds->first : ev.s_h_bounds->second;
         const double g0 = model_.s_h(y) - bound, g1 = s1 - bound;
-        const double tb = (g0 > 0) == (g1 > 0) || g0 == 0
-                              ? t
-                              : locate([&](const State& s, double) { return model_.s_h(s) - bound; },
-                                       g0, g1);
+        const double tb =
+            (g0 > 0) == (g1 > 0) || g0 == 0
+                ? t
+                : locate([&](const State& s, double) { return model_.s_h(s) - bound; }, g0, g1);
         if (tb < t_event || kind == kNone) t_event = tb, kind = kBounds;
       }
       Sample s_end;
@@ -367,8 +371,9 @@ void Integration<Model>::run(const InitialContact& init) {
         have_end = true;
         const Sample s0 = res_.steps.empty() || !opt_.record ? sample(t, y) : res_.steps.back();
         if (ev.stop_on_contact_loss && s_end.force_normal < 0 && s0.force_normal >= 0) {
-          const double tc = locate([&](const State& s, double tau) { return sample(tau, s).force_normal; },
-                                   s0.force_normal, s_end.force_normal);
+          const double tc =
+              locate([&](const State& s, double tau) { return sample(tau, s).force_normal; },
+                     s0.force_normal, s_end.force_normal);
           if (tc < t_event || kind == kNone) t_event = tc, kind = kContact;
         }
         if (ev.mu) {
@@ -376,8 +381,9 @@ void Integration<Model>::run(const InitialContact& init) {
             return *ev.mu * s.force_normal - std::abs(s.force_tangential);
           };
           if (slip_margin(s_end) < 0 && slip_margin(s0) >= 0) {
-            const double ts = locate([&](const State& s, double tau) { return slip_margin(sample(tau, s)); },
-                                     slip_margin(s0), slip_margin(s_end));
+            const double ts =
+                locate([&](const State& s, double tau) { return slip_margin(sample(tau, s)); },
+                       slip_margin(s0), slip_margin(s_end));
             if (ts < t_event || kind == kNone) t_event = ts, kind = kSlip;
           }
         }
@@ -416,10 +422,14 @@ void Integration<Model>::run(const InitialContact& init) {
         const bool moved = drift > 0 && N != 3;
         t = t1;
         y = y1p;
-        if (moved) need_k1 = true; else k1 = k7;
+        if (moved)
+          need_k1 = true;
+        else
+          k1 = k7;
         if (opt_.record || kind != kNone) {
           const Sample s = have_end ? s_end : sample(t, y);
-          st_.max_constraint_residual = std::max(st_.max_constraint_residual, s.constraint_residual);
+          st_.max_constraint_residual =
+              std::max(st_.max_constraint_residual, s.constraint_residual);
           st_.max_redundant_residual = std::max(st_.max_redundant_residual, s.redundant_residual);
           record(t, y, &s);
         }
@@ -432,7 +442,8 @@ void Integration<Model>::run(const InitialContact& init) {
         h = h_try / fac;
       }
       switch (kind) {
-        case kNone: break;
+        case kNone:
+          break;
         case kJunction: {
           ++st_.junction_crossings;
           ++st_.restarts;
@@ -532,8 +543,10 @@ Extrema find_extrema(const RunResult& run, double t_from, double t_to, double ti
   bool nonpositive = false;
   for (std::size_t i = 0; i < n; ++i) {
     if (pts[i].fn_ratio < pts[imin].fn_ratio) imin = i;
-    if (pts[i].force_normal <= 0) nonpositive = true;
-    else if (pts[i].mu_required > pts[imu].mu_required) imu = i;
+    if (pts[i].force_normal <= 0)
+      nonpositive = true;
+    else if (pts[i].mu_required > pts[imu].mu_required)
+      imu = i;
   }
   const auto fn = refine(imin, [](const Sample& s) { return s.fn_ratio; });
   x.t_fn_min = fn.first;

@@ -22,7 +22,8 @@ std::shared_ptr<const RollingProblem> build_problem(const SimulationSpec& spec) 
   auto hand = std::make_shared<PolynomialHand>(spec.hand.a, spec.hand.b, spec.hand.c, spec.hand.d);
   const ObjectSpec& o = spec.object;
   if (o.kind == ObjectSpec::Kind::kDisk) {
-    pb->object = o.inertia ? make_disk(o.radius, o.mass, *o.inertia) : make_uniform_disk(o.radius, o.mass);
+    pb->object =
+        o.inertia ? make_disk(o.radius, o.mass, *o.inertia) : make_uniform_disk(o.radius, o.mass);
     validate_hand_for_disk(*hand, o.radius);
   } else {
     pb->object = make_uniform_ellipse(o.semi_axis_x, o.semi_axis_y, o.mass);

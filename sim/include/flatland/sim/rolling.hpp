@@ -25,11 +25,11 @@ namespace flatland::sim {
 
 /// Everything one run needs; immutable, shared between threads.
 struct RollingProblem {
-  CurvePtr hand;                             ///< outline in the hand frame (pivot at origin)
+  CurvePtr hand;  ///< outline in the hand frame (pivot at origin)
   RigidObject object;
   std::shared_ptr<const HandMotion> motion;
-  double gravity = 9.8;                      ///< effective gravity in the table plane, m/s^2,
-                                             ///< acting along world -y (= g sin(tilt))
+  double gravity = 9.8;  ///< effective gravity in the table plane, m/s^2,
+                         ///< acting along world -y (= g sin(tilt))
   Vec2 gravity_vector() const { return {0.0, -gravity}; }
 };
 
@@ -57,9 +57,9 @@ struct Sample {
   double t = 0;
   double theta = 0, theta_dot = 0, theta_ddot = 0;  ///< hand angle, rad
   double s_h = 0, sdot_h = 0, sddot_h = 0;          ///< hand contact parameter
-  double s_o = 0, sdot_o = 0;                       ///< object contact parameter (wrapped to (-pi, pi])
-  Vec2 object_position = Vec2::Zero();              ///< centre of mass, world, m
-  double object_angle = 0;                          ///< rad, unwrapped
+  double s_o = 0, sdot_o = 0;           ///< object contact parameter (wrapped to (-pi, pi])
+  Vec2 object_position = Vec2::Zero();  ///< centre of mass, world, m
+  double object_angle = 0;              ///< rad, unwrapped
   Vec2 object_velocity = Vec2::Zero();
   double object_angular_velocity = 0;
   double force_normal = 0;      ///< N, hand on object along the hand's outward normal (> 0 pushes)

@@ -6,8 +6,8 @@
 namespace flatland::sim {
 
 struct RootResult {
-  double x = 0;        ///< the root
-  double fx = 0;       ///< f at the root
+  double x = 0;   ///< the root
+  double fx = 0;  ///< f at the root
   int evaluations = 0;
   bool converged = false;
 };

@@ -25,17 +25,17 @@ struct SearchSettings {
 struct SolveReport {
   double period = 0;  ///< 2T, s
   double k = 0;
-  double d = 0;       ///< hand shape parameter d, m
-  double s_T = 0;     ///< s_h at t = T (0 at a solution)
+  double d = 0;                    ///< hand shape parameter d, m
+  double s_T = 0;                  ///< s_h at t = T (0 at a solution)
   double s_end = 0, sdot_end = 0;  ///< s_h and its rate at t = 2T
   // A solution is symmetric about T (its second half mirrors the first), so its forces are taken
   // over [0, T], where they are well conditioned even for slow motions.
-  double fn_apex_ratio = 0;        ///< normal force / weight at t = T (the apex of a solution)
-  double fn_min_ratio = 0;         ///< minimum over [0, T]
-  double mu_required = 0;          ///< max |f_t| / f_n over [0, T] (inf if f_n <= 0 somewhere)
-  int simulations = 0;             ///< runs the search made
-  long rhs_evals = 0;              ///< right-hand-side evaluations over all of them
-  RunResult run;                   ///< the full recorded run of the solution
+  double fn_apex_ratio = 0;  ///< normal force / weight at t = T (the apex of a solution)
+  double fn_min_ratio = 0;   ///< minimum over [0, T]
+  double mu_required = 0;    ///< max |f_t| / f_n over [0, T] (inf if f_n <= 0 somewhere)
+  int simulations = 0;       ///< runs the search made
+  long rhs_evals = 0;        ///< right-hand-side evaluations over all of them
+  RunResult run;             ///< the full recorded run of the solution
 };
 
 /// s_h at the half period T for the spec with (period, k) set; one unrecorded run.

@@ -28,11 +28,11 @@ std::string to_string(Formulation f);
 
 struct IntegratorSettings {
   Method method = Method::kDormandPrince54;
-  double rtol = 1e-10;        ///< relative tolerance (Dormand-Prince)
-  double atol = 1e-12;        ///< absolute tolerance (Dormand-Prince)
-  double fixed_step = 1e-3;   ///< s (RK4)
+  double rtol = 1e-10;       ///< relative tolerance (Dormand-Prince)
+  double atol = 1e-12;       ///< absolute tolerance (Dormand-Prince)
+  double fixed_step = 1e-3;  ///< s (RK4)
   double max_step = std::numeric_limits<double>::infinity();  ///< s (Dormand-Prince)
-  long max_steps = 5'000'000; ///< runtime error beyond this
+  long max_steps = 5'000'000;                                 ///< runtime error beyond this
 };
 
 struct EventSettings {
@@ -48,7 +48,8 @@ struct RunOptions {
   Formulation formulation = Formulation::kAuto;
   IntegratorSettings integrator;
   EventSettings events;
-  bool record = true;  ///< keep every step (dense output, per-step samples, extrema); off for search
+  bool record =
+      true;  ///< keep every step (dense output, per-step samples, extrema); off for search
 };
 
 enum class StopReason { kEndTime, kContactLost, kSlip, kLeftBounds };
@@ -56,13 +57,13 @@ std::string to_string(StopReason r);
 
 /// What the integrator did, so accuracy can be audited.
 struct RunStats {
-  long steps = 0;             ///< accepted steps
-  long rejected = 0;          ///< rejected steps (Dormand-Prince)
-  long rhs_evals = 0;         ///< right-hand-side evaluations
-  long event_evals = 0;       ///< force evaluations for events and extrema
-  int restarts = 0;           ///< integrator restarts (junctions s_h = +-1, motion breakpoints)
-  int junction_crossings = 0; ///< crossings of hand junctions (s_h odd integer)
-  double max_drift = 0;       ///< largest constraint residual removed by a projection (general)
+  long steps = 0;              ///< accepted steps
+  long rejected = 0;           ///< rejected steps (Dormand-Prince)
+  long rhs_evals = 0;          ///< right-hand-side evaluations
+  long event_evals = 0;        ///< force evaluations for events and extrema
+  int restarts = 0;            ///< integrator restarts (junctions s_h = +-1, motion breakpoints)
+  int junction_crossings = 0;  ///< crossings of hand junctions (s_h odd integer)
+  double max_drift = 0;        ///< largest constraint residual removed by a projection (general)
   double max_constraint_residual = 0;  ///< largest constraint residual after projection
   double max_redundant_residual = 0;   ///< largest |A x - b| seen at step ends (general)
 };
@@ -122,7 +123,8 @@ struct RunResult {
   // Extrema over the run, located on the dense output (when recorded).
   double fn_min_ratio = std::numeric_limits<double>::quiet_NaN();
   double t_fn_min = std::numeric_limits<double>::quiet_NaN();
-  double mu_required = std::numeric_limits<double>::quiet_NaN();  ///< max |f_t|/f_n (inf if f_n <= 0)
+  double mu_required =
+      std::numeric_limits<double>::quiet_NaN();  ///< max |f_t|/f_n (inf if f_n <= 0)
   double t_mu_required = std::numeric_limits<double>::quiet_NaN();
   std::optional<double> t_apex;         ///< first time s_h rises through 0 (the fingertip)
   std::optional<double> fn_apex_ratio;  ///< normal force ratio there

@@ -17,10 +17,10 @@ struct HandSpec {
 struct ObjectSpec {
   enum class Kind { kDisk, kEllipse };
   Kind kind = Kind::kDisk;
-  double radius = 0.051;                 ///< m (disk)
+  double radius = 0.051;                    ///< m (disk)
   double semi_axis_x = 0, semi_axis_y = 0;  ///< m (ellipse)
-  double mass = 1.0;                     ///< kg
-  std::optional<double> inertia;         ///< kg m^2; default: uniform plate
+  double mass = 1.0;                        ///< kg
+  std::optional<double> inertia;            ///< kg m^2; default: uniform plate
 };
 
 struct MotionSpec {
@@ -32,8 +32,8 @@ struct MotionSpec {
 };
 
 struct SimulationSpec {
-  double gravity = 9.8;                     ///< m/s^2
-  double tilt = 0.5 * std::numbers::pi;     ///< rad, table tilt; pi/2 = vertical plane (full g)
+  double gravity = 9.8;                  ///< m/s^2
+  double tilt = 0.5 * std::numbers::pi;  ///< rad, table tilt; pi/2 = vertical plane (full g)
   HandSpec hand;
   ObjectSpec object;
   MotionSpec motion;

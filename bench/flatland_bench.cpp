@@ -1,0 +1,157 @@
+// Speed (and cost-versus-accuracy) of the simulator and the design search, on the paper's
+// butterfly: sim::SimulationSpec's defaults (2T = 1.181 s, k = -1.1393, disk r = 5.1 cm, g = 9.8).
+// Results and how to rerun: docs/BENCHMARKS.md.
+#include "flatland/sim/rolling.hpp"
+#include "flatland/sim/search.hpp"
+#include "flatland/sim/simulate.hpp"
+#include "flatland/sim/spec.hpp"
+
+#include <benchmark/benchmark.h>
+
+#include <cmath>
+#include <cstdio>
+#include <string>
+
+namespace sim = flatland::sim;
+
+namespace {
+
+constexpr double kPeriod = 1.181;  // 2T, s: the paper's solution
+
+sim::SimulationSpec with_tolerance(double rtol, double atol) {
+  sim::SimulationSpec spec;
+  spec.run.integrator.rtol = rtol;
+  spec.run.integrator.atol = atol;
+  return spec;
+}
+
+// DoNotOptimize is applied to whole result structs, never to a lone double: with GCC 12 and
+// libbenchmark 1.7.1 (whose GCC variant uses a "+m,r" asm constraint), DoNotOptimize on a double
+// member was seen to corrupt it (compare google/benchmark#903).
+
+// Reference values from tight tolerances, computed once (outside any timed region).
+double reference_s_end() {
+  static const double s = [] {
+    sim::SimulationSpec spec = with_tolerance(1e-13, 1e-15);
+    spec.run.formulation = sim::Formulation::kReduced;
+    spec.run.record = false;
+    return sim::run_spec(spec).final.s_h;
+  }();
+  return s;
+}
+double reference_k() {
+  static const double k = [] {
+    const sim::SimulationSpec spec = with_tolerance(1e-12, 1e-14);
+    sim::SearchSettings settings;
+    settings.tolerance = 1e-12;
+    return sim::solve_k(spec, kPeriod, settings).k;
+  }();
+  return k;
+}
+
+// One full 2T run of the butterfly.
+void ButterflyRun(benchmark::State& state, sim::Formulation formulation, double rtol, bool record) {
+  sim::SimulationSpec spec = with_tolerance(rtol, rtol * 1e-2);
+  spec.run.formulation = formulation;
+  spec.run.record = record;
+  const auto problem = sim::build_problem(spec);
+  const sim::RunOptions options = sim::run_options(spec);
+  sim::RunResult result;
+  for (auto _ : state) {
+    result = sim::simulate(problem, spec.initial, options);
+    benchmark::DoNotOptimize(result);
+  }
+  state.counters["steps"] = benchmark::Counter(static_cast<double>(result.stats.steps));
+  state.counters["rhs_evals"] = benchmark::Counter(static_cast<double>(result.stats.rhs_evals));
+  // Distance of the final s_h from a reduced run at rtol 1e-13: the accuracy bought.
+  state.counters["s_end_err"] = benchmark::Counter(std::abs(result.final.s_h - reference_s_end()));
+}
+
+// One right-hand-side evaluation at a mid-roll state.
+template <class Model>
+void Rhs(benchmark::State& state) {
+  const sim::SimulationSpec spec;
+  const Model model(sim::build_problem(spec));
+  const double t = 0.3;
+  sim::InitialContact init;
+  init.t0 = t;
+  init.s_h = -0.5;
+  init.sdot_h = 1.0;
+  typename Model::State y = model.initial_state(init);
+  sim::Pieces pieces = model.pieces_for(y, +1);
+  pieces.motion = 1;  // the quintic (0 < t < 2T)
+  typename Model::State dy;
+  for (auto _ : state) {
+    model.derivative(t, y, pieces, dy);
+    benchmark::DoNotOptimize(dy);
+    benchmark::ClobberMemory();
+  }
+}
+
+// Solve k for 2T = 1.181 s to a bracket of 1e-6 (the acceptance target: <= 2 ms).
+void Solve(benchmark::State& state, double rtol, double atol) {
+  const sim::SimulationSpec spec = with_tolerance(rtol, atol);
+  sim::SearchSettings settings;
+  settings.tolerance = 1e-6;
+  sim::SolveReport report;
+  for (auto _ : state) {
+    report = sim::solve_k(spec, kPeriod, settings);
+    benchmark::DoNotOptimize(report);
+  }
+  state.counters["simulations"] = benchmark::Counter(report.simulations);
+  state.counters["rhs_evals"] = benchmark::Counter(static_cast<double>(report.rhs_evals));
+  state.counters["k_err"] = benchmark::Counter(std::abs(report.k - reference_k()));
+}
+
+// s_h(T) on a 100 x 100 grid of (k, 2T) (paper Fig. 6) on all cores (target: <= 5 s wall).
+void Surface100(benchmark::State& state) {
+  const sim::SimulationSpec spec = with_tolerance(1e-7, 1e-9);
+  sim::SurfaceResult result;
+  for (auto _ : state) {
+    result = sim::surface(spec, -1.6, -0.8, 100, 0.8, 2.0, 100, /*threads=*/0);
+    benchmark::DoNotOptimize(result);
+  }
+  state.counters["points"] = benchmark::Counter(static_cast<double>(result.s_T.size()));
+  state.counters["rhs_evals"] = benchmark::Counter(static_cast<double>(result.rhs_evals));
+}
+
+std::string tolerance_name(double rtol) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "rtol:%.0e", rtol);
+  return buf;
+}
+
+void register_all() {
+  for (const auto formulation : {sim::Formulation::kGeneral, sim::Formulation::kReduced}) {
+    for (const double rtol : {1e-6, 1e-9, 1e-12}) {
+      for (const bool record : {false, true}) {
+        const std::string name = "BM_ButterflyRun/" + sim::to_string(formulation) + "/" +
+                                 tolerance_name(rtol) + "/record:" + (record ? "1" : "0");
+        benchmark::RegisterBenchmark(name.c_str(), ButterflyRun, formulation, rtol, record)
+            ->Unit(benchmark::kMillisecond);
+      }
+    }
+  }
+  benchmark::RegisterBenchmark("BM_Rhs/general", Rhs<sim::GeneralRolling>);
+  benchmark::RegisterBenchmark("BM_Rhs/reduced", Rhs<sim::ReducedDiskRolling>);
+  benchmark::RegisterBenchmark("BM_Solve/rtol:1e-07", Solve, 1e-7, 1e-9)
+      ->Unit(benchmark::kMillisecond);
+  benchmark::RegisterBenchmark("BM_Solve/rtol:1e-10", Solve, 1e-10, 1e-12)
+      ->Unit(benchmark::kMillisecond);
+  benchmark::RegisterBenchmark("BM_Surface100", Surface100)
+      ->Iterations(1)
+      ->UseRealTime()
+      ->MeasureProcessCPUTime()
+      ->Unit(benchmark::kSecond);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  register_all();
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}
