@@ -234,6 +234,14 @@ fs::path OutputSet::reserve(const fs::path& final_path) {
   return tmp;
 }
 
+fs::path OutputSet::reserve_keep_extension(const fs::path& final_path) {
+  fs::path tmp = final_path;
+  tmp.replace_filename(final_path.stem().string() + ".tmp-" + std::to_string(::getpid()) +
+                       final_path.extension().string());
+  files_.emplace_back(tmp, final_path);
+  return tmp;
+}
+
 fs::path OutputSet::stage(const fs::path& final_path, const std::string& content) {
   const fs::path tmp = reserve(final_path);
   std::ofstream f(tmp, std::ios::binary | std::ios::trunc);

@@ -94,6 +94,9 @@ class OutputSet {
   fs::path stage(const fs::path& final_path, const std::string& content);
   /// Reserve a temporary path for a file another program writes (gnuplot's PNGs).
   fs::path reserve(const fs::path& final_path);
+  /// The same, with the extension kept last ("run.tmp-<pid>.mp4"), for writers that choose the
+  /// format by the file name (OpenCV's VideoWriter).
+  fs::path reserve_keep_extension(const fs::path& final_path);
   /// Rename every staged file into place.
   void commit();
   /// The final paths, in staging order.
@@ -174,5 +177,6 @@ Command add_solve_command(CLI::App& app);
 Command add_locus_command(CLI::App& app);
 Command add_surface_command(CLI::App& app);
 Command add_time_optimal_command(CLI::App& app);
+Command add_render_command(CLI::App& app);
 
 }  // namespace flatland::app

@@ -33,9 +33,9 @@ int main(int argc, char** argv) {
       "Exit codes: 0 success; 2 bad input (scene or option; no files are written); 1 runtime "
       "failure (e.g. no solution bracketed, integrator failure).");
   app.require_subcommand(1);
-  std::vector<Command> commands = {add_simulate_command(app), add_solve_command(app),
-                                   add_locus_command(app), add_surface_command(app),
-                                   add_time_optimal_command(app)};
+  std::vector<Command> commands = {add_simulate_command(app),     add_solve_command(app),
+                                   add_locus_command(app),        add_surface_command(app),
+                                   add_time_optimal_command(app), add_render_command(app)};
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {

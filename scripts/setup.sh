@@ -24,6 +24,7 @@ packages=(
   libeigen3-dev libyaml-cpp-dev libcli11-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   gnuplot-nox
+  libopencv-dev libosmesa6-dev mesa-common-dev libegl-dev libegl-mesa0 ffmpeg
 )
 
 missing=()

@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
@@ -178,6 +179,38 @@ TEST(SceneTest, AirTableSceneIsTheButterflyTimeScaledTo5Degrees) {
   EXPECT_NEAR(kappa, 3.387, 5e-4);
   EXPECT_NEAR(sp.motion.period, kappa * 1.181, 0.01);
   EXPECT_DOUBLE_EQ(sp.end_time(), 4.0);
+}
+
+TEST(SceneTest, CameraSceneIsTheAirTableButterflySeenByThePapersCamera) {
+  const Scene s =
+      flatland::load_scene(std::string(FLATLAND_ASSET_DIR) + "/scenes/butterfly-camera.yaml");
+  const sim::SimulationSpec& sp = s.sim;
+  EXPECT_NEAR(sp.tilt, 5.0 * kPi / 180.0, 1e-15);
+  EXPECT_DOUBLE_EQ(sp.motion.period, 4.0);
+  EXPECT_DOUBLE_EQ(sp.motion.k, -1.1393);
+  EXPECT_DOUBLE_EQ(sp.object.radius, 0.051);
+  ASSERT_TRUE(s.camera.has_value());
+  const flatland::CameraSpec& c = *s.camera;
+  // Section 5: a 30 Hz vision system; 640 x 480 images.
+  EXPECT_EQ(c.width, 640);
+  EXPECT_EQ(c.height, 480);
+  EXPECT_DOUBLE_EQ(c.fps, 30.0);
+  EXPECT_EQ(c.fx, c.fy);
+  // About 1.2 m straight above the pivot, looking down at it.
+  EXPECT_EQ(c.position, (std::array<double, 3>{0.0, 0.0, 1.2}));
+  EXPECT_EQ(c.look_at, (std::array<double, 3>{0.0, 0.0, 0.0}));
+  // Pinhole projection of the table points +-0.3 m around the pivot: all inside the image.
+  for (double x : {-0.3, 0.3})
+    for (double y : {-0.3, 0.3}) {
+      const double u = c.cx + c.fx * x / c.position[2];
+      const double v = c.cy - c.fy * y / c.position[2];
+      EXPECT_GE(u, -0.5);
+      EXPECT_LE(u, c.width - 0.5);
+      EXPECT_GE(v, -0.5);
+      EXPECT_LE(v, c.height - 0.5);
+    }
+  EXPECT_EQ(s.render.backend, "osmesa");
+  EXPECT_EQ(s.render.view, "overhead");
 }
 
 // --------------------------------------------------------------------------------------------
@@ -456,6 +489,271 @@ TEST(SceneTest, MessagesStayOnOneLineEvenForMultiLineInput) {
   const std::string msg = error_of(with(kBase, "k: -1.1393", "k: |\n    two\n    lines"));
   EXPECT_EQ(msg.rfind("t.yaml: motion.k: expected a number", 0), 0u) << msg;
   EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
+}
+
+// --------------------------------------------------------------------------------------------
+// Renderer sections: camera, effects, render, targets
+
+TEST(SceneRenderSections, AbsentSectionsAreOff) {
+  const Scene s = parse_scene(kMinimal);
+  EXPECT_FALSE(s.camera.has_value());
+  EXPECT_TRUE(s.targets.empty());
+  const flatland::EffectsSpec& e = s.effects;
+  EXPECT_EQ(e.supersample, 1);
+  EXPECT_EQ(e.blur_subframes, 1);
+  EXPECT_DOUBLE_EQ(e.noise_read_dn, 0.0);
+  EXPECT_DOUBLE_EQ(e.noise_shot_gain, 0.0);
+  EXPECT_TRUE(e.quantize);
+  EXPECT_DOUBLE_EQ(e.vignetting, 0.0);
+  EXPECT_DOUBLE_EQ(e.jitter_s, 0.0);
+  EXPECT_DOUBLE_EQ(e.drop_probability, 0.0);
+  EXPECT_EQ(e.seed, 1u);
+  EXPECT_EQ(s.render.backend, "osmesa");
+  EXPECT_EQ(s.render.view, "overhead");
+  EXPECT_DOUBLE_EQ(s.render.hand_thickness, 0.012);
+  EXPECT_DOUBLE_EQ(s.render.disk_thickness, 0.006);
+  EXPECT_DOUBLE_EQ(s.render.table_extent, 0.6);
+}
+
+TEST(SceneRenderSections, EmptyCameraSectionGetsDefaults) {
+  const Scene s = parse_scene(kMinimal + "camera: {}\n");
+  ASSERT_TRUE(s.camera.has_value());
+  const flatland::CameraSpec& c = *s.camera;
+  EXPECT_EQ(c.width, 640);
+  EXPECT_EQ(c.height, 480);
+  EXPECT_DOUBLE_EQ(c.fx, 700.0);
+  EXPECT_DOUBLE_EQ(c.fy, 700.0);
+  EXPECT_DOUBLE_EQ(c.cx, 319.5);
+  EXPECT_DOUBLE_EQ(c.cy, 239.5);
+  for (double k : c.distortion) EXPECT_EQ(k, 0.0);
+  EXPECT_EQ(c.position, (std::array<double, 3>{0, 0, 1}));
+  EXPECT_EQ(c.look_at, (std::array<double, 3>{0, 0, 0}));
+  EXPECT_EQ(c.up, (std::array<double, 3>{0, 1, 0}));
+  EXPECT_DOUBLE_EQ(c.fps, 30.0);
+  EXPECT_DOUBLE_EQ(c.exposure, 0.0);
+}
+
+TEST(SceneRenderSections, PrincipalPointDefaultsToTheImageCentre) {
+  const Scene s = parse_scene(kMinimal + "camera:\n  width: 160\n  height: 121\n");
+  ASSERT_TRUE(s.camera.has_value());
+  EXPECT_DOUBLE_EQ(s.camera->cx, 79.5);
+  EXPECT_DOUBLE_EQ(s.camera->cy, 60.0);
+}
+
+const std::string kRenderSections = R"(camera:
+  width: 800
+  height: 600
+  fx: 650.5
+  fy: 651
+  cx: 401.25
+  cy: 298
+  distortion: [-0.1, 0.02, 0.001, -0.002, 0.003]
+  position: [0.1, -0.2, 1.5]
+  look_at: [0.05, 0.0, 0.01]
+  up: [0, 1, 0.1]
+  fps: 60
+  exposure: 0.01
+effects:
+  supersample: 4
+  blur_subframes: 8
+  noise_read_dn: 1.5
+  noise_shot_gain: 0.25
+  quantize: false
+  vignetting: 0.3
+  jitter_s: 0.002
+  drop_probability: 0.05
+  seed: 42
+render:
+  backend: egl
+  view: side
+  hand_thickness: 0.02
+  disk_thickness: 0.004
+  table_extent: 0.8
+targets:
+  - type: chessboard
+    cols: 7
+    rows: 5
+    square: 0.03
+    position: [0.1, 0.2, 0.001]
+    rotation: [0, 0, 1.5707963267948966]
+  - type: charuco
+    cols: 5
+    rows: 4
+    square: 0.04
+    marker: 0.03
+    dictionary: DICT_5X5_100
+  - type: charuco
+)";
+
+TEST(SceneRenderSections, GivenValuesAreLoaded) {
+  const Scene s = parse_scene(kMinimal + kRenderSections);
+  ASSERT_TRUE(s.camera.has_value());
+  const flatland::CameraSpec& c = *s.camera;
+  EXPECT_EQ(c.width, 800);
+  EXPECT_EQ(c.height, 600);
+  EXPECT_DOUBLE_EQ(c.fx, 650.5);
+  EXPECT_DOUBLE_EQ(c.fy, 651.0);
+  EXPECT_DOUBLE_EQ(c.cx, 401.25);
+  EXPECT_DOUBLE_EQ(c.cy, 298.0);
+  EXPECT_EQ(c.distortion, (std::array<double, 5>{-0.1, 0.02, 0.001, -0.002, 0.003}));
+  EXPECT_EQ(c.position, (std::array<double, 3>{0.1, -0.2, 1.5}));
+  EXPECT_EQ(c.look_at, (std::array<double, 3>{0.05, 0.0, 0.01}));
+  EXPECT_EQ(c.up, (std::array<double, 3>{0, 1, 0.1}));
+  EXPECT_DOUBLE_EQ(c.fps, 60.0);
+  EXPECT_DOUBLE_EQ(c.exposure, 0.01);
+
+  const flatland::EffectsSpec& e = s.effects;
+  EXPECT_EQ(e.supersample, 4);
+  EXPECT_EQ(e.blur_subframes, 8);
+  EXPECT_DOUBLE_EQ(e.noise_read_dn, 1.5);
+  EXPECT_DOUBLE_EQ(e.noise_shot_gain, 0.25);
+  EXPECT_FALSE(e.quantize);
+  EXPECT_DOUBLE_EQ(e.vignetting, 0.3);
+  EXPECT_DOUBLE_EQ(e.jitter_s, 0.002);
+  EXPECT_DOUBLE_EQ(e.drop_probability, 0.05);
+  EXPECT_EQ(e.seed, 42u);
+
+  EXPECT_EQ(s.render.backend, "egl");
+  EXPECT_EQ(s.render.view, "side");
+  EXPECT_DOUBLE_EQ(s.render.hand_thickness, 0.02);
+  EXPECT_DOUBLE_EQ(s.render.disk_thickness, 0.004);
+  EXPECT_DOUBLE_EQ(s.render.table_extent, 0.8);
+
+  ASSERT_EQ(s.targets.size(), 3u);
+  const flatland::TargetSpec& board = s.targets[0];
+  EXPECT_EQ(board.kind, flatland::TargetSpec::Kind::kChessboard);
+  EXPECT_EQ(board.cols, 7);
+  EXPECT_EQ(board.rows, 5);
+  EXPECT_DOUBLE_EQ(board.square, 0.03);
+  EXPECT_EQ(board.position, (std::array<double, 3>{0.1, 0.2, 0.001}));
+  EXPECT_DOUBLE_EQ(board.rotation[2], kPi / 2);
+  const flatland::TargetSpec& charuco = s.targets[1];
+  EXPECT_EQ(charuco.kind, flatland::TargetSpec::Kind::kCharuco);
+  EXPECT_EQ(charuco.cols, 5);
+  EXPECT_EQ(charuco.rows, 4);
+  EXPECT_DOUBLE_EQ(charuco.square, 0.04);
+  EXPECT_DOUBLE_EQ(charuco.marker, 0.03);
+  EXPECT_EQ(charuco.dictionary, "DICT_5X5_100");
+  // Defaults: 9 x 6 squares of 0.02 m, 0.015 m markers, DICT_4X4_50, at the origin.
+  const flatland::TargetSpec& plain = s.targets[2];
+  EXPECT_EQ(plain.kind, flatland::TargetSpec::Kind::kCharuco);
+  EXPECT_EQ(plain.cols, 9);
+  EXPECT_EQ(plain.rows, 6);
+  EXPECT_DOUBLE_EQ(plain.square, 0.02);
+  EXPECT_DOUBLE_EQ(plain.marker, 0.015);
+  EXPECT_EQ(plain.dictionary, "DICT_4X4_50");
+  EXPECT_EQ(plain.position, (std::array<double, 3>{0, 0, 0}));
+  EXPECT_EQ(plain.rotation, (std::array<double, 3>{0, 0, 0}));
+}
+
+TEST(SceneRenderSections, EmptyTargetListAndCharucoMarkerDefault) {
+  EXPECT_TRUE(parse_scene(kMinimal + "targets: []\n").targets.empty());
+  // Without `marker`, a ChArUco marker is 3/4 of its square.
+  const Scene s = parse_scene(kMinimal + "targets:\n  - type: charuco\n    square: 0.04\n");
+  ASSERT_EQ(s.targets.size(), 1u);
+  EXPECT_DOUBLE_EQ(s.targets[0].marker, 0.03);
+}
+
+TEST(SceneRenderSections, ExactCameraMessages) {
+  EXPECT_EQ(error_of(kMinimal + "camera:\n  position: [0, 0, -1]\n", "x.yaml"),
+            "x.yaml: camera.position: the camera must be above the table (z > 0), got z = -1");
+  EXPECT_EQ(error_of(kMinimal + "camera:\n  fx: 0\n", "x.yaml"),
+            "x.yaml: camera.fx: must be positive, got 0");
+  EXPECT_EQ(error_of(kMinimal + "camera:\n  width: 0\n", "x.yaml"),
+            "x.yaml: camera.width: must be an integer in [1, 16384], got 0");
+}
+
+// Each line perturbs one value of kRenderSections; the error names that field.
+TEST(SceneRenderSections, BadValuesNameTheField) {
+  const std::string base = kMinimal + kRenderSections;
+  auto bad = [&](const std::string& from, const std::string& to, const std::string& field,
+                 const std::string& reason) {
+    SCOPED_TRACE(to);
+    expect_field_error(with(base, from, to), field, reason);
+  };
+  // camera
+  bad("width: 800", "width: 0", "camera.width", "[1, 16384]");
+  bad("width: 800", "width: -640", "camera.width", "[1, 16384]");
+  bad("height: 600", "height: 0", "camera.height", "[1, 16384]");
+  bad("width: 800", "width: 640.5", "camera.width", "expected an integer");
+  bad("width: 800", "width: 6.4e2", "camera.width", "expected an integer");
+  bad("width: 800", "width: \"640\"", "camera.width", "string");
+  bad("fx: 650.5", "fx: 0", "camera.fx", "positive");
+  bad("fy: 651", "fy: -700", "camera.fy", "positive");
+  bad("cx: 401.25", "cx: .nan", "camera.cx", "finite");
+  bad("cy: 298", "cy: abc", "camera.cy", "expected a number");
+  bad("distortion: [-0.1, 0.02, 0.001, -0.002, 0.003]", "distortion: [-0.1, 0.02, 0.001, -0.002]",
+      "camera.distortion", "5 numbers");
+  bad("distortion: [-0.1, 0.02, 0.001, -0.002, 0.003]", "distortion: 0.1", "camera.distortion",
+      "5 numbers");
+  bad("distortion: [-0.1, 0.02, 0.001, -0.002, 0.003]",
+      "distortion: [-0.1, 0.02, x, -0.002, 0.003]", "camera.distortion[2]", "expected a number");
+  bad("position: [0.1, -0.2, 1.5]", "position: [0.1, -0.2, -1]", "camera.position",
+      "above the table (z > 0)");
+  bad("position: [0.1, -0.2, 1.5]", "position: [0.1, -0.2, 0]", "camera.position",
+      "above the table");
+  bad("position: [0.1, -0.2, 1.5]", "position: [0.1, 1.5]", "camera.position", "3 numbers");
+  bad("position: [0.1, -0.2, 1.5]", "position: [0.05, 0.0, 0.01]", "camera.look_at", "must differ");
+  bad("look_at: [0.05, 0.0, 0.01]", "look_at: [0.05, 0.0, .inf]", "camera.look_at[2]", "finite");
+  bad("up: [0, 1, 0.1]", "up: [0, 0, 0]", "camera.up", "zero");
+  bad("up: [0, 1, 0.1]", "up: [0.05, -0.2, 1.49]", "camera.up", "parallel");
+  bad("fps: 60", "fps: 0", "camera.fps", "positive");
+  bad("exposure: 0.01", "exposure: -0.001", "camera.exposure", ">= 0");
+  bad("exposure: 0.01", "exposure: 0.02", "camera.exposure", "1/fps");
+  bad("  exposure: 0.01\n", "  exposure: 0.01\n  focal: 700\n", "camera.focal", "unknown key");
+  // effects
+  bad("supersample: 4", "supersample: 0", "effects.supersample", "[1, 8]");
+  bad("supersample: 4", "supersample: 9", "effects.supersample", "[1, 8]");
+  bad("supersample: 4", "supersample: 2.5", "effects.supersample", "integer");
+  bad("blur_subframes: 8", "blur_subframes: 0", "effects.blur_subframes", "[1, 64]");
+  bad("blur_subframes: 8", "blur_subframes: 65", "effects.blur_subframes", "[1, 64]");
+  bad("exposure: 0.01", "exposure: 0", "effects.blur_subframes", "camera.exposure > 0");
+  bad("noise_read_dn: 1.5", "noise_read_dn: -1", "effects.noise_read_dn", ">= 0");
+  bad("noise_shot_gain: 0.25", "noise_shot_gain: -0.1", "effects.noise_shot_gain", ">= 0");
+  bad("quantize: false", "quantize: no", "effects.quantize", "true or false");
+  bad("vignetting: 0.3", "vignetting: 1.5", "effects.vignetting", "[0, 1]");
+  bad("vignetting: 0.3", "vignetting: -0.1", "effects.vignetting", "[0, 1]");
+  bad("jitter_s: 0.002", "jitter_s: -0.002", "effects.jitter_s", ">= 0");
+  bad("drop_probability: 0.05", "drop_probability: 1.01", "effects.drop_probability", "[0, 1]");
+  bad("seed: 42", "seed: -1", "effects.seed", "integer in [0,");
+  bad("seed: 42", "seed: 4.2", "effects.seed", "expected an integer");
+  bad("seed: 42", "seed: 99999999999999999999999", "effects.seed", "out of range");
+  bad("  seed: 42\n", "  seed: 42\n  blur: 3\n", "effects.blur", "unknown key");
+  // render
+  bad("backend: egl", "backend: glx", "render.backend", "(allowed: osmesa, egl)");
+  bad("view: side", "view: top", "render.view", "(allowed: overhead, side)");
+  bad("hand_thickness: 0.02", "hand_thickness: 0", "render.hand_thickness", "positive");
+  bad("disk_thickness: 0.004", "disk_thickness: -0.004", "render.disk_thickness", "positive");
+  bad("table_extent: 0.8", "table_extent: 0", "render.table_extent", "positive");
+  bad("  table_extent: 0.8\n", "  table_extent: 0.8\n  light: 1\n", "render.light", "unknown key");
+  // targets
+  bad("  - type: chessboard\n", "  - type: circles\n", "targets[0].type",
+      "(allowed: chessboard, charuco)");
+  bad("cols: 7", "cols: 1", "targets[0].cols", "[2, 1000]");
+  bad("rows: 5", "rows: 1.5", "targets[0].rows", "expected an integer");
+  bad("square: 0.03", "square: 0", "targets[0].square", "positive");
+  bad("square: 0.03", "square: 0.03\n    marker: 0.02", "targets[0].marker", "charuco");
+  bad("square: 0.03", "square: 0.03\n    dictionary: DICT_4X4_50", "targets[0].dictionary",
+      "charuco");
+  bad("marker: 0.03", "marker: 0.04", "targets[1].marker", "smaller than the square");
+  bad("marker: 0.03", "marker: 0", "targets[1].marker", "positive");
+  bad("dictionary: DICT_5X5_100", "dictionary: DICT_5X5_99", "targets[1].dictionary",
+      "unknown value 'DICT_5X5_99'");
+  bad("position: [0.1, 0.2, 0.001]", "position: [0.1, 0.2]", "targets[0].position", "3 numbers");
+  bad("rotation: [0, 0, 1.5707963267948966]", "rotation: [0, 0, .nan]", "targets[0].rotation[2]",
+      "finite");
+  expect_field_error(base + "    colour: red\n", "targets[2].colour", "unknown key");
+  expect_field_error(base + "  - 3\n", "targets[3]", "expected a mapping");
+}
+
+TEST(SceneRenderSections, SectionShapeErrors) {
+  expect_field_error(kMinimal + "camera: 3\n", "camera", "expected a mapping");
+  expect_field_error(kMinimal + "effects: [1]\n", "effects", "expected a mapping");
+  expect_field_error(kMinimal + "render: side\n", "render", "expected a mapping");
+  expect_field_error(kMinimal + "targets:\n  type: chessboard\n", "targets", "expected a list");
+  // Exposure blur without any camera section.
+  expect_field_error(kMinimal + "effects:\n  blur_subframes: 2\n", "effects.blur_subframes",
+                     "no camera section");
 }
 
 // --------------------------------------------------------------------------------------------

@@ -8,6 +8,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
+#include <array>
 #include <cerrno>
 #include <charconv>
 #include <cmath>
@@ -188,6 +189,34 @@ class MapReader {
     return has(key) ? choice(key, allowed) : std::string(fallback);
   }
 
+  /// Optional integer in [lo, hi]. Written as a plain integer: 2.0 or 2.5 are rejected, since a
+  /// count or a size with a fraction is a mistake rather than something to round.
+  long long integer_or(const char* key, long long lo, long long hi, long long fallback) const {
+    if (!has(key)) return fallback;
+    const YAML::Node n = node_[key];
+    const long long v = to_integer(n, field(key));
+    if (v < lo || v > hi)
+      fail_at(key, "must be an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) +
+                       "], got " + n.Scalar());
+    return v;
+  }
+
+  /// Optional fixed-length list of finite numbers ("[x, y, z]"); `shape` names the elements for
+  /// the error message.
+  template <std::size_t N>
+  std::array<double, N> numbers_or(const char* key, const char* shape,
+                                   const std::array<double, N>& fallback) const {
+    if (!has(key)) return fallback;
+    const YAML::Node n = node_[key];
+    if (!n.IsSequence() || n.size() != N)
+      fail_at(key, "expected a list of " + std::to_string(N) + " numbers " + shape + ", got " +
+                       (n.IsSequence() ? "a list of " + std::to_string(n.size()) : describe(n)));
+    std::array<double, N> v{};
+    for (std::size_t i = 0; i < N; ++i)
+      v[i] = to_number(n[i], field(key) + "[" + std::to_string(i) + "]");
+    return v;
+  }
+
   const YAML::Node node(const char* key) const { return node_[key]; }
 
   MapReader section(const char* key, std::initializer_list<const char*> allowed) const {
@@ -221,6 +250,23 @@ class MapReader {
         fail(origin_, where, "number out of range, got " + describe(n));
     }
     if (!std::isfinite(v)) fail(origin_, where, "must be a finite number, got " + n.Scalar());
+    return v;
+  }
+
+  /// A plain decimal integer (optional sign); numbers with a fraction or exponent are rejected.
+  long long to_integer(const YAML::Node& n, const std::string& where) const {
+    if (!n.IsScalar()) fail(origin_, where, "expected an integer, got " + describe(n));
+    if (n.Tag() == "!")
+      fail(origin_, where,
+           "expected an integer, got the string " + describe(n) + " (remove the quotes)");
+    std::string_view s = n.Scalar();
+    if (!s.empty() && s.front() == '+') s.remove_prefix(1);
+    long long v = 0;
+    const auto [ptr, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
+    if (ec == std::errc::result_out_of_range)
+      fail(origin_, where, "number out of range, got " + describe(n));
+    if (ec != std::errc() || ptr != s.data() + s.size() || s.empty())
+      fail(origin_, where, "expected an integer, got " + describe(n));
     return v;
   }
 
@@ -352,6 +398,170 @@ void read_contact(const MapReader& root, sim::SimulationSpec& spec) {
   ev.time_tolerance = c->positive_or("event_tolerance", ev.time_tolerance);
 }
 
+std::string format_value(double v) {
+  char buf[64];
+  const auto res = std::to_chars(buf, buf + sizeof buf, v);
+  return std::string(buf, res.ptr);
+}
+
+// ---- camera, effects, render, targets (the renderer's plain data) ------------------------------
+
+/// What the renderer's camera model needs and plain data can tell: positive focal lengths and
+/// image size, a camera above the table that looks somewhere, an exposure within one frame.
+void read_camera(const MapReader& root, Scene& scene) {
+  const auto c =
+      root.optional_section("camera", {"width", "height", "fx", "fy", "cx", "cy", "distortion",
+                                       "position", "look_at", "up", "fps", "exposure"});
+  if (!c) return;
+  CameraSpec cam;
+  constexpr long long kMaxSide = 16384;  // px; beyond any GL framebuffer this renders into
+  cam.width = static_cast<int>(c->integer_or("width", 1, kMaxSide, cam.width));
+  cam.height = static_cast<int>(c->integer_or("height", 1, kMaxSide, cam.height));
+  cam.fx = c->positive_or("fx", cam.fx);
+  cam.fy = c->positive_or("fy", cam.fy);
+  cam.cx = c->number_or("cx", 0.5 * (cam.width - 1));
+  cam.cy = c->number_or("cy", 0.5 * (cam.height - 1));
+  cam.distortion = c->numbers_or<5>("distortion", "[k1, k2, p1, p2, k3]", cam.distortion);
+  cam.position = c->numbers_or<3>("position", "[x, y, z]", cam.position);
+  cam.look_at = c->numbers_or<3>("look_at", "[x, y, z]", cam.look_at);
+  cam.up = c->numbers_or<3>("up", "[x, y, z]", cam.up);
+  cam.fps = c->positive_or("fps", cam.fps);
+  cam.exposure = c->number_or("exposure", cam.exposure);
+
+  if (!(cam.position[2] > 0))
+    c->fail_at("position", "the camera must be above the table (z > 0), got z = " +
+                               format_value(cam.position[2]));
+  const double view[3] = {cam.look_at[0] - cam.position[0], cam.look_at[1] - cam.position[1],
+                          cam.look_at[2] - cam.position[2]};
+  const double view_len = std::hypot(view[0], view[1], view[2]);
+  if (!(view_len > 1e-9))
+    c->fail_at("look_at", "must differ from camera.position (the camera looks nowhere)");
+  const double up_len = std::hypot(cam.up[0], cam.up[1], cam.up[2]);
+  if (!(up_len > 0)) c->fail_at("up", "must not be the zero vector");
+  // |view x up| / (|view| |up|) = sin of the angle between them.
+  const double cross[3] = {view[1] * cam.up[2] - view[2] * cam.up[1],
+                           view[2] * cam.up[0] - view[0] * cam.up[2],
+                           view[0] * cam.up[1] - view[1] * cam.up[0]};
+  if (!(std::hypot(cross[0], cross[1], cross[2]) > 1e-6 * view_len * up_len))
+    c->fail_at("up", "must not be parallel to the viewing direction (look_at - position)");
+  if (!(cam.exposure >= 0))
+    c->fail_at("exposure", "must be >= 0 s, got " + c->node("exposure").Scalar());
+  if (!(cam.exposure <= 1.0 / cam.fps))
+    c->fail_at("exposure",
+               "must not exceed the frame interval 1/fps = " + format_value(1.0 / cam.fps) +
+                   " s, got " + c->node("exposure").Scalar());
+  scene.camera = cam;
+}
+
+/// A number in [lo, hi] (bounds included).
+double number_in(const MapReader& m, const char* key, double lo, double hi, double fallback) {
+  if (!m.has(key)) return fallback;
+  const double v = m.number(key);
+  if (!(v >= lo && v <= hi))
+    m.fail_at(key, "must be in [" + format_value(lo) + ", " + format_value(hi) + "], got " +
+                       m.node(key).Scalar());
+  return v;
+}
+
+double non_negative(const MapReader& m, const char* key, double fallback) {
+  if (!m.has(key)) return fallback;
+  const double v = m.number(key);
+  if (!(v >= 0)) m.fail_at(key, "must be >= 0, got " + m.node(key).Scalar());
+  return v;
+}
+
+void read_effects(const MapReader& root, Scene& scene) {
+  const auto e = root.optional_section(
+      "effects", {"supersample", "blur_subframes", "noise_read_dn", "noise_shot_gain", "quantize",
+                  "vignetting", "jitter_s", "drop_probability", "seed"});
+  if (!e) return;
+  EffectsSpec& fx = scene.effects;
+  fx.supersample = static_cast<int>(e->integer_or("supersample", 1, 8, fx.supersample));
+  fx.blur_subframes = static_cast<int>(e->integer_or("blur_subframes", 1, 64, fx.blur_subframes));
+  // Sub-frames spread over a zero exposure would all be the same image.
+  if (fx.blur_subframes > 1 && !(scene.camera && scene.camera->exposure > 0))
+    e->fail_at("blur_subframes", "exposure blur needs camera.exposure > 0 (got " +
+                                     (scene.camera ? format_value(scene.camera->exposure) + " s"
+                                                   : std::string("no camera section")) +
+                                     ")");
+  fx.noise_read_dn = non_negative(*e, "noise_read_dn", fx.noise_read_dn);
+  fx.noise_shot_gain = non_negative(*e, "noise_shot_gain", fx.noise_shot_gain);
+  fx.quantize = e->boolean_or("quantize", fx.quantize);
+  fx.vignetting = number_in(*e, "vignetting", 0.0, 1.0, fx.vignetting);
+  fx.jitter_s = non_negative(*e, "jitter_s", fx.jitter_s);
+  fx.drop_probability = number_in(*e, "drop_probability", 0.0, 1.0, fx.drop_probability);
+  fx.seed = static_cast<std::uint64_t>(e->integer_or(
+      "seed", 0, std::numeric_limits<long long>::max(), static_cast<long long>(fx.seed)));
+}
+
+void read_render(const MapReader& root, Scene& scene) {
+  const auto r = root.optional_section(
+      "render", {"backend", "view", "hand_thickness", "disk_thickness", "table_extent"});
+  if (!r) return;
+  RenderSpec& rs = scene.render;
+  rs.backend = r->choice_or("backend", {"osmesa", "egl"}, rs.backend.c_str());
+  rs.view = r->choice_or("view", {"overhead", "side"}, rs.view.c_str());
+  rs.hand_thickness = r->positive_or("hand_thickness", rs.hand_thickness);
+  rs.disk_thickness = r->positive_or("disk_thickness", rs.disk_thickness);
+  rs.table_extent = r->positive_or("table_extent", rs.table_extent);
+}
+
+/// OpenCV's predefined ArUco dictionaries (cv::aruco::PREDEFINED_DICTIONARY_NAME), by name.
+constexpr const char* kArucoDictionaries[] = {
+    "DICT_4X4_50",         "DICT_4X4_100",       "DICT_4X4_250",       "DICT_4X4_1000",
+    "DICT_5X5_50",         "DICT_5X5_100",       "DICT_5X5_250",       "DICT_5X5_1000",
+    "DICT_6X6_50",         "DICT_6X6_100",       "DICT_6X6_250",       "DICT_6X6_1000",
+    "DICT_7X7_50",         "DICT_7X7_100",       "DICT_7X7_250",       "DICT_7X7_1000",
+    "DICT_ARUCO_ORIGINAL", "DICT_APRILTAG_16h5", "DICT_APRILTAG_25h9", "DICT_APRILTAG_36h10",
+    "DICT_APRILTAG_36h11"};
+
+void read_targets(const MapReader& root, Scene& scene) {
+  if (!root.has("targets")) return;
+  const YAML::Node list = root.node("targets");
+  if (!list.IsSequence())
+    root.fail_at("targets",
+                 "expected a list of targets (- type: chessboard ...), got " + describe(list));
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    const MapReader m(
+        list[i], "targets[" + std::to_string(i) + "]", root.origin(),
+        {"type", "cols", "rows", "square", "marker", "dictionary", "position", "rotation"});
+    TargetSpec t;
+    const bool charuco = m.choice("type", {"chessboard", "charuco"}) == "charuco";
+    t.kind = charuco ? TargetSpec::Kind::kCharuco : TargetSpec::Kind::kChessboard;
+    constexpr long long kMaxSquares = 1000;
+    t.cols = static_cast<int>(m.integer_or("cols", 2, kMaxSquares, t.cols));
+    t.rows = static_cast<int>(m.integer_or("rows", 2, kMaxSquares, t.rows));
+    t.square = m.positive_or("square", t.square);
+    if (charuco) {
+      // The default keeps the struct's proportion (0.015 m markers on 0.02 m squares).
+      t.marker = m.positive_or("marker", 0.75 * t.square);
+      if (!(t.marker < t.square))
+        m.fail_at("marker",
+                  "must be smaller than the square (" + format_value(t.square) + " m), got " +
+                      (m.has("marker") ? m.node("marker").Scalar() : format_value(t.marker)));
+      if (m.has("dictionary")) {
+        const std::string d = m.text("dictionary");
+        const auto known =
+            std::find_if(std::begin(kArucoDictionaries), std::end(kArucoDictionaries),
+                         [&](const char* k) { return d == k; });
+        if (known == std::end(kArucoDictionaries)) {
+          std::string allowed;
+          for (const char* k : kArucoDictionaries)
+            allowed += std::string(allowed.empty() ? "" : ", ") + k;
+          m.fail_at("dictionary", "unknown value '" + d + "' (allowed: " + allowed + ")");
+        }
+        t.dictionary = d;
+      }
+    } else {
+      m.reject_if_present("marker", "only for type: charuco");
+      m.reject_if_present("dictionary", "only for type: charuco");
+    }
+    t.position = m.numbers_or<3>("position", "[x, y, z]", t.position);
+    t.rotation = m.numbers_or<3>("rotation", "[rx, ry, rz]", t.rotation);
+    scene.targets.push_back(t);
+  }
+}
+
 }  // namespace
 
 Scene parse_scene(const std::string& yaml_text, const std::string& origin) {
@@ -374,7 +584,7 @@ Scene parse_scene(const std::string& yaml_text, const std::string& origin) {
   scene.origin = origin;
   const MapReader root(docs.front(), "", origin,
                        {"name", "gravity", "hand", "object", "motion", "initial", "duration",
-                        "integrator", "contact"});
+                        "integrator", "contact", "camera", "effects", "render", "targets"});
   if (root.has("name")) scene.name = root.text("name");
   sim::SimulationSpec& spec = scene.sim;
   read_gravity(root, spec);
@@ -385,6 +595,10 @@ Scene parse_scene(const std::string& yaml_text, const std::string& origin) {
   if (root.has("duration")) spec.duration = root.positive("duration");
   read_integrator(root, spec);
   read_contact(root, spec);
+  read_camera(root, scene);
+  read_effects(root, scene);  // after the camera: exposure blur needs its exposure
+  read_render(root, scene);
+  read_targets(root, scene);
 
   // Physics that needs more than one field (hand shape against the disk, k = -2, inertia bounds,
   // formulation against the object) is validated where it is implemented; its messages already

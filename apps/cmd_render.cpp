@@ -1,0 +1,429 @@
+// flatland render: simulate the scene and film it with the scene's camera: an MP4 video or a
+// directory of PNG frames, with the ground truth of every frame (CSV) and the camera (JSON).
+#include "common.hpp"
+
+#include "flatland/render/renderer.hpp"
+#include "flatland/sim/curve.hpp"
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+
+#include <algorithm>
+#include <cctype>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <iostream>
+#include <memory>
+#include <optional>
+#include <sstream>
+
+namespace flatland::app {
+
+namespace {
+
+struct RenderOptions {
+  CommonOptions common;
+  std::string view, gl;
+  bool overlay = false, solve = false;
+  double fps = 0, duration = 0;
+  CLI::Option* view_opt = nullptr;
+  CLI::Option* gl_opt = nullptr;
+  CLI::Option* fps_opt = nullptr;
+  CLI::Option* duration_opt = nullptr;
+};
+
+/// The side view: the scene's intrinsics, from downhill (-y) and above the table, looking at the
+/// hand a little above the table plane, the table's normal up in the image.
+CameraSpec side_camera(CameraSpec c) {
+  c.position = {0.0, -1.2, 0.4};
+  c.look_at = {0.0, 0.0, 0.05};
+  c.up = {0.0, 0.0, 1.0};
+  return c;
+}
+
+std::string lower(std::string s) {
+  for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+const char* kTruthColumns =
+    "frame,t,dropped,theta,s_h,disk_x,disk_y,disk_z,disk_u,disk_v,marker_x,marker_y,marker_z,"
+    "marker_u,marker_v";
+
+/// One truth.csv row. `frame` is the image's index in the output, -1 for a dropped frame.
+std::string truth_row(long frame, const render::FrameTruth& t) {
+  const double v[] = {t.t,
+                      t.theta,
+                      t.s_h,
+                      t.disk_center_table.x,
+                      t.disk_center_table.y,
+                      t.disk_center_table.z,
+                      t.disk_center_px.x,
+                      t.disk_center_px.y,
+                      t.marker_table.x,
+                      t.marker_table.y,
+                      t.marker_table.z,
+                      t.marker_px.x,
+                      t.marker_px.y};
+  std::string row =
+      std::to_string(frame) + "," + format_number(v[0]) + "," + (t.dropped ? "1" : "0");
+  for (std::size_t i = 1; i < sizeof v / sizeof v[0]; ++i) row += "," + format_number(v[i]);
+  return row + "\n";
+}
+
+/// The image as 8-bit BGR (a float image from effects.quantize = false is rounded and saturated).
+cv::Mat to_bgr8(const cv::Mat& image) {
+  cv::Mat out = image;
+  if (out.depth() != CV_8U) out.convertTo(out, CV_8U);
+  if (out.channels() == 1) cv::cvtColor(out, out, cv::COLOR_GRAY2BGR);
+  if (out.channels() == 4) cv::cvtColor(out, out, cv::COLOR_BGRA2BGR);
+  return out;
+}
+
+/// --overlay: time, s_h and the hand's contact force on the frame. The force f = f_n n + f_t t
+/// (n the hand's outward normal, t its tangent towards increasing s_h, both rotated by theta into
+/// the table frame) is drawn from the projected contact point, 0.1 m on the table per m g.
+void draw_overlay(cv::Mat& bgr, const render::CameraModel& camera, const sim::PolynomialHand& hand,
+                  const sim::Sample& s, const render::FrameTruth& truth) {
+  const double c = std::cos(s.theta), sn = std::sin(s.theta);
+  const auto rotate = [&](const sim::Vec2& v) {
+    return sim::Vec2(c * v.x() - sn * v.y(), sn * v.x() + c * v.y());
+  };
+  const sim::CurveGeometry g = hand.geometry(s.s_h);
+  const sim::Vec2 contact = rotate(g.point);
+  const sim::Vec2 force = s.fn_ratio * rotate(g.normal) + s.ft_ratio * rotate(g.tangent);
+  constexpr double kMetresPerWeight = 0.1;
+  const double z = truth.disk_center_table.z;
+  const cv::Point2d from = camera.project(cv::Point3d(contact.x(), contact.y(), z));
+  const cv::Point2d to = camera.project(cv::Point3d(contact.x() + kMetresPerWeight * force.x(),
+                                                    contact.y() + kMetresPerWeight * force.y(), z));
+  const double scale = std::max(0.35, bgr.rows / 960.0);
+  const int thick = std::max(1, static_cast<int>(std::lround(2 * scale)));
+  const cv::Scalar red(0, 0, 255), yellow(0, 220, 255), white(255, 255, 255), black(0, 0, 0);
+  if (std::isfinite(from.x) && std::isfinite(to.x)) {
+    cv::circle(bgr, from, 3 * thick, yellow, thick, cv::LINE_AA);
+    if (cv::norm(to - from) >= 2) cv::arrowedLine(bgr, from, to, red, thick, cv::LINE_AA, 0, 0.2);
+  }
+  char line[3][96];
+  std::snprintf(line[0], sizeof line[0], "t = %.3f s", truth.t);
+  std::snprintf(line[1], sizeof line[1], "s_h = %+.3f", s.s_h);
+  std::snprintf(line[2], sizeof line[2], "f = %.3f mg (f_n %+.3f, f_t %+.3f)", force.norm(),
+                s.fn_ratio, s.ft_ratio);
+  const double font = 1.2 * scale;
+  for (int i = 0; i < 3; ++i) {
+    const cv::Point at(static_cast<int>(8 * scale + 4), static_cast<int>((i + 1) * 34 * scale + 4));
+    cv::putText(bgr, line[i], at, cv::FONT_HERSHEY_SIMPLEX, font, black, thick + 2, cv::LINE_AA);
+    cv::putText(bgr, line[i], at, cv::FONT_HERSHEY_SIMPLEX, font, white, thick, cv::LINE_AA);
+  }
+}
+
+Json effects_json(const EffectsSpec& e) {
+  Json j;
+  j["supersample"] = e.supersample;
+  j["blur_subframes"] = e.blur_subframes;
+  j["noise_read_dn"] = e.noise_read_dn;
+  j["noise_shot_gain"] = e.noise_shot_gain;
+  j["quantize"] = e.quantize;
+  j["vignetting"] = e.vignetting;
+  j["jitter_s"] = e.jitter_s;
+  j["drop_probability"] = e.drop_probability;
+  j["seed"] = e.seed;
+  return j;
+}
+
+Json camera_json(const render::CameraModel& m, const CameraSpec& spec) {
+  Json j;
+  j["width"] = m.width;
+  j["height"] = m.height;
+  j["fx"] = m.K(0, 0);
+  j["fy"] = m.K(1, 1);
+  j["cx"] = m.K(0, 2);
+  j["cy"] = m.K(1, 2);
+  j["K"] = {{m.K(0, 0), m.K(0, 1), m.K(0, 2)},
+            {m.K(1, 0), m.K(1, 1), m.K(1, 2)},
+            {m.K(2, 0), m.K(2, 1), m.K(2, 2)}};
+  j["distortion"] = {m.dist[0], m.dist[1], m.dist[2], m.dist[3], m.dist[4]};
+  const cv::Vec3d r = m.rvec();
+  j["rvec"] = {r[0], r[1], r[2]};
+  j["tvec"] = {m.t[0], m.t[1], m.t[2]};
+  j["position"] = spec.position;
+  j["look_at"] = spec.look_at;
+  j["up"] = spec.up;
+  j["fps"] = m.fps;
+  j["exposure"] = m.exposure;
+  return j;
+}
+
+void run_render(const RenderOptions& o) {
+  // ---- everything that can be bad input, before anything is computed or written
+  Scene scene = load_scene_with_overrides(o.common);
+  if (!scene.camera)
+    throw UsageError(scene.origin + ": camera: the scene has no camera section (needed by render)");
+  sim::SimulationSpec& spec = scene.sim;
+  const bool butterfly = spec.motion.kind == sim::MotionSpec::Kind::kButterfly;
+  if (o.solve && !butterfly)
+    throw UsageError("--solve: the scene's motion is not the butterfly (motion.type)");
+  if (o.duration_opt->count()) {
+    require_positive("--duration", o.duration, "s");
+    spec.duration = o.duration;
+  }
+  CameraSpec& camera = *scene.camera;
+  if (o.fps_opt->count()) {
+    require_positive("--fps", o.fps, "frames per s");
+    if (camera.exposure > 1.0 / o.fps)
+      throw UsageError("--fps: the frame interval 1/" + format_number(o.fps) +
+                       " s is shorter than camera.exposure (" + format_number(camera.exposure) +
+                       " s)");
+    camera.fps = o.fps;
+  }
+  if (o.view_opt->count()) scene.render.view = o.view;
+  if (scene.render.view == "side") camera = side_camera(camera);
+  if (o.gl_opt->count()) scene.render.backend = o.gl;
+  const render::GlBackend backend = render::parse_backend(scene.render.backend);
+  build_problem_checked(spec, {});
+  sim::resolve_formulation(*sim::build_problem(spec), spec.run.formulation);
+
+  const std::string out_text = o.common.out;
+  if (out_text.empty()) throw UsageError("--out: required (FILE.mp4 or a directory)");
+  const fs::path out = out_text;
+  const std::string ext = lower(out.extension().string());
+  const bool mp4 = ext == ".mp4" && out_text.back() != '/';
+  for (const char* video : {".avi", ".mkv", ".mov", ".webm", ".gif", ".m4v"})
+    if (ext == video)
+      throw UsageError(
+          "--out: only .mp4 video is written (any other --out is a directory of PNG "
+          "frames), got " +
+          out_text);
+  if (mp4 && fs::is_directory(out))
+    throw UsageError("--out: " + out_text + " is a directory; give a FILE.mp4 or a directory");
+  if (!mp4 && fs::exists(out)) {
+    if (!fs::is_directory(out))
+      throw UsageError("--out: " + out_text + " exists and is not a directory");
+    // Frames of an earlier, longer render would silently mix with this one's.
+    for (const auto& e : fs::directory_iterator(out)) {
+      const std::string name = e.path().filename().string();
+      if (name.rfind("frame_", 0) == 0 || name == "truth.csv" || name == "meta.json")
+        throw UsageError("--out: " + out_text + " already holds a render (" + name +
+                         "); remove it or choose another directory");
+    }
+  }
+
+  // The renderer validates the camera and effects (bad input) and makes the GL context (a
+  // runtime failure), both before any file exists.
+  render::Renderer renderer(scene, backend);
+  const render::CameraModel& model = renderer.camera();
+  const std::string gl = renderer.gl_description();
+
+  // ---- outputs: the video (or the frame directory) first, so that a missing codec fails fast
+  OutputSet outputs;
+  const cv::Size size(model.width, model.height);
+  const double fps = model.fps;
+  fs::path truth_path, meta_path, video_tmp;
+  cv::VideoWriter writer;  // declared after `outputs`: released before its files are removed
+  std::string codec;
+  if (mp4) {
+    outputs.ensure_directory(out.parent_path());
+    video_tmp = outputs.reserve_keep_extension(out);
+    for (const char* fourcc : {"avc1", "mp4v"}) {
+      writer.open(video_tmp.string(), cv::CAP_FFMPEG,
+                  cv::VideoWriter::fourcc(fourcc[0], fourcc[1], fourcc[2], fourcc[3]), fps, size,
+                  true);
+      if (writer.isOpened()) {
+        codec = fourcc;
+        break;
+      }
+      if (std::string(fourcc) == "avc1")
+        std::cerr << "flatland: OpenCV's FFmpeg backend cannot encode H.264 (avc1) here; falling "
+                     "back to MPEG-4 part 2 (mp4v)\n";
+    }
+    if (!writer.isOpened())
+      throw std::runtime_error(
+          "cannot open an MP4 writer for " + out_text +
+          ": neither H.264 (avc1) nor MPEG-4 part 2 (mp4v) can be encoded through OpenCV's FFmpeg "
+          "backend (Debian: libavcodec59 with libx264); --out DIR writes PNG frames instead");
+    const fs::path dir = out.parent_path();
+    truth_path = dir / (out.stem().string() + ".truth.csv");
+    meta_path = dir / (out.stem().string() + ".json");
+  } else {
+    outputs.ensure_directory(out);
+    truth_path = out / "truth.csv";
+    meta_path = out / "meta.json";
+  }
+
+  // ---- simulate
+  if (o.solve) {
+    std::cerr << "flatland: solving k for 2T = " << format_number(spec.motion.period) << " s\n";
+    const sim::SolveReport solved = sim::solve_k(spec, spec.motion.period);
+    spec.motion.k = solved.k;
+    std::cerr << "flatland: k = " << format_number(solved.k) << "\n";
+  }
+  std::cerr << "flatland: simulating " << scene.origin << " for "
+            << format_number(spec.end_time() - spec.initial.t0) << " s\n";
+  spec.run.record = true;  // the frames sample the dense output
+  const sim::RunResult run = sim::run_spec(spec);
+  if (run.trajectory.empty()) throw std::runtime_error("the run recorded no trajectory");
+  const double t0 = run.trajectory.t_begin(), t_end = run.trajectory.t_end();
+  if (run.reason != sim::StopReason::kEndTime)
+    std::cerr << "flatland: the run stopped at t = " << format_number(t_end) << " s ("
+              << sim::to_string(run.reason) << "); rendering up to there\n";
+
+  // ---- render
+  const long n = static_cast<long>(std::floor((t_end - t0) * fps + 1e-9)) + 1;
+  const sim::PolynomialHand hand(spec.hand.a, spec.hand.b, spec.hand.c, spec.hand.d);
+  std::string truth_csv = std::string(kTruthColumns) + "\n";
+  long written = 0, dropped = 0;
+  std::vector<unsigned char> png;
+  std::cerr << "flatland: rendering " << n << " frames at " << format_number(fps) << " fps, "
+            << model.width << " x " << model.height << " px (" << gl << ")\n";
+  const auto start = std::chrono::steady_clock::now();
+  {
+    ProgressBar bar("render");
+    for (long i = 0; i < n; ++i) {
+      const double t = std::min(t0 + static_cast<double>(i) / fps, t_end);
+      render::Frame frame = renderer.capture(run.trajectory, t);
+      if (frame.truth.dropped) {
+        ++dropped;
+        truth_csv += truth_row(-1, frame.truth);
+        bar.update(i + 1, n);
+        continue;
+      }
+      cv::Mat bgr = to_bgr8(frame.image);
+      if (bgr.cols != size.width || bgr.rows != size.height)
+        throw std::runtime_error("the renderer returned a " + std::to_string(bgr.cols) + " x " +
+                                 std::to_string(bgr.rows) + " image for a " +
+                                 std::to_string(size.width) + " x " + std::to_string(size.height) +
+                                 " camera");
+      if (o.overlay) {
+        if (bgr.data == frame.image.data) bgr = bgr.clone();
+        draw_overlay(bgr, model, hand, run.trajectory.sample(frame.truth.t), frame.truth);
+      }
+      if (mp4) {
+        writer.write(bgr);
+      } else {
+        if (!cv::imencode(".png", bgr, png))
+          throw std::runtime_error("cannot encode frame " + std::to_string(written) + " as PNG");
+        char name[32];
+        std::snprintf(name, sizeof name, "frame_%06ld.png", written);
+        outputs.stage(out / name, std::string(png.begin(), png.end()));
+      }
+      truth_csv += truth_row(written, frame.truth);
+      ++written;
+      bar.update(i + 1, n);
+    }
+  }
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const double fps_rendered = seconds > 0 ? static_cast<double>(written) / seconds : 0.0;
+  if (mp4) {
+    writer.release();
+    std::error_code ec;
+    if (written > 0 && !(fs::file_size(video_tmp, ec) > 0))
+      throw std::runtime_error("the MP4 writer (" + codec + ") produced no data for " + out_text);
+  }
+
+  // ---- ground truth and metadata, then everything into place
+  outputs.stage(truth_path, truth_csv);
+  Json meta;
+  meta["scene"] = scene.origin;
+  meta["name"] = scene.name;
+  meta["view"] = scene.render.view;
+  meta["format"] = mp4 ? "mp4" : "png";
+  meta["codec"] = mp4 ? Json(codec) : Json(nullptr);
+  meta["output"] = out.string();
+  meta["truth"] = truth_path.string();
+  meta["frames"] = written;
+  meta["dropped"] = dropped;
+  meta["t_begin"] = t0;
+  meta["t_end"] = t_end;
+  meta["stop_reason"] = sim::to_string(run.reason);
+  meta["motion"] = {{"type", butterfly ? "butterfly" : "fixed"},
+                    {"period", butterfly ? number(spec.motion.period) : Json(nullptr)},
+                    {"k", butterfly ? number(spec.motion.k) : Json(nullptr)},
+                    {"solved", o.solve}};
+  meta["camera"] = camera_json(model, camera);
+  meta["effects"] = effects_json(scene.effects);
+  meta["gl"] = {{"backend", render::to_string(backend)}, {"description", gl}};
+  meta["overlay"] = o.overlay;
+  meta["truth_columns"] = kTruthColumns;
+  outputs.stage(meta_path, meta.dump(2) + "\n");
+  outputs.commit();
+
+  if (o.common.json) {
+    Json j;
+    j["frames"] = written;
+    j["dropped"] = dropped;
+    j["width"] = model.width;
+    j["height"] = model.height;
+    j["fps"] = fps;
+    j["fps_rendered"] = number(fps_rendered);
+    j["view"] = scene.render.view;
+    j["output"] = out.string();
+    j["codec"] = mp4 ? Json(codec) : Json(nullptr);
+    j["truth"] = truth_path.string();
+    j["meta"] = meta_path.string();
+    j["k"] = butterfly ? number(spec.motion.k) : Json(nullptr);
+    j["gl"] = {{"backend", render::to_string(backend)}, {"description", gl}};
+    emit_json(j);
+    return;
+  }
+  std::ostringstream os;
+  os << "flatland render: " << scene.origin << (scene.name.empty() ? "" : " (" + scene.name + ")")
+     << "\n"
+     << "  camera             " << scene.render.view << ", " << model.width << " x " << model.height
+     << " px at " << format_number(fps) << " fps\n"
+     << "  frames             " << written << " written, " << dropped
+     << " dropped, t = " << format_number(t0) << " .. " << format_number(t_end) << " s\n"
+     << "  speed              " << format_number(std::round(fps_rendered * 10) / 10)
+     << " frames/s (" << gl << ")\n"
+     << "  wrote              " << out.string() << (mp4 ? " (" + codec + ")" : "") << "\n"
+     << "  wrote              " << truth_path.string() << "\n"
+     << "  wrote              " << meta_path.string() << "\n";
+  std::cout << os.str();
+}
+
+}  // namespace
+
+Command add_render_command(CLI::App& app) {
+  auto o = std::make_shared<RenderOptions>();
+  CLI::App* cmd = app.add_subcommand(
+      "render",
+      "Simulate the scene and film it with the scene's camera (its `camera` section): an MP4 "
+      "video or PNG frames at the camera's frame rate from the start to the end of the run, with "
+      "the ground truth of every frame (CSV: times in s, positions in m, image points in px) and "
+      "the camera's intrinsics and pose (JSON).");
+  add_common_options(*cmd, o->common,
+                     "FILE.mp4: an H.264 video (MPEG-4 part 2 if H.264 cannot be encoded) with "
+                     "FILE.truth.csv and FILE.json beside it; anything else: a directory of "
+                     "frame_000000.png ... with truth.csv and meta.json, created if missing. "
+                     "Required",
+                     false);
+  cmd->get_option("--out")->required();
+  o->view_opt = cmd->add_option("--view", o->view,
+                                "Camera: overhead (the scene's camera) or side (its intrinsics, "
+                                "placed at [0, -1.2, 0.4] m looking at [0, 0, 0.05] m). Default: "
+                                "the scene's render.view, else overhead")
+                    ->check(CLI::IsMember({"overhead", "side"}));
+  o->gl_opt = cmd->add_option("--gl", o->gl,
+                              "OpenGL backend: osmesa (software, no GPU needed) or egl. Default: "
+                              "the scene's render.backend, else osmesa")
+                  ->check(CLI::IsMember({"osmesa", "egl"}));
+  o->fps_opt = cmd->add_option("--fps", o->fps,
+                               "Frame rate, frames per s (> 0; the frame interval must not be "
+                               "shorter than camera.exposure). Default: the scene's camera.fps, "
+                               "else 30");
+  o->duration_opt = cmd->add_option("--duration", o->duration,
+                                    "Simulated (and filmed) time, s (> 0). Default: the scene's "
+                                    "duration, else 2T for the butterfly, else 1 s");
+  cmd->add_flag("--overlay", o->overlay,
+                "Draw on each frame: t (s), s_h, and the hand's contact force as an arrow from the "
+                "contact point (0.1 m on the table per m g). Default: off");
+  cmd->add_flag("--solve", o->solve,
+                "Butterfly only: first solve k for the scene's period (as `flatland solve`) and "
+                "film that motion. Default: off (the scene's k)");
+  return {cmd, [o] { run_render(*o); }};
+}
+
+}  // namespace flatland::app

@@ -1,0 +1,37 @@
+// Image effects of a real camera, each applied only when the scene asks for it.
+#pragma once
+
+#include "flatland/scene/scene.hpp"
+
+#include <opencv2/core.hpp>
+
+#include <random>
+
+namespace flatland::render {
+
+/// Seeded source of the random effects (noise, jitter, dropped frames). Draws nothing for
+/// effects that are off.
+class EffectsRng {
+ public:
+  explicit EffectsRng(std::uint64_t seed) : engine_(seed) {}
+  std::mt19937_64& engine() { return engine_; }
+
+ private:
+  std::mt19937_64 engine_;
+};
+
+/// Average of equally weighted sub-frames (CV_32F, same size and channels), for exposure blur.
+cv::Mat average_frames(const std::vector<cv::Mat>& subframes);
+/// Downsample an image rendered at `factor` x the resolution by area averaging (anti-aliasing).
+cv::Mat downsample(const cv::Mat& image, int factor);
+/// Vignetting: multiply by (1 - strength * (r / r_corner)^2)^2 about the principal point.
+void apply_vignetting(cv::Mat& image_f32, double strength, cv::Point2d principal_point);
+/// Sensor noise on a float image in DN: Gaussian with variance read^2 + gain * max(signal, 0).
+void apply_noise(cv::Mat& image_f32, double read_sigma_dn, double shot_gain, EffectsRng& rng);
+/// Round and saturate to 8 bits.
+cv::Mat quantize(const cv::Mat& image_f32);
+/// Capture time of frame i with timing jitter (sigma s), and whether it is dropped.
+double jittered_time(double nominal, double sigma, EffectsRng& rng);
+bool dropped(double probability, EffectsRng& rng);
+
+}  // namespace flatland::render

@@ -1,0 +1,81 @@
+// Synthetic camera images of the air table: the tilted table, the hand (its closed outline
+// extruded), the pivot, the disk (rim O-ring, off-centre marker) and optional calibration
+// targets, seen by the scene's camera with exact geometry and optional image effects.
+#pragma once
+
+#include "flatland/render/camera.hpp"
+#include "flatland/render/effects.hpp"
+#include "flatland/render/gl_context.hpp"
+#include "flatland/scene/scene.hpp"
+#include "flatland/sim/simulate.hpp"
+
+#include <opencv2/core.hpp>
+
+#include <memory>
+#include <optional>
+#include <vector>
+
+namespace flatland::render {
+
+/// What the renderer draws at one instant (all table frame, SI).
+struct SceneState {
+  double t = 0;
+  double hand_angle = 0;                 ///< rad
+  cv::Point2d disk_center{0, 0};         ///< m
+  double disk_angle = 0;                 ///< rad
+  double s_h = 0;                        ///< for truth and overlays
+  double force_normal_ratio = 0, force_tangential_ratio = 0;  ///< overlays
+  static SceneState from_sample(const sim::Sample& s);
+};
+
+/// Ground truth of one frame.
+struct FrameTruth {
+  double t = 0;            ///< capture time (with jitter), s
+  double theta = 0, s_h = 0;
+  cv::Point3d disk_center_table, marker_table;  ///< m; top face of the disk
+  cv::Point2d disk_center_px, marker_px;        ///< cv::projectPoints of the above
+  bool dropped = false;
+};
+
+struct Frame {
+  cv::Mat image;     ///< CV_8UC3 (BGR), or CV_32FC3 when effects.quantize is false
+  FrameTruth truth;
+};
+
+/// Inner corners of a target's square grid in the table frame (on the board plane), row by row
+/// (rows - 1 rows of cols - 1 corners): the truth for chessboard and ChArUco corner detection.
+std::vector<cv::Point3d> target_corners(const TargetSpec& target);
+
+class Renderer {
+ public:
+  /// Needs scene.camera. Creates the GL context (backend from scene.render.backend unless
+  /// `backend` is given). Throws std::invalid_argument on bad camera/effects values and
+  /// std::runtime_error when no GL context can be made.
+  explicit Renderer(const Scene& scene, std::optional<GlBackend> backend = std::nullopt);
+  ~Renderer();
+  Renderer(const Renderer&) = delete;
+  Renderer& operator=(const Renderer&) = delete;
+
+  const CameraModel& camera() const;
+  std::string gl_description() const;
+
+  /// One geometric image of the state: anti-aliasing and distortion applied, no noise/blur/
+  /// quantisation (CV_32FC3, 0..255 DN).
+  cv::Mat render_linear(const SceneState& state);
+  /// The same as an 8-bit BGR image; without supersampling or distortion it is the GL readback
+  /// itself (the fast path).
+  cv::Mat render_8u(const SceneState& state);
+  /// One camera frame at nominal time t from a run's dense output: exposure blur over the
+  /// exposure ending at t (sub-frames from the trajectory), timing jitter, noise, vignetting,
+  /// quantisation, dropped frames, per the scene's effects. The renderer's RNG
+  /// (scene.effects.seed) advances frame by frame, so a scene and seed give identical frames.
+  Frame capture(const sim::Trajectory& trajectory, double t);
+  /// Truth for a state (also usable without rendering).
+  FrameTruth truth(const SceneState& state) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace flatland::render

@@ -1,0 +1,784 @@
+#include "flatland/render/renderer.hpp"
+
+#include "flatland/sim/curve.hpp"
+
+// Prototypes only, for decltype: every function is fetched from the context at run time.
+#define GL_GLEXT_PROTOTYPES 1
+#include <GL/gl.h>
+#include <GL/glext.h>
+#include <opencv2/aruco/charuco.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include <array>
+#include <cmath>
+#include <numbers>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace flatland::render {
+
+namespace {
+
+// ---------------------------------------------------------------------------------------------
+// The GL 3.3 core functions the renderer uses, fetched through the context (no libGL linked).
+#define FLATLAND_GL_FUNCTIONS(X)                                                        \
+  X(glClear)                                                            \
+  X(glClearColor)                                                  \
+  X(glEnable)                                                          \
+  X(glDisable)                                                        \
+  X(glPolygonOffset)                                                        \
+  X(glViewport)                                                      \
+  X(glReadPixels)                                                  \
+  X(glPixelStorei)                                                \
+  X(glGetError)                                                      \
+  X(glFinish)                                                          \
+  X(glDrawArrays)                                                  \
+  X(glGenTextures)                                                \
+  X(glBindTexture)                                                \
+  X(glTexImage2D)                                                  \
+  X(glTexParameteri)                                            \
+  X(glDeleteTextures)                                          \
+  X(glActiveTexture)                                            \
+  X(glGenerateMipmap)                                          \
+  X(glGenFramebuffers)                                        \
+  X(glBindFramebuffer)                                        \
+  X(glFramebufferRenderbuffer)                        \
+  X(glCheckFramebufferStatus)                          \
+  X(glDeleteFramebuffers)                                  \
+  X(glGenRenderbuffers)                                      \
+  X(glBindRenderbuffer)                                      \
+  X(glRenderbufferStorage)                                \
+  X(glDeleteRenderbuffers)                                \
+  X(glGenBuffers)                                                  \
+  X(glBindBuffer)                                                  \
+  X(glBufferData)                                                  \
+  X(glDeleteBuffers)                                            \
+  X(glGenVertexArrays)                                        \
+  X(glBindVertexArray)                                        \
+  X(glDeleteVertexArrays)                                  \
+  X(glEnableVertexAttribArray)                        \
+  X(glVertexAttribPointer)                                \
+  X(glCreateShader)                                              \
+  X(glShaderSource)                                              \
+  X(glCompileShader)                                            \
+  X(glGetShaderiv)                                                \
+  X(glGetShaderInfoLog)                                      \
+  X(glDeleteShader)                                              \
+  X(glCreateProgram)                                            \
+  X(glAttachShader)                                              \
+  X(glLinkProgram)                                                \
+  X(glGetProgramiv)                                              \
+  X(glGetProgramInfoLog)                                    \
+  X(glUseProgram)                                                  \
+  X(glDeleteProgram)                                            \
+  X(glGetUniformLocation)                                  \
+  X(glUniformMatrix4fv)                                      \
+  X(glUniform3f)                                                    \
+  X(glUniform1f)                                                    \
+  X(glUniform1i)
+
+struct Gl {
+#define FLATLAND_GL_MEMBER(name) decltype(&::name) name = nullptr;
+  FLATLAND_GL_FUNCTIONS(FLATLAND_GL_MEMBER)
+#undef FLATLAND_GL_MEMBER
+  explicit Gl(const GlContext& c) {
+#define FLATLAND_GL_LOAD(name)                                                       \
+  name = reinterpret_cast<decltype(&::name)>(c.proc_address(#name));                              \
+  if (!name)                                                                         \
+    throw std::runtime_error("GL backend " + to_string(c.backend()) + ": no " #name \
+                             " (OpenGL 3.3 core required)");
+    FLATLAND_GL_FUNCTIONS(FLATLAND_GL_LOAD)
+#undef FLATLAND_GL_LOAD
+  }
+};
+
+// ---------------------------------------------------------------------------------------------
+// Shading: Lambert plus an optional Blinn-Phong highlight (the brushed aluminium hand) under one
+// directional light, evaluated per vertex. Every face is planar, so Lambert shading is exact per
+// vertex, and the fragment stage only passes the colour on: llvmpipe runs a fragment shader for
+// every pixel, and a lit or textured one there costs several times the whole frame budget.
+const char* kVertexShader = R"(#version 330 core
+layout(location = 0) in vec3 position;
+layout(location = 1) in vec3 normal;
+layout(location = 2) in vec3 color;
+layout(location = 3) in vec2 uv;
+uniform mat4 model;
+uniform mat4 view;
+uniform mat4 projection;
+uniform vec3 light_direction;
+uniform vec3 eye;
+uniform float ambient;
+uniform float specular;
+out vec3 lit_color;
+out vec2 tex_uv;
+void main() {
+  vec4 wp = model * vec4(position, 1.0);
+  vec3 n = normalize(mat3(model) * normal);
+  float diffuse = max(dot(n, light_direction), 0.0);
+  vec3 h = normalize(light_direction + normalize(eye - wp.xyz));
+  float highlight = specular > 0.0 ? specular * pow(max(dot(n, h), 0.0), 24.0) : 0.0;
+  lit_color = color * (ambient + (1.0 - ambient) * diffuse) + vec3(highlight);
+  tex_uv = uv;
+  gl_Position = projection * view * wp;
+}
+)";
+
+const char* kPlainFragmentShader = R"(#version 330 core
+in vec3 lit_color;
+in vec2 tex_uv;
+out vec4 out_color;
+void main() { out_color = vec4(lit_color, 1.0); }
+)";
+
+// Only ChArUco boards (their marker bits) need a texture.
+const char* kTexturedFragmentShader = R"(#version 330 core
+in vec3 lit_color;
+in vec2 tex_uv;
+uniform sampler2D board;
+out vec4 out_color;
+void main() { out_color = vec4(lit_color * texture(board, tex_uv).rgb, 1.0); }
+)";
+
+// Interleaved vertex: position, normal, colour, texture coordinate.
+struct Vertex {
+  float p[3], n[3], c[3], uv[2];
+};
+using Mesh = std::vector<Vertex>;
+
+void add_triangle(Mesh& m, const cv::Vec3d& a, const cv::Vec3d& b, const cv::Vec3d& c,
+                  const cv::Vec3d& normal, const cv::Vec3f& color,
+                  std::array<cv::Vec2f, 3> uv = {}) {
+  const cv::Vec3d* pts[3] = {&a, &b, &c};
+  for (int i = 0; i < 3; ++i) {
+    Vertex v{};
+    for (int k = 0; k < 3; ++k) {
+      v.p[k] = static_cast<float>((*pts[i])[k]);
+      v.n[k] = static_cast<float>(normal[k]);
+      v.c[k] = color[k];
+    }
+    v.uv[0] = uv[i][0];
+    v.uv[1] = uv[i][1];
+    m.push_back(v);
+  }
+}
+
+void add_quad(Mesh& m, const cv::Vec3d& a, const cv::Vec3d& b, const cv::Vec3d& c,
+              const cv::Vec3d& d, const cv::Vec3d& normal, const cv::Vec3f& color) {
+  add_triangle(m, a, b, c, normal, color);
+  add_triangle(m, a, c, d, normal, color);
+}
+
+// Ear clipping of a simple polygon (counter-clockwise), for the hand's top and bottom faces.
+std::vector<std::array<int, 3>> triangulate(const std::vector<cv::Point2d>& poly) {
+  std::vector<int> idx(poly.size());
+  for (std::size_t i = 0; i < poly.size(); ++i) idx[i] = static_cast<int>(i);
+  std::vector<std::array<int, 3>> tris;
+  auto cross = [](const cv::Point2d& o, const cv::Point2d& a, const cv::Point2d& b) {
+    return (a.x - o.x) * (b.y - o.y) - (a.y - o.y) * (b.x - o.x);
+  };
+  std::size_t guard = 0;
+  while (idx.size() > 3 && guard < poly.size() * poly.size()) {
+    ++guard;
+    bool clipped = false;
+    for (std::size_t i = 0; i < idx.size(); ++i) {
+      const int a = idx[(i + idx.size() - 1) % idx.size()], b = idx[i], c = idx[(i + 1) % idx.size()];
+      if (cross(poly[a], poly[b], poly[c]) <= 0) continue;  // reflex corner
+      bool empty = true;
+      for (int j : idx) {
+        if (j == a || j == b || j == c) continue;
+        if (cross(poly[a], poly[b], poly[j]) >= 0 && cross(poly[b], poly[c], poly[j]) >= 0 &&
+            cross(poly[c], poly[a], poly[j]) >= 0) {
+          empty = false;
+          break;
+        }
+      }
+      if (!empty) continue;
+      tris.push_back({a, b, c});
+      idx.erase(idx.begin() + static_cast<long>(i));
+      clipped = true;
+      break;
+    }
+    if (!clipped) throw std::runtime_error("render: cannot triangulate the hand outline");
+  }
+  if (idx.size() == 3) tris.push_back({idx[0], idx[1], idx[2]});
+  return tris;
+}
+
+// Colours (linear RGB stored as BGR-free RGB; the shader output is read back as BGRA).
+const cv::Vec3f kTable(0.20f, 0.22f, 0.25f);
+const cv::Vec3f kAluminium(0.60f, 0.61f, 0.63f);
+const cv::Vec3f kPivot(0.30f, 0.30f, 0.32f);
+const cv::Vec3f kDiskFace(0.92f, 0.92f, 0.90f);
+const cv::Vec3f kRubber(0.05f, 0.05f, 0.05f);
+const cv::Vec3f kMarker(0.10f, 0.12f, 0.55f);
+
+constexpr double kAmbient = 0.35;
+const cv::Vec3d kLight = cv::normalize(cv::Vec3d(0.25, 0.35, 1.0));  // table frame, towards the light
+
+constexpr double kRingWidth = 0.08;    // O-ring seen from above, fraction of the radius
+constexpr double kMarkerOffset = 0.5;  // marker centre from the disk centre, fraction of radius
+constexpr double kMarkerRadius = 0.12;
+
+// Parameters along [s0, s1] of one piece, spaced so that the chord's sagitta stays below
+// `tolerance` (m): fine at the tip, coarse along flat stretches.
+std::vector<double> adaptive_samples(const sim::Curve& curve, int piece, double s0, double s1,
+                                     double tolerance) {
+  std::vector<double> out{s0};
+  double s = s0;
+  const double dir = s1 > s0 ? 1.0 : -1.0;
+  while (dir * (s1 - s) > 1e-12) {
+    const sim::CurveGeometry g = curve.geometry(s, piece);
+    const double kappa = std::max(std::abs(g.curvature), 1e-6);
+    const double step_len = std::min(std::sqrt(8.0 * tolerance / kappa), 0.01);  // m
+    s += dir * std::max(step_len / g.speed, 1e-4);
+    if (dir * (s1 - s) < 0.25 * step_len / g.speed) s = s1;  // no sliver at the end
+    out.push_back(s);
+  }
+  return out;
+}
+
+constexpr double kOutlineTolerance = 2e-5;  // m: 0.02 px at 1 px/mm
+
+Mesh hand_mesh(const sim::PolynomialHand& hand, double thickness) {
+  // Right half from the tip (u = 0) to the middle of the palm/back (u = 1); the paper's shape is
+  // symmetric about the x axis within a half (x even, y odd in u) and the halves mirror x -> -x.
+  const std::vector<double> u = adaptive_samples(hand, 0, 0.0, 1.0, kOutlineTolerance);
+  std::vector<cv::Point2d> half;  // (x(u), |y(u)|)
+  bool monotone = true;
+  for (std::size_t i = 0; i < u.size(); ++i) {
+    const sim::Vec2 p = hand.geometry(u[i], 0).point;
+    half.emplace_back(p.x(), std::abs(p.y()));
+    if (i > 0 && !(p.x() < half[i - 1].x)) monotone = false;
+  }
+  // Closed outline, counter-clockwise: up the right half from the back's middle (bottom) over the
+  // tip to the palm's middle (top), then down the mirrored half. Junction points appear once.
+  const std::size_t last = half.size() - 1;
+  std::vector<cv::Point2d> outline;
+  for (std::size_t i = last + 1; i-- > 0;) outline.emplace_back(half[i].x, -half[i].y);
+  for (std::size_t i = 1; i <= last; ++i) outline.emplace_back(half[i].x, half[i].y);
+  for (std::size_t i = last; i-- > 0;) outline.emplace_back(-half[i].x, half[i].y);
+  for (std::size_t i = 1; i < last; ++i) outline.emplace_back(-half[i].x, -half[i].y);
+  Mesh m;
+  const double z0 = 0.0005, z1 = thickness;
+  if (monotone) {
+    // Vertical slabs between the upper and lower chains: well-shaped triangles, few of them.
+    for (double side : {1.0, -1.0})
+      for (std::size_t i = 0; i + 1 < half.size(); ++i) {
+        const cv::Point2d a = half[i], b = half[i + 1];
+        add_quad(m, {side * a.x, -a.y, z1}, {side * b.x, -b.y, z1}, {side * b.x, b.y, z1},
+                 {side * a.x, a.y, z1}, {0, 0, 1}, kAluminium);
+      }
+  } else {
+    for (const auto& t : triangulate(outline)) {
+      auto P = [&](int i) { return cv::Vec3d(outline[i].x, outline[i].y, z1); };
+      add_triangle(m, P(t[0]), P(t[1]), P(t[2]), {0, 0, 1}, kAluminium);
+    }
+  }
+  const std::size_t n = outline.size();
+  for (std::size_t i = 0; i < n; ++i) {
+    const cv::Point2d a = outline[i], b = outline[(i + 1) % n];
+    const cv::Point2d d = b - a;
+    const double len = std::hypot(d.x, d.y);
+    if (len < 1e-12) continue;
+    const cv::Vec3d normal(d.y / len, -d.x / len, 0);  // outward for a counter-clockwise outline
+    add_quad(m, {a.x, a.y, z0}, {b.x, b.y, z0}, {b.x, b.y, z1}, {a.x, a.y, z1}, normal, kAluminium);
+  }
+  // The pivot: a short cylinder on top of the hand plate at the origin.
+  constexpr int kSeg = 32;
+  const double pr = 0.012, pz = z1 + 0.004;
+  for (int i = 0; i < kSeg; ++i) {
+    const double a0 = 2 * std::numbers::pi * i / kSeg, a1 = 2 * std::numbers::pi * (i + 1) / kSeg;
+    add_triangle(m, {0, 0, pz}, {pr * std::cos(a0), pr * std::sin(a0), pz},
+                 {pr * std::cos(a1), pr * std::sin(a1), pz}, {0, 0, 1}, kPivot);
+  }
+  return m;
+}
+
+Mesh disk_mesh(double r, double thickness) {
+  constexpr int kSeg = 96;
+  Mesh m;
+  const double z = thickness, ri = r * (1.0 - kRingWidth);
+  for (int i = 0; i < kSeg; ++i) {
+    const double a0 = 2 * std::numbers::pi * i / kSeg, a1 = 2 * std::numbers::pi * (i + 1) / kSeg;
+    const cv::Vec3d u0(std::cos(a0), std::sin(a0), 0), u1(std::cos(a1), std::sin(a1), 0);
+    add_triangle(m, {0, 0, z}, ri * u0 + cv::Vec3d(0, 0, z), ri * u1 + cv::Vec3d(0, 0, z), {0, 0, 1},
+                 kDiskFace);
+    add_quad(m, ri * u0 + cv::Vec3d(0, 0, z), r * u0 + cv::Vec3d(0, 0, z), r * u1 + cv::Vec3d(0, 0, z),
+             ri * u1 + cv::Vec3d(0, 0, z), {0, 0, 1}, kRubber);
+    add_quad(m, r * u0, r * u1, r * u1 + cv::Vec3d(0, 0, z), r * u0 + cv::Vec3d(0, 0, z),
+             0.5 * (u0 + u1), kRubber);
+  }
+  // The marker: a dark dot on the face, lifted a little above it against depth fighting.
+  const double mz = z + 1e-4, mr = kMarkerRadius * r;
+  const cv::Vec3d mc(kMarkerOffset * r, 0, mz);
+  for (int i = 0; i < 32; ++i) {
+    const double a0 = 2 * std::numbers::pi * i / 32, a1 = 2 * std::numbers::pi * (i + 1) / 32;
+    add_triangle(m, mc, mc + mr * cv::Vec3d(std::cos(a0), std::sin(a0), 0),
+                 mc + mr * cv::Vec3d(std::cos(a1), std::sin(a1), 0), {0, 0, 1}, kMarker);
+  }
+  return m;
+}
+
+Mesh table_mesh(double extent) {
+  Mesh m;
+  add_quad(m, {-extent, -extent, 0}, {extent, -extent, 0}, {extent, extent, 0}, {-extent, extent, 0},
+           {0, 0, 1}, kTable);
+  return m;
+}
+
+// A chessboard as exact geometry: a white board (one square of margin) and black squares, all in
+// the board plane z = 0 (the board is drawn with a polygon offset behind the squares). Board
+// frame: origin at the outer corner of the first square, x along columns, y along rows.
+Mesh chessboard_background(const TargetSpec& t) {
+  Mesh m;
+  const double s = t.square;
+  add_quad(m, {-s, -s, 0}, {(t.cols + 1) * s, -s, 0}, {(t.cols + 1) * s, (t.rows + 1) * s, 0},
+           {-s, (t.rows + 1) * s, 0}, {0, 0, 1}, cv::Vec3f(0.95f, 0.95f, 0.95f));
+  return m;
+}
+
+Mesh chessboard_squares(const TargetSpec& t) {
+  Mesh m;
+  const double s = t.square;
+  for (int r = 0; r < t.rows; ++r)
+    for (int c = 0; c < t.cols; ++c)
+      if ((r + c) % 2 == 0)
+        add_quad(m, {c * s, r * s, 0}, {(c + 1) * s, r * s, 0}, {(c + 1) * s, (r + 1) * s, 0},
+                 {c * s, (r + 1) * s, 0}, {0, 0, 1}, cv::Vec3f(0.04f, 0.04f, 0.04f));
+  return m;
+}
+
+// A ChArUco board as a textured quad: OpenCV draws the board image (the markers' bits need a
+// texture); 40 texels per square keep the marker bits sharp.
+Mesh textured_quad(double w, double h) {
+  Mesh m;
+  const cv::Vec3f white(1, 1, 1);
+  add_triangle(m, {0, 0, 0}, {w, 0, 0}, {w, h, 0}, {0, 0, 1}, white,
+               {cv::Vec2f(0, 1), cv::Vec2f(1, 1), cv::Vec2f(1, 0)});
+  add_triangle(m, {0, 0, 0}, {w, h, 0}, {0, h, 0}, {0, 0, 1}, white,
+               {cv::Vec2f(0, 1), cv::Vec2f(1, 0), cv::Vec2f(0, 0)});
+  return m;
+}
+
+cv::Matx44f to_gl(const cv::Matx44d& m) {
+  // GL expects column-major; transposing a row-major matrix gives that memory layout.
+  cv::Matx44f out;
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) out(c, r) = static_cast<float>(m(r, c));
+  return out;
+}
+
+cv::Matx44d rigid(const cv::Matx33d& R, const cv::Vec3d& t) {
+  return {R(0, 0), R(0, 1), R(0, 2), t[0], R(1, 0), R(1, 1), R(1, 2), t[1],
+          R(2, 0), R(2, 1), R(2, 2), t[2], 0, 0, 0, 1};
+}
+
+cv::Matx33d rot_z(double a) {
+  const double c = std::cos(a), s = std::sin(a);
+  return {c, -s, 0, s, c, 0, 0, 0, 1};
+}
+
+}  // namespace
+
+std::vector<cv::Point3d> target_corners(const TargetSpec& t) {
+  cv::Matx33d R;
+  cv::Rodrigues(cv::Vec3d(t.rotation[0], t.rotation[1], t.rotation[2]), R);
+  const cv::Vec3d p(t.position[0], t.position[1], t.position[2]);
+  std::vector<cv::Point3d> out;
+  for (int r = 1; r < t.rows; ++r)
+    for (int c = 1; c < t.cols; ++c) {
+      const cv::Vec3d q = R * cv::Vec3d(c * t.square, r * t.square, 0) + p;
+      out.emplace_back(q[0], q[1], q[2]);
+    }
+  return out;
+}
+
+SceneState SceneState::from_sample(const sim::Sample& s) {
+  SceneState st;
+  st.t = s.t;
+  st.hand_angle = s.theta;
+  st.disk_center = {s.object_position.x(), s.object_position.y()};
+  st.disk_angle = s.object_angle;
+  st.s_h = s.s_h;
+  st.force_normal_ratio = s.fn_ratio;
+  st.force_tangential_ratio = s.ft_ratio;
+  return st;
+}
+
+// ---------------------------------------------------------------------------------------------
+struct Renderer::Impl {
+  struct Drawable {
+    unsigned vao = 0, vbo = 0, texture = 0;
+    int count = 0;
+    cv::Matx44d model = cv::Matx44d::eye();
+    bool behind = false;  // drawn with a polygon offset: coplanar geometry drawn later wins
+  };
+
+  Scene scene;
+  CameraModel camera;
+  DistortionMaps maps;
+  int supersample = 1;
+  double disk_radius = 0;
+  std::unique_ptr<GlContext> context;
+  std::unique_ptr<Gl> gl;
+  unsigned program = 0, textured_program = 0, fbo = 0, color_rb = 0, depth_rb = 0;
+  int fbo_width = 0, fbo_height = 0;
+  Drawable table, hand, disk;
+  std::vector<Drawable> targets;
+  bool textured_targets = false;
+  bool table_fills_view = false;
+  cv::Vec3f table_color;
+  EffectsRng rng;
+  cv::Mat readback;  // CV_8UC4 (RGBA), reused
+
+  Impl(const Scene& s, GlBackend backend)
+      : scene(s), camera(CameraModel::from_spec(*s.camera)), rng(s.effects.seed) {
+    supersample = s.effects.supersample;
+    if (supersample < 1 || supersample > 8)
+      throw std::invalid_argument("effects.supersample: must be between 1 and 8");
+    if (s.sim.object.kind != sim::ObjectSpec::Kind::kDisk)
+      throw std::invalid_argument("object.type: the renderer draws disks only");
+    disk_radius = s.sim.object.radius;
+    maps = make_distortion_maps(camera, supersample);
+    fbo_width = maps.ideal_width;
+    fbo_height = maps.ideal_height;
+    context = create_context(backend);
+    gl = std::make_unique<Gl>(*context);
+    build_program();
+    build_framebuffer();
+    table = upload(table_mesh(s.render.table_extent));
+    const sim::PolynomialHand shape(s.sim.hand.a, s.sim.hand.b, s.sim.hand.c, s.sim.hand.d);
+    hand = upload(hand_mesh(shape, s.render.hand_thickness));
+    disk = upload(disk_mesh(disk_radius, s.render.disk_thickness));
+    for (const TargetSpec& t : s.targets) targets.push_back(make_target(t));
+    for (const Drawable& t : targets) textured_targets = textured_targets || t.texture != 0;
+    readback.create(fbo_height, fbo_width, CV_8UC4);
+    const float shade = static_cast<float>(kAmbient + (1.0 - kAmbient) * std::max(kLight[2], 0.0));
+    table_color = kTable * shade;
+    table_fills_view = view_inside_table(s.render.table_extent);
+  }
+
+  // Whether every ray through the ideal image's corners meets the table plane inside the table.
+  bool view_inside_table(double extent) const {
+    const cv::Vec3d c = camera.position_in_table();
+    const cv::Matx33d Kinv = maps.ideal_K.inv();
+    for (double u : {-0.5, fbo_width - 0.5})
+      for (double v : {-0.5, fbo_height - 0.5}) {
+        const cv::Vec3d d = camera.R.t() * (Kinv * cv::Vec3d(u, v, 1));
+        if (!(d[2] < 0)) return false;
+        const double lambda = -c[2] / d[2];
+        const cv::Vec3d p = c + lambda * d;
+        if (std::abs(p[0]) > extent || std::abs(p[1]) > extent) return false;
+      }
+    return true;
+  }
+
+  ~Impl() {
+    if (!gl) return;
+    context->make_current();
+    for (Drawable* d : {&table, &hand, &disk}) release(*d);
+    for (Drawable& d : targets) release(d);
+    gl->glDeleteFramebuffers(1, &fbo);
+    gl->glDeleteRenderbuffers(1, &color_rb);
+    gl->glDeleteRenderbuffers(1, &depth_rb);
+    gl->glDeleteProgram(program);
+    gl->glDeleteProgram(textured_program);
+  }
+
+  void release(Drawable& d) {
+    gl->glDeleteBuffers(1, &d.vbo);
+    gl->glDeleteVertexArrays(1, &d.vao);
+    if (d.texture) gl->glDeleteTextures(1, &d.texture);
+  }
+
+  unsigned compile(unsigned type, const char* src) {
+    const unsigned sh = gl->glCreateShader(type);
+    gl->glShaderSource(sh, 1, &src, nullptr);
+    gl->glCompileShader(sh);
+    int ok = 0;
+    gl->glGetShaderiv(sh, GL_COMPILE_STATUS, &ok);
+    if (!ok) {
+      char log[2048];
+      gl->glGetShaderInfoLog(sh, sizeof log, nullptr, log);
+      throw std::runtime_error(std::string("render: shader does not compile: ") + log);
+    }
+    return sh;
+  }
+
+  unsigned link(const char* fragment_source) {
+    const unsigned vs = compile(GL_VERTEX_SHADER, kVertexShader);
+    const unsigned fs = compile(GL_FRAGMENT_SHADER, fragment_source);
+    const unsigned p = gl->glCreateProgram();
+    gl->glAttachShader(p, vs);
+    gl->glAttachShader(p, fs);
+    gl->glLinkProgram(p);
+    int ok = 0;
+    gl->glGetProgramiv(p, GL_LINK_STATUS, &ok);
+    gl->glDeleteShader(vs);
+    gl->glDeleteShader(fs);
+    if (!ok) throw std::runtime_error("render: shader program does not link");
+    return p;
+  }
+
+  void build_program() {
+    program = link(kPlainFragmentShader);
+    textured_program = link(kTexturedFragmentShader);
+  }
+
+  void build_framebuffer() {
+    gl->glGenFramebuffers(1, &fbo);
+    gl->glBindFramebuffer(GL_FRAMEBUFFER, fbo);
+    gl->glGenRenderbuffers(1, &color_rb);
+    gl->glBindRenderbuffer(GL_RENDERBUFFER, color_rb);
+    gl->glRenderbufferStorage(GL_RENDERBUFFER, GL_RGBA8, fbo_width, fbo_height);
+    gl->glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, color_rb);
+    gl->glGenRenderbuffers(1, &depth_rb);
+    gl->glBindRenderbuffer(GL_RENDERBUFFER, depth_rb);
+    gl->glRenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT24, fbo_width, fbo_height);
+    gl->glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, depth_rb);
+    if (gl->glCheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
+      throw std::runtime_error("render: framebuffer " + std::to_string(fbo_width) + "x" +
+                               std::to_string(fbo_height) + " is incomplete (too large?)");
+  }
+
+  Drawable upload(const Mesh& mesh) {
+    Drawable d;
+    gl->glGenVertexArrays(1, &d.vao);
+    gl->glBindVertexArray(d.vao);
+    gl->glGenBuffers(1, &d.vbo);
+    gl->glBindBuffer(GL_ARRAY_BUFFER, d.vbo);
+    gl->glBufferData(GL_ARRAY_BUFFER, static_cast<long>(mesh.size() * sizeof(Vertex)), mesh.data(),
+                     GL_STATIC_DRAW);
+    const int stride = sizeof(Vertex);
+    gl->glEnableVertexAttribArray(0);
+    gl->glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, stride, reinterpret_cast<void*>(offsetof(Vertex, p)));
+    gl->glEnableVertexAttribArray(1);
+    gl->glVertexAttribPointer(1, 3, GL_FLOAT, GL_FALSE, stride, reinterpret_cast<void*>(offsetof(Vertex, n)));
+    gl->glEnableVertexAttribArray(2);
+    gl->glVertexAttribPointer(2, 3, GL_FLOAT, GL_FALSE, stride, reinterpret_cast<void*>(offsetof(Vertex, c)));
+    gl->glEnableVertexAttribArray(3);
+    gl->glVertexAttribPointer(3, 2, GL_FLOAT, GL_FALSE, stride, reinterpret_cast<void*>(offsetof(Vertex, uv)));
+    d.count = static_cast<int>(mesh.size());
+    return d;
+  }
+
+  Drawable make_target(const TargetSpec& t) {
+    cv::Matx33d R;
+    cv::Rodrigues(cv::Vec3d(t.rotation[0], t.rotation[1], t.rotation[2]), R);
+    const cv::Vec3d p(t.position[0], t.position[1], t.position[2]);
+    if (t.kind == TargetSpec::Kind::kChessboard) {
+      Drawable back = upload(chessboard_background(t));
+      back.model = rigid(R, p);
+      back.behind = true;
+      targets.push_back(back);
+      Drawable squares = upload(chessboard_squares(t));
+      squares.model = rigid(R, p);
+      return squares;
+    }
+    // ChArUco: OpenCV draws the board (white margin of one square drawn by us as the quad's own
+    // border is not needed: the board image covers exactly cols x rows squares).
+    const int px_per_square = 40;
+    const auto dict = cv::aruco::getPredefinedDictionary(
+        cv::aruco::PREDEFINED_DICTIONARY_NAME(dictionary_id(t.dictionary)));
+    const auto board = cv::aruco::CharucoBoard::create(t.cols, t.rows, static_cast<float>(t.square),
+                                                       static_cast<float>(t.marker), dict);
+    cv::Mat image;
+    board->draw(cv::Size(t.cols * px_per_square, t.rows * px_per_square), image, 0, 1);
+    cv::Mat rgba;
+    cv::cvtColor(image, rgba, cv::COLOR_GRAY2RGBA);
+    Drawable d = upload(textured_quad(t.cols * t.square, t.rows * t.square));
+    gl->glGenTextures(1, &d.texture);
+    gl->glBindTexture(GL_TEXTURE_2D, d.texture);
+    gl->glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+    gl->glTexImage2D(GL_TEXTURE_2D, 0, GL_RGBA8, rgba.cols, rgba.rows, 0, GL_RGBA, GL_UNSIGNED_BYTE,
+                     rgba.data);
+    gl->glGenerateMipmap(GL_TEXTURE_2D);
+    gl->glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_LINEAR_MIPMAP_LINEAR);
+    gl->glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+    gl->glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+    gl->glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+    d.model = rigid(R, p);
+    return d;
+  }
+
+  static int dictionary_id(const std::string& name) {
+    static const std::vector<std::string> names = {
+        "DICT_4X4_50",   "DICT_4X4_100",  "DICT_4X4_250",  "DICT_4X4_1000", "DICT_5X5_50",
+        "DICT_5X5_100",  "DICT_5X5_250",  "DICT_5X5_1000", "DICT_6X6_50",   "DICT_6X6_100",
+        "DICT_6X6_250",  "DICT_6X6_1000", "DICT_7X7_50",   "DICT_7X7_100",  "DICT_7X7_250",
+        "DICT_7X7_1000", "DICT_ARUCO_ORIGINAL"};
+    for (std::size_t i = 0; i < names.size(); ++i)
+      if (names[i] == name) return static_cast<int>(i);
+    throw std::invalid_argument("targets.dictionary: unknown ArUco dictionary '" + name + "'");
+  }
+
+  // Projection of the ideal pinhole camera, OpenCV pixel convention (centres at integers), with
+  // image row v mapped to window row v so that glReadPixels returns rows top-down.
+  cv::Matx44d projection() const {
+    const double W = fbo_width, H = fbo_height, n = 0.01, f = 50.0;
+    const cv::Matx33d& K = maps.ideal_K;
+    return {2 * K(0, 0) / W, 0, (2 * K(0, 2) + 1) / W - 1, 0,
+            0, 2 * K(1, 1) / H, (2 * K(1, 2) + 1) / H - 1, 0,
+            0, 0, (f + n) / (f - n), -2 * f * n / (f - n),
+            0, 0, 1, 0};
+  }
+
+  // Per-frame uniforms, set on both programs.
+  void set_frame_uniforms(unsigned p) {
+    gl->glUseProgram(p);
+    const cv::Matx44f view = to_gl(rigid(camera.R, camera.t));
+    const cv::Matx44f proj = to_gl(projection());
+    gl->glUniformMatrix4fv(gl->glGetUniformLocation(p, "view"), 1, GL_FALSE, view.val);
+    gl->glUniformMatrix4fv(gl->glGetUniformLocation(p, "projection"), 1, GL_FALSE, proj.val);
+    gl->glUniform3f(gl->glGetUniformLocation(p, "light_direction"), float(kLight[0]),
+                    float(kLight[1]), float(kLight[2]));
+    const cv::Vec3d eye = camera.position_in_table();
+    gl->glUniform3f(gl->glGetUniformLocation(p, "eye"), float(eye[0]), float(eye[1]), float(eye[2]));
+    gl->glUniform1f(gl->glGetUniformLocation(p, "ambient"), float(kAmbient));
+  }
+
+  void draw(const Drawable& d, float specular = 0.0f) {
+    const unsigned p = d.texture ? textured_program : program;
+    gl->glUseProgram(p);
+    const cv::Matx44f m = to_gl(d.model);
+    gl->glUniformMatrix4fv(gl->glGetUniformLocation(p, "model"), 1, GL_FALSE, m.val);
+    gl->glUniform1f(gl->glGetUniformLocation(p, "specular"), specular);
+    if (d.texture) {
+      gl->glUniform1i(gl->glGetUniformLocation(p, "board"), 0);
+      gl->glActiveTexture(GL_TEXTURE0);
+      gl->glBindTexture(GL_TEXTURE_2D, d.texture);
+    }
+    if (d.behind) {
+      gl->glEnable(GL_POLYGON_OFFSET_FILL);
+      gl->glPolygonOffset(1.0f, 4.0f);
+    }
+    gl->glBindVertexArray(d.vao);
+    gl->glDrawArrays(GL_TRIANGLES, 0, d.count);
+    if (d.behind) gl->glDisable(GL_POLYGON_OFFSET_FILL);
+  }
+
+  // Render the ideal (undistorted, supersampled) image into `readback` (BGRA, top row first).
+  void render_ideal(const SceneState& st) {
+    context->make_current();
+    gl->glBindFramebuffer(GL_FRAMEBUFFER, fbo);
+    gl->glViewport(0, 0, fbo_width, fbo_height);
+    gl->glEnable(GL_DEPTH_TEST);
+    // Where the table fills the whole view it is a uniformly lit plane: clearing to its colour
+    // gives the same pixels as drawing it, without a full-screen fill.
+    if (table_fills_view)
+      gl->glClearColor(table_color[0], table_color[1], table_color[2], 1);
+    else
+      gl->glClearColor(0, 0, 0, 1);
+    gl->glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+    set_frame_uniforms(program);
+    if (textured_targets) set_frame_uniforms(textured_program);
+    if (!table_fills_view) draw(table);
+    for (const Drawable& t : targets) draw(t);
+    disk.model = rigid(rot_z(st.disk_angle), {st.disk_center.x, st.disk_center.y, 0});
+    draw(disk);
+    hand.model = rigid(rot_z(st.hand_angle), {0, 0, 0});
+    draw(hand, 0.25f);  // brushed aluminium: a soft highlight
+    gl->glPixelStorei(GL_PACK_ALIGNMENT, 4);
+    // RGBA is llvmpipe's fastest read format (BGRA and BGR go through slower paths).
+    gl->glReadPixels(0, 0, fbo_width, fbo_height, GL_RGBA, GL_UNSIGNED_BYTE, readback.data);
+  }
+
+  // The geometric image: supersampled ideal render -> distortion remap -> area downsample.
+  cv::Mat render_linear(const SceneState& st) {
+    render_ideal(st);
+    cv::Mat bgr;
+    cv::cvtColor(readback, bgr, cv::COLOR_RGBA2BGR);
+    cv::Mat f;
+    bgr.convertTo(f, CV_32FC3);
+    if (camera.distorted()) {
+      cv::Mat out;
+      cv::remap(f, out, maps.map_x, maps.map_y, cv::INTER_LINEAR, cv::BORDER_CONSTANT);
+      f = out;
+    }
+    return downsample(f, supersample);
+  }
+
+  // Fast path for 8-bit frames without effects: no float conversion when nothing resamples.
+  cv::Mat render_8u(const SceneState& st) {
+    if (supersample == 1 && !camera.distorted()) {
+      render_ideal(st);
+      cv::Mat bgr;
+      cv::cvtColor(readback, bgr, cv::COLOR_RGBA2BGR);
+      return bgr;
+    }
+    return quantize(render_linear(st));
+  }
+
+  FrameTruth truth(const SceneState& st) const {
+    FrameTruth tr;
+    tr.t = st.t;
+    tr.theta = st.hand_angle;
+    tr.s_h = st.s_h;
+    const double z = scene.render.disk_thickness;
+    tr.disk_center_table = {st.disk_center.x, st.disk_center.y, z};
+    tr.marker_table = {st.disk_center.x + kMarkerOffset * disk_radius * std::cos(st.disk_angle),
+                       st.disk_center.y + kMarkerOffset * disk_radius * std::sin(st.disk_angle), z};
+    const auto px = camera.project(std::vector<cv::Point3d>{tr.disk_center_table, tr.marker_table});
+    tr.disk_center_px = px[0];
+    tr.marker_px = px[1];
+    return tr;
+  }
+};
+
+Renderer::Renderer(const Scene& scene, std::optional<GlBackend> backend) {
+  if (!scene.camera)
+    throw std::invalid_argument("camera: the scene has no camera section (needed to render)");
+  impl_ = std::make_unique<Impl>(scene, backend ? *backend : parse_backend(scene.render.backend));
+}
+
+Renderer::~Renderer() = default;
+
+const CameraModel& Renderer::camera() const { return impl_->camera; }
+std::string Renderer::gl_description() const { return impl_->context->description(); }
+cv::Mat Renderer::render_linear(const SceneState& state) { return impl_->render_linear(state); }
+cv::Mat Renderer::render_8u(const SceneState& state) { return impl_->render_8u(state); }
+FrameTruth Renderer::truth(const SceneState& state) const { return impl_->truth(state); }
+
+Frame Renderer::capture(const sim::Trajectory& trajectory, double t) {
+  const EffectsSpec& fx = impl_->scene.effects;
+  EffectsRng& rng = impl_->rng;
+  Frame frame;
+  const double t_capture = jittered_time(t, fx.jitter_s, rng);
+  const double tc = std::clamp(t_capture, trajectory.t_begin(), trajectory.t_end());
+  const SceneState mid = SceneState::from_sample(trajectory.sample(tc));
+  frame.truth = impl_->truth(mid);
+  frame.truth.t = t_capture;
+  if (dropped(fx.drop_probability, rng)) {
+    frame.truth.dropped = true;
+    return frame;
+  }
+  const double exposure = impl_->camera.exposure;
+  const bool plain = fx.blur_subframes <= 1 && fx.noise_read_dn == 0 && fx.noise_shot_gain == 0 &&
+                     fx.vignetting == 0 && fx.quantize;
+  if (plain) {
+    frame.image = impl_->render_8u(mid);
+    return frame;
+  }
+  cv::Mat linear;
+  if (fx.blur_subframes > 1 && exposure > 0) {
+    // Exposure blur: equally weighted sub-frames over the exposure centred on the capture time.
+    std::vector<cv::Mat> subs;
+    for (int i = 0; i < fx.blur_subframes; ++i) {
+      const double ts = t_capture - 0.5 * exposure + (i + 0.5) * exposure / fx.blur_subframes;
+      const double tcl = std::clamp(ts, trajectory.t_begin(), trajectory.t_end());
+      subs.push_back(impl_->render_linear(SceneState::from_sample(trajectory.sample(tcl))));
+    }
+    linear = average_frames(subs);
+  } else {
+    linear = impl_->render_linear(mid);
+  }
+  if (fx.vignetting > 0)
+    apply_vignetting(linear, fx.vignetting,
+                     {impl_->camera.K(0, 2), impl_->camera.K(1, 2)});
+  apply_noise(linear, fx.noise_read_dn, fx.noise_shot_gain, rng);
+  frame.image = fx.quantize ? quantize(linear) : linear;
+  return frame;
+}
+
+}  // namespace flatland::render
