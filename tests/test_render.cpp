@@ -94,7 +94,8 @@ TEST(Render, DiskCentroidMatchesProjectedCentre) {
   const Scene scene = overhead_scene(4);
   Renderer r(scene);
   const double radius_px = 900 * scene.sim.object.radius / (1.0 - scene.render.disk_thickness);
-  for (cv::Point2d c : {cv::Point2d(0.12, 0.21), cv::Point2d(-0.1, 0.19), cv::Point2d(0.25, 0.22)}) {
+  for (cv::Point2d c :
+       {cv::Point2d(0.12, 0.21), cv::Point2d(-0.1, 0.19), cv::Point2d(0.25, 0.22)}) {
     // The off-centre marker is dark; rendering the disk turned by pi as well and averaging the two
     // centroids cancels its pull exactly, leaving the geometry of the face.
     const SceneState a = disk_at(c.x, c.y, 0.3), b = disk_at(c.x, c.y, 0.3 + std::numbers::pi);

@@ -70,9 +70,17 @@ class OsmesaContext final : public GlContext {
     make_current_ = symbol<MakeCurrent>(lib_, "OSMesaMakeCurrent", "osmesa");
     destroy_ = symbol<Destroy>(lib_, "OSMesaDestroyContext", "osmesa");
     get_proc_ = symbol<GetProc>(lib_, "OSMesaGetProcAddress", "osmesa");
-    const int attribs[] = {OSMESA_FORMAT,  OSMESA_BGRA, OSMESA_DEPTH_BITS, 24,
-                           OSMESA_PROFILE, OSMESA_CORE_PROFILE, OSMESA_CONTEXT_MAJOR_VERSION, 3,
-                           OSMESA_CONTEXT_MINOR_VERSION, 3, 0};
+    const int attribs[] = {OSMESA_FORMAT,
+                           OSMESA_BGRA,
+                           OSMESA_DEPTH_BITS,
+                           24,
+                           OSMESA_PROFILE,
+                           OSMESA_CORE_PROFILE,
+                           OSMESA_CONTEXT_MAJOR_VERSION,
+                           3,
+                           OSMESA_CONTEXT_MINOR_VERSION,
+                           3,
+                           0};
     ctx_ = create_(attribs, nullptr);
     if (!ctx_)
       throw std::runtime_error(
@@ -115,7 +123,8 @@ class EglContext final : public GlContext {
                         "GL backend egl: cannot load libEGL (install the Debian packages libegl1 "
                         "and libegl-mesa0)");
     get_proc_ = symbol<GetProc>(lib_, "eglGetProcAddress", "egl");
-    auto initialize = symbol<EGLBoolean (*)(EGLDisplay, EGLint*, EGLint*)>(lib_, "eglInitialize", "egl");
+    auto initialize =
+        symbol<EGLBoolean (*)(EGLDisplay, EGLint*, EGLint*)>(lib_, "eglInitialize", "egl");
     auto bind_api = symbol<EGLBoolean (*)(EGLenum)>(lib_, "eglBindAPI", "egl");
     auto choose = symbol<EGLBoolean (*)(EGLDisplay, const EGLint*, EGLConfig*, EGLint, EGLint*)>(
         lib_, "eglChooseConfig", "egl");
@@ -140,9 +149,13 @@ class EglContext final : public GlContext {
     EGLConfig config = nullptr;
     EGLint count = 0;
     choose(display_, config_attribs, &config, 1, &count);
-    const EGLint context_attribs[] = {EGL_CONTEXT_MAJOR_VERSION, 3, EGL_CONTEXT_MINOR_VERSION, 3,
+    const EGLint context_attribs[] = {EGL_CONTEXT_MAJOR_VERSION,
+                                      3,
+                                      EGL_CONTEXT_MINOR_VERSION,
+                                      3,
                                       EGL_CONTEXT_OPENGL_PROFILE_MASK,
-                                      EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT, EGL_NONE};
+                                      EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT,
+                                      EGL_NONE};
     ctx_ = create(display_, count > 0 ? config : nullptr, EGL_NO_CONTEXT, context_attribs);
     if (ctx_ == EGL_NO_CONTEXT)
       throw std::runtime_error("GL backend egl: eglCreateContext failed (no OpenGL 3.3 core)");

@@ -22,60 +22,62 @@ namespace {
 
 // ---------------------------------------------------------------------------------------------
 // The GL 3.3 core functions the renderer uses, fetched through the context (no libGL linked).
-#define FLATLAND_GL_FUNCTIONS(X)                                                        \
-  X(glClear)                                                            \
-  X(glClearColor)                                                  \
-  X(glEnable)                                                          \
-  X(glDisable)                                                        \
-  X(glPolygonOffset)                                                        \
-  X(glViewport)                                                      \
-  X(glReadPixels)                                                  \
-  X(glPixelStorei)                                                \
-  X(glGetError)                                                      \
-  X(glFinish)                                                          \
-  X(glDrawArrays)                                                  \
-  X(glGenTextures)                                                \
-  X(glBindTexture)                                                \
-  X(glTexImage2D)                                                  \
-  X(glTexParameteri)                                            \
-  X(glDeleteTextures)                                          \
-  X(glActiveTexture)                                            \
-  X(glGenerateMipmap)                                          \
-  X(glGenFramebuffers)                                        \
-  X(glBindFramebuffer)                                        \
-  X(glFramebufferRenderbuffer)                        \
-  X(glCheckFramebufferStatus)                          \
-  X(glDeleteFramebuffers)                                  \
-  X(glGenRenderbuffers)                                      \
-  X(glBindRenderbuffer)                                      \
-  X(glRenderbufferStorage)                                \
-  X(glDeleteRenderbuffers)                                \
-  X(glGenBuffers)                                                  \
-  X(glBindBuffer)                                                  \
-  X(glBufferData)                                                  \
-  X(glDeleteBuffers)                                            \
-  X(glGenVertexArrays)                                        \
-  X(glBindVertexArray)                                        \
-  X(glDeleteVertexArrays)                                  \
-  X(glEnableVertexAttribArray)                        \
-  X(glVertexAttribPointer)                                \
-  X(glCreateShader)                                              \
-  X(glShaderSource)                                              \
-  X(glCompileShader)                                            \
-  X(glGetShaderiv)                                                \
-  X(glGetShaderInfoLog)                                      \
-  X(glDeleteShader)                                              \
-  X(glCreateProgram)                                            \
-  X(glAttachShader)                                              \
-  X(glLinkProgram)                                                \
-  X(glGetProgramiv)                                              \
-  X(glGetProgramInfoLog)                                    \
-  X(glUseProgram)                                                  \
-  X(glDeleteProgram)                                            \
-  X(glGetUniformLocation)                                  \
-  X(glUniformMatrix4fv)                                      \
-  X(glUniform3f)                                                    \
-  X(glUniform1f)                                                    \
+#define FLATLAND_GL_FUNCTIONS(X) \
+  X(glClear)                     \
+  X(glClearColor)                \
+  X(glEnable)                    \
+  X(glDisable)                   \
+  X(glFrontFace)                 \
+  X(glPolygonOffset)             \
+  X(glViewport)                  \
+  X(glReadPixels)                \
+  X(glPixelStorei)               \
+  X(glGetError)                  \
+  X(glFinish)                    \
+  X(glDrawArrays)                \
+  X(glGenTextures)               \
+  X(glBindTexture)               \
+  X(glTexImage2D)                \
+  X(glTexParameteri)             \
+  X(glDeleteTextures)            \
+  X(glActiveTexture)             \
+  X(glGenerateMipmap)            \
+  X(glGenFramebuffers)           \
+  X(glBindFramebuffer)           \
+  X(glFramebufferRenderbuffer)   \
+  X(glCheckFramebufferStatus)    \
+  X(glDeleteFramebuffers)        \
+  X(glGenRenderbuffers)          \
+  X(glBindRenderbuffer)          \
+  X(glRenderbufferStorage)       \
+  X(glDeleteRenderbuffers)       \
+  X(glGenBuffers)                \
+  X(glBindBuffer)                \
+  X(glBufferData)                \
+  X(glDeleteBuffers)             \
+  X(glGenVertexArrays)           \
+  X(glBindVertexArray)           \
+  X(glDeleteVertexArrays)        \
+  X(glEnableVertexAttribArray)   \
+  X(glVertexAttribPointer)       \
+  X(glCreateShader)              \
+  X(glShaderSource)              \
+  X(glCompileShader)             \
+  X(glGetShaderiv)               \
+  X(glGetShaderInfoLog)          \
+  X(glDeleteShader)              \
+  X(glCreateProgram)             \
+  X(glAttachShader)              \
+  X(glLinkProgram)               \
+  X(glGetProgramiv)              \
+  X(glGetProgramInfoLog)         \
+  X(glUseProgram)                \
+  X(glDeleteProgram)             \
+  X(glGetUniformLocation)        \
+  X(glUniformMatrix4fv)          \
+  X(glUniform3f)                 \
+  X(glUniform1f)                 \
+  X(glUniform2f)                 \
   X(glUniform1i)
 
 struct Gl {
@@ -83,11 +85,11 @@ struct Gl {
   FLATLAND_GL_FUNCTIONS(FLATLAND_GL_MEMBER)
 #undef FLATLAND_GL_MEMBER
   explicit Gl(const GlContext& c) {
-#define FLATLAND_GL_LOAD(name)                                                       \
-  name = reinterpret_cast<decltype(&::name)>(c.proc_address(#name));                              \
-  if (!name)                                                                         \
-    throw std::runtime_error("GL backend " + to_string(c.backend()) + ": no " #name \
-                             " (OpenGL 3.3 core required)");
+#define FLATLAND_GL_LOAD(name)                                        \
+  name = reinterpret_cast<decltype(&::name)>(c.proc_address(#name));  \
+  if (!name)                                                          \
+    throw std::runtime_error("GL backend " + to_string(c.backend()) + \
+                             ": no " #name " (OpenGL 3.3 core required)");
     FLATLAND_GL_FUNCTIONS(FLATLAND_GL_LOAD)
 #undef FLATLAND_GL_LOAD
   }
@@ -131,6 +133,29 @@ out vec4 out_color;
 void main() { out_color = vec4(lit_color, 1.0); }
 )";
 
+// The disk's top face as one quad: face, O-ring band and marker are exact circles evaluated per
+// fragment (the quad's texture coordinates are disk-frame coordinates in units of the radius),
+// which costs far less on llvmpipe than the few hundred triangles of a polygonal disk.
+const char* kDiskFragmentShader = R"(#version 330 core
+in vec3 lit_color;
+in vec2 tex_uv;
+uniform vec3 face_color;
+uniform vec3 ring_color;
+uniform vec3 marker_color;
+uniform float ring_inner;      // inner radius of the O-ring band, in radii
+uniform vec2 marker_center;    // in radii
+uniform float marker_radius;   // in radii
+out vec4 out_color;
+void main() {
+  float d2 = dot(tex_uv, tex_uv);
+  if (d2 > 1.0) discard;
+  vec3 c = d2 > ring_inner * ring_inner ? ring_color : face_color;
+  vec2 m = tex_uv - marker_center;
+  if (dot(m, m) < marker_radius * marker_radius) c = marker_color;
+  out_color = vec4(lit_color * c, 1.0);
+}
+)";
+
 // Only ChArUco boards (their marker bits) need a texture.
 const char* kTexturedFragmentShader = R"(#version 330 core
 in vec3 lit_color;
@@ -149,7 +174,11 @@ using Mesh = std::vector<Vertex>;
 void add_triangle(Mesh& m, const cv::Vec3d& a, const cv::Vec3d& b, const cv::Vec3d& c,
                   const cv::Vec3d& normal, const cv::Vec3f& color,
                   std::array<cv::Vec2f, 3> uv = {}) {
-  const cv::Vec3d* pts[3] = {&a, &b, &c};
+  // Wind every triangle counter-clockwise seen from its outward normal, so that back faces can
+  // be culled (walls facing away from the camera cost nothing).
+  const bool flip = (b - a).cross(c - a).dot(normal) < 0;
+  const cv::Vec3d* pts[3] = {&a, flip ? &c : &b, flip ? &b : &c};
+  if (flip) std::swap(uv[1], uv[2]);
   for (int i = 0; i < 3; ++i) {
     Vertex v{};
     for (int k = 0; k < 3; ++k) {
@@ -182,7 +211,8 @@ std::vector<std::array<int, 3>> triangulate(const std::vector<cv::Point2d>& poly
     ++guard;
     bool clipped = false;
     for (std::size_t i = 0; i < idx.size(); ++i) {
-      const int a = idx[(i + idx.size() - 1) % idx.size()], b = idx[i], c = idx[(i + 1) % idx.size()];
+      const int a = idx[(i + idx.size() - 1) % idx.size()], b = idx[i],
+                c = idx[(i + 1) % idx.size()];
       if (cross(poly[a], poly[b], poly[c]) <= 0) continue;  // reflex corner
       bool empty = true;
       for (int j : idx) {
@@ -214,7 +244,8 @@ const cv::Vec3f kRubber(0.05f, 0.05f, 0.05f);
 const cv::Vec3f kMarker(0.10f, 0.12f, 0.55f);
 
 constexpr double kAmbient = 0.35;
-const cv::Vec3d kLight = cv::normalize(cv::Vec3d(0.25, 0.35, 1.0));  // table frame, towards the light
+const cv::Vec3d kLight =
+    cv::normalize(cv::Vec3d(0.25, 0.35, 1.0));  // table frame, towards the light
 
 constexpr double kRingWidth = 0.08;    // O-ring seen from above, fraction of the radius
 constexpr double kMarkerOffset = 0.5;  // marker centre from the disk centre, fraction of radius
@@ -295,35 +326,34 @@ Mesh hand_mesh(const sim::PolynomialHand& hand, double thickness) {
   return m;
 }
 
-Mesh disk_mesh(double r, double thickness) {
-  constexpr int kSeg = 96;
+// The disk's rubber side wall (its top is drawn by kDiskFragmentShader on disk_top_quad).
+Mesh disk_side_mesh(double r, double thickness) {
+  constexpr int kSeg = 64;
   Mesh m;
-  const double z = thickness, ri = r * (1.0 - kRingWidth);
   for (int i = 0; i < kSeg; ++i) {
     const double a0 = 2 * std::numbers::pi * i / kSeg, a1 = 2 * std::numbers::pi * (i + 1) / kSeg;
     const cv::Vec3d u0(std::cos(a0), std::sin(a0), 0), u1(std::cos(a1), std::sin(a1), 0);
-    add_triangle(m, {0, 0, z}, ri * u0 + cv::Vec3d(0, 0, z), ri * u1 + cv::Vec3d(0, 0, z), {0, 0, 1},
-                 kDiskFace);
-    add_quad(m, ri * u0 + cv::Vec3d(0, 0, z), r * u0 + cv::Vec3d(0, 0, z), r * u1 + cv::Vec3d(0, 0, z),
-             ri * u1 + cv::Vec3d(0, 0, z), {0, 0, 1}, kRubber);
-    add_quad(m, r * u0, r * u1, r * u1 + cv::Vec3d(0, 0, z), r * u0 + cv::Vec3d(0, 0, z),
-             0.5 * (u0 + u1), kRubber);
+    add_quad(m, r * u0, r * u1, r * u1 + cv::Vec3d(0, 0, thickness),
+             r * u0 + cv::Vec3d(0, 0, thickness), 0.5 * (u0 + u1), kRubber);
   }
-  // The marker: a dark dot on the face, lifted a little above it against depth fighting.
-  const double mz = z + 1e-4, mr = kMarkerRadius * r;
-  const cv::Vec3d mc(kMarkerOffset * r, 0, mz);
-  for (int i = 0; i < 32; ++i) {
-    const double a0 = 2 * std::numbers::pi * i / 32, a1 = 2 * std::numbers::pi * (i + 1) / 32;
-    add_triangle(m, mc, mc + mr * cv::Vec3d(std::cos(a0), std::sin(a0), 0),
-                 mc + mr * cv::Vec3d(std::cos(a1), std::sin(a1), 0), {0, 0, 1}, kMarker);
-  }
+  return m;
+}
+
+Mesh disk_top_quad(double r, double thickness) {
+  Mesh m;
+  const cv::Vec3f white(1, 1, 1);
+  const double z = thickness;
+  add_triangle(m, {-r, -r, z}, {r, -r, z}, {r, r, z}, {0, 0, 1}, white,
+               {cv::Vec2f(-1, -1), cv::Vec2f(1, -1), cv::Vec2f(1, 1)});
+  add_triangle(m, {-r, -r, z}, {r, r, z}, {-r, r, z}, {0, 0, 1}, white,
+               {cv::Vec2f(-1, -1), cv::Vec2f(1, 1), cv::Vec2f(-1, 1)});
   return m;
 }
 
 Mesh table_mesh(double extent) {
   Mesh m;
-  add_quad(m, {-extent, -extent, 0}, {extent, -extent, 0}, {extent, extent, 0}, {-extent, extent, 0},
-           {0, 0, 1}, kTable);
+  add_quad(m, {-extent, -extent, 0}, {extent, -extent, 0}, {extent, extent, 0},
+           {-extent, extent, 0}, {0, 0, 1}, kTable);
   return m;
 }
 
@@ -371,7 +401,7 @@ cv::Matx44f to_gl(const cv::Matx44d& m) {
 
 cv::Matx44d rigid(const cv::Matx33d& R, const cv::Vec3d& t) {
   return {R(0, 0), R(0, 1), R(0, 2), t[0], R(1, 0), R(1, 1), R(1, 2), t[1],
-          R(2, 0), R(2, 1), R(2, 2), t[2], 0, 0, 0, 1};
+          R(2, 0), R(2, 1), R(2, 2), t[2], 0,       0,       0,       1};
 }
 
 cv::Matx33d rot_z(double a) {
@@ -422,9 +452,9 @@ struct Renderer::Impl {
   double disk_radius = 0;
   std::unique_ptr<GlContext> context;
   std::unique_ptr<Gl> gl;
-  unsigned program = 0, textured_program = 0, fbo = 0, color_rb = 0, depth_rb = 0;
+  unsigned program = 0, textured_program = 0, disk_program = 0, fbo = 0, color_rb = 0, depth_rb = 0;
   int fbo_width = 0, fbo_height = 0;
-  Drawable table, hand, disk;
+  Drawable table, hand, disk, disk_top;
   std::vector<Drawable> targets;
   bool textured_targets = false;
   bool table_fills_view = false;
@@ -450,7 +480,8 @@ struct Renderer::Impl {
     table = upload(table_mesh(s.render.table_extent));
     const sim::PolynomialHand shape(s.sim.hand.a, s.sim.hand.b, s.sim.hand.c, s.sim.hand.d);
     hand = upload(hand_mesh(shape, s.render.hand_thickness));
-    disk = upload(disk_mesh(disk_radius, s.render.disk_thickness));
+    disk = upload(disk_side_mesh(disk_radius, s.render.disk_thickness));
+    disk_top = upload(disk_top_quad(disk_radius, s.render.disk_thickness));
     for (const TargetSpec& t : s.targets) targets.push_back(make_target(t));
     for (const Drawable& t : targets) textured_targets = textured_targets || t.texture != 0;
     readback.create(fbo_height, fbo_width, CV_8UC4);
@@ -477,13 +508,14 @@ struct Renderer::Impl {
   ~Impl() {
     if (!gl) return;
     context->make_current();
-    for (Drawable* d : {&table, &hand, &disk}) release(*d);
+    for (Drawable* d : {&table, &hand, &disk, &disk_top}) release(*d);
     for (Drawable& d : targets) release(d);
     gl->glDeleteFramebuffers(1, &fbo);
     gl->glDeleteRenderbuffers(1, &color_rb);
     gl->glDeleteRenderbuffers(1, &depth_rb);
     gl->glDeleteProgram(program);
     gl->glDeleteProgram(textured_program);
+    gl->glDeleteProgram(disk_program);
   }
 
   void release(Drawable& d) {
@@ -524,6 +556,18 @@ struct Renderer::Impl {
   void build_program() {
     program = link(kPlainFragmentShader);
     textured_program = link(kTexturedFragmentShader);
+    disk_program = link(kDiskFragmentShader);
+    gl->glUseProgram(disk_program);
+    auto set3 = [&](const char* name, const cv::Vec3f& c) {
+      gl->glUniform3f(gl->glGetUniformLocation(disk_program, name), c[0], c[1], c[2]);
+    };
+    set3("face_color", kDiskFace);
+    set3("ring_color", kRubber);
+    set3("marker_color", kMarker);
+    gl->glUniform1f(gl->glGetUniformLocation(disk_program, "ring_inner"), float(1.0 - kRingWidth));
+    gl->glUniform1f(gl->glGetUniformLocation(disk_program, "marker_radius"), float(kMarkerRadius));
+    gl->glUniform2f(gl->glGetUniformLocation(disk_program, "marker_center"), float(kMarkerOffset),
+                    0.0f);
   }
 
   void build_framebuffer() {
@@ -552,13 +596,17 @@ struct Renderer::Impl {
                      GL_STATIC_DRAW);
     const int stride = sizeof(Vertex);
     gl->glEnableVertexAttribArray(0);
-    gl->glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, stride, reinterpret_cast<void*>(offsetof(Vertex, p)));
+    gl->glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, stride,
+                              reinterpret_cast<void*>(offsetof(Vertex, p)));
     gl->glEnableVertexAttribArray(1);
-    gl->glVertexAttribPointer(1, 3, GL_FLOAT, GL_FALSE, stride, reinterpret_cast<void*>(offsetof(Vertex, n)));
+    gl->glVertexAttribPointer(1, 3, GL_FLOAT, GL_FALSE, stride,
+                              reinterpret_cast<void*>(offsetof(Vertex, n)));
     gl->glEnableVertexAttribArray(2);
-    gl->glVertexAttribPointer(2, 3, GL_FLOAT, GL_FALSE, stride, reinterpret_cast<void*>(offsetof(Vertex, c)));
+    gl->glVertexAttribPointer(2, 3, GL_FLOAT, GL_FALSE, stride,
+                              reinterpret_cast<void*>(offsetof(Vertex, c)));
     gl->glEnableVertexAttribArray(3);
-    gl->glVertexAttribPointer(3, 2, GL_FLOAT, GL_FALSE, stride, reinterpret_cast<void*>(offsetof(Vertex, uv)));
+    gl->glVertexAttribPointer(3, 2, GL_FLOAT, GL_FALSE, stride,
+                              reinterpret_cast<void*>(offsetof(Vertex, uv)));
     d.count = static_cast<int>(mesh.size());
     return d;
   }
@@ -604,9 +652,9 @@ struct Renderer::Impl {
 
   static int dictionary_id(const std::string& name) {
     static const std::vector<std::string> names = {
-        "DICT_4X4_50",   "DICT_4X4_100",  "DICT_4X4_250",  "DICT_4X4_1000", "DICT_5X5_50",
-        "DICT_5X5_100",  "DICT_5X5_250",  "DICT_5X5_1000", "DICT_6X6_50",   "DICT_6X6_100",
-        "DICT_6X6_250",  "DICT_6X6_1000", "DICT_7X7_50",   "DICT_7X7_100",  "DICT_7X7_250",
+        "DICT_4X4_50",   "DICT_4X4_100",       "DICT_4X4_250",  "DICT_4X4_1000", "DICT_5X5_50",
+        "DICT_5X5_100",  "DICT_5X5_250",       "DICT_5X5_1000", "DICT_6X6_50",   "DICT_6X6_100",
+        "DICT_6X6_250",  "DICT_6X6_1000",      "DICT_7X7_50",   "DICT_7X7_100",  "DICT_7X7_250",
         "DICT_7X7_1000", "DICT_ARUCO_ORIGINAL"};
     for (std::size_t i = 0; i < names.size(); ++i)
       if (names[i] == name) return static_cast<int>(i);
@@ -618,10 +666,22 @@ struct Renderer::Impl {
   cv::Matx44d projection() const {
     const double W = fbo_width, H = fbo_height, n = 0.01, f = 50.0;
     const cv::Matx33d& K = maps.ideal_K;
-    return {2 * K(0, 0) / W, 0, (2 * K(0, 2) + 1) / W - 1, 0,
-            0, 2 * K(1, 1) / H, (2 * K(1, 2) + 1) / H - 1, 0,
-            0, 0, (f + n) / (f - n), -2 * f * n / (f - n),
-            0, 0, 1, 0};
+    return {2 * K(0, 0) / W,
+            0,
+            (2 * K(0, 2) + 1) / W - 1,
+            0,
+            0,
+            2 * K(1, 1) / H,
+            (2 * K(1, 2) + 1) / H - 1,
+            0,
+            0,
+            0,
+            (f + n) / (f - n),
+            -2 * f * n / (f - n),
+            0,
+            0,
+            1,
+            0};
   }
 
   // Per-frame uniforms, set on both programs.
@@ -634,12 +694,13 @@ struct Renderer::Impl {
     gl->glUniform3f(gl->glGetUniformLocation(p, "light_direction"), float(kLight[0]),
                     float(kLight[1]), float(kLight[2]));
     const cv::Vec3d eye = camera.position_in_table();
-    gl->glUniform3f(gl->glGetUniformLocation(p, "eye"), float(eye[0]), float(eye[1]), float(eye[2]));
+    gl->glUniform3f(gl->glGetUniformLocation(p, "eye"), float(eye[0]), float(eye[1]),
+                    float(eye[2]));
     gl->glUniform1f(gl->glGetUniformLocation(p, "ambient"), float(kAmbient));
   }
 
-  void draw(const Drawable& d, float specular = 0.0f) {
-    const unsigned p = d.texture ? textured_program : program;
+  void draw(const Drawable& d, float specular = 0.0f, unsigned use_program = 0) {
+    const unsigned p = use_program ? use_program : d.texture ? textured_program : program;
     gl->glUseProgram(p);
     const cv::Matx44f m = to_gl(d.model);
     gl->glUniformMatrix4fv(gl->glGetUniformLocation(p, "model"), 1, GL_FALSE, m.val);
@@ -664,6 +725,10 @@ struct Renderer::Impl {
     gl->glBindFramebuffer(GL_FRAMEBUFFER, fbo);
     gl->glViewport(0, 0, fbo_width, fbo_height);
     gl->glEnable(GL_DEPTH_TEST);
+    // The projection maps image rows top-down, which mirrors the window: counter-clockwise
+    // triangles arrive clockwise.
+    gl->glEnable(GL_CULL_FACE);
+    gl->glFrontFace(GL_CW);
     // Where the table fills the whole view it is a uniformly lit plane: clearing to its colour
     // gives the same pixels as drawing it, without a full-screen fill.
     if (table_fills_view)
@@ -673,10 +738,13 @@ struct Renderer::Impl {
     gl->glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
     set_frame_uniforms(program);
     if (textured_targets) set_frame_uniforms(textured_program);
+    set_frame_uniforms(disk_program);
     if (!table_fills_view) draw(table);
     for (const Drawable& t : targets) draw(t);
     disk.model = rigid(rot_z(st.disk_angle), {st.disk_center.x, st.disk_center.y, 0});
     draw(disk);
+    disk_top.model = disk.model;
+    draw(disk_top, 0.0f, disk_program);
     hand.model = rigid(rot_z(st.hand_angle), {0, 0, 0});
     draw(hand, 0.25f);  // brushed aluminium: a soft highlight
     gl->glPixelStorei(GL_PACK_ALIGNMENT, 4);
@@ -701,10 +769,15 @@ struct Renderer::Impl {
 
   // Fast path for 8-bit frames without effects: no float conversion when nothing resamples.
   cv::Mat render_8u(const SceneState& st) {
-    if (supersample == 1 && !camera.distorted()) {
+    if (!camera.distorted()) {
+      // Anti-aliasing by area averaging works as well on 8-bit samples (rounded once), and avoids
+      // converting the supersampled image to float.
       render_ideal(st);
-      cv::Mat bgr;
-      cv::cvtColor(readback, bgr, cv::COLOR_RGBA2BGR);
+      cv::Mat small = readback, bgr;
+      if (supersample > 1)
+        cv::resize(readback, small, cv::Size(fbo_width / supersample, fbo_height / supersample), 0,
+                   0, cv::INTER_AREA);
+      cv::cvtColor(small, bgr, cv::COLOR_RGBA2BGR);
       return bgr;
     }
     return quantize(render_linear(st));
@@ -774,8 +847,7 @@ Frame Renderer::capture(const sim::Trajectory& trajectory, double t) {
     linear = impl_->render_linear(mid);
   }
   if (fx.vignetting > 0)
-    apply_vignetting(linear, fx.vignetting,
-                     {impl_->camera.K(0, 2), impl_->camera.K(1, 2)});
+    apply_vignetting(linear, fx.vignetting, {impl_->camera.K(0, 2), impl_->camera.K(1, 2)});
   apply_noise(linear, fx.noise_read_dn, fx.noise_shot_gain, rng);
   frame.image = fx.quantize ? quantize(linear) : linear;
   return frame;

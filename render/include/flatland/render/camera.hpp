@@ -15,8 +15,9 @@ struct CameraModel {
   int width = 640, height = 480;
   cv::Matx33d K = cv::Matx33d::eye();
   cv::Vec<double, 5> dist = cv::Vec<double, 5>::all(0);  ///< k1, k2, p1, p2, k3
-  cv::Matx33d R = cv::Matx33d::eye();  ///< table -> camera rotation (OpenCV axes: x right, y down, z forward)
-  cv::Vec3d t = cv::Vec3d(0, 0, 0);    ///< table -> camera translation: x_cam = R x_table + t
+  cv::Matx33d R =
+      cv::Matx33d::eye();  ///< table -> camera rotation (OpenCV axes: x right, y down, z forward)
+  cv::Vec3d t = cv::Vec3d(0, 0, 0);  ///< table -> camera translation: x_cam = R x_table + t
   double fps = 30.0;
   double exposure = 0.0;
 
@@ -26,8 +27,8 @@ struct CameraModel {
   static CameraModel from_spec(const CameraSpec& spec);
 
   bool distorted() const;
-  cv::Vec3d rvec() const;                ///< Rodrigues vector of R (for cv::projectPoints)
-  cv::Vec3d position_in_table() const;   ///< camera centre, table frame
+  cv::Vec3d rvec() const;               ///< Rodrigues vector of R (for cv::projectPoints)
+  cv::Vec3d position_in_table() const;  ///< camera centre, table frame
   /// cv::projectPoints of table-frame points.
   std::vector<cv::Point2d> project(const std::vector<cv::Point3d>& table_points) const;
   cv::Point2d project(const cv::Point3d& table_point) const;

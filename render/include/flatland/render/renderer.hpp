@@ -20,17 +20,17 @@ namespace flatland::render {
 /// What the renderer draws at one instant (all table frame, SI).
 struct SceneState {
   double t = 0;
-  double hand_angle = 0;                 ///< rad
-  cv::Point2d disk_center{0, 0};         ///< m
-  double disk_angle = 0;                 ///< rad
-  double s_h = 0;                        ///< for truth and overlays
+  double hand_angle = 0;                                      ///< rad
+  cv::Point2d disk_center{0, 0};                              ///< m
+  double disk_angle = 0;                                      ///< rad
+  double s_h = 0;                                             ///< for truth and overlays
   double force_normal_ratio = 0, force_tangential_ratio = 0;  ///< overlays
   static SceneState from_sample(const sim::Sample& s);
 };
 
 /// Ground truth of one frame.
 struct FrameTruth {
-  double t = 0;            ///< capture time (with jitter), s
+  double t = 0;  ///< capture time (with jitter), s
   double theta = 0, s_h = 0;
   cv::Point3d disk_center_table, marker_table;  ///< m; top face of the disk
   cv::Point2d disk_center_px, marker_px;        ///< cv::projectPoints of the above
@@ -38,7 +38,7 @@ struct FrameTruth {
 };
 
 struct Frame {
-  cv::Mat image;     ///< CV_8UC3 (BGR), or CV_32FC3 when effects.quantize is false
+  cv::Mat image;  ///< CV_8UC3 (BGR), or CV_32FC3 when effects.quantize is false
   FrameTruth truth;
 };
 

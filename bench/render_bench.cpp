@@ -1,0 +1,150 @@
+// Renderer throughput on llvmpipe: frames per second including readback into a cv::Mat, against
+// the raw throughput of a trivial scene (clear + the same readback) measured in the same run.
+// Results and how to rerun: docs/BENCHMARKS.md.
+#define GL_GLEXT_PROTOTYPES 1
+#include <GL/gl.h>
+#include <GL/glext.h>
+#include <benchmark/benchmark.h>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+
+#include "flatland/render/renderer.hpp"
+
+#include <filesystem>
+#include <string>
+
+using namespace flatland;
+
+namespace {
+
+Scene camera_scene(int width, int height, int supersample) {
+  Scene s;  // the paper's butterfly
+  CameraSpec cam;
+  cam.width = width;
+  cam.height = height;
+  cam.fx = cam.fy = 900.0 * width / 640.0;  // the same field of view at every resolution
+  cam.cx = (width - 1) / 2.0;
+  cam.cy = (height - 1) / 2.0;
+  cam.position = {0.0, 0.0, 1.0};
+  s.camera = cam;
+  s.effects.supersample = supersample;
+  return s;
+}
+
+// A mid-roll state of the solved butterfly (disk near the tip, hand turning).
+render::SceneState mid_roll() {
+  static const render::SceneState st = [] {
+    const sim::RunResult run = sim::run_spec(sim::SimulationSpec{});
+    return render::SceneState::from_sample(run.trajectory.sample(0.45));
+  }();
+  return st;
+}
+
+// The reference: clear an FBO of the same size and read it back through the renderer's path
+// (RGBA readback, conversion to BGR).
+void TrivialScene(benchmark::State& state, render::GlBackend backend, int width, int height) {
+  auto ctx = render::create_context(backend);
+  auto get = [&](const char* n) { return ctx->proc_address(n); };
+  auto gen_fb = reinterpret_cast<decltype(&glGenFramebuffers)>(get("glGenFramebuffers"));
+  auto bind_fb = reinterpret_cast<decltype(&glBindFramebuffer)>(get("glBindFramebuffer"));
+  auto gen_rb = reinterpret_cast<decltype(&glGenRenderbuffers)>(get("glGenRenderbuffers"));
+  auto bind_rb = reinterpret_cast<decltype(&glBindRenderbuffer)>(get("glBindRenderbuffer"));
+  auto storage = reinterpret_cast<decltype(&glRenderbufferStorage)>(get("glRenderbufferStorage"));
+  auto attach =
+      reinterpret_cast<decltype(&glFramebufferRenderbuffer)>(get("glFramebufferRenderbuffer"));
+  auto clear = reinterpret_cast<decltype(&glClear)>(get("glClear"));
+  auto viewport = reinterpret_cast<decltype(&glViewport)>(get("glViewport"));
+  auto read = reinterpret_cast<decltype(&glReadPixels)>(get("glReadPixels"));
+  unsigned fbo = 0, rb[2] = {0, 0};
+  gen_fb(1, &fbo);
+  bind_fb(GL_FRAMEBUFFER, fbo);
+  gen_rb(2, rb);
+  bind_rb(GL_RENDERBUFFER, rb[0]);
+  storage(GL_RENDERBUFFER, GL_RGBA8, width, height);
+  attach(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, rb[0]);
+  bind_rb(GL_RENDERBUFFER, rb[1]);
+  storage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT24, width, height);
+  attach(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, rb[1]);
+  viewport(0, 0, width, height);
+  cv::Mat rgba(height, width, CV_8UC4), bgr;
+  for (auto _ : state) {
+    clear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+    read(0, 0, width, height, GL_RGBA, GL_UNSIGNED_BYTE, rgba.data);
+    cv::cvtColor(rgba, bgr, cv::COLOR_RGBA2BGR);
+    benchmark::DoNotOptimize(bgr.data);
+  }
+  state.counters["fps"] =
+      benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
+}
+
+void Render(benchmark::State& state, render::GlBackend backend, int width, int height,
+            int supersample) {
+  render::Renderer r(camera_scene(width, height, supersample), backend);
+  const render::SceneState st = mid_roll();
+  for (auto _ : state) {
+    cv::Mat image = r.render_8u(st);
+    benchmark::DoNotOptimize(image.data);
+  }
+  state.counters["fps"] =
+      benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
+}
+
+// H.264 ('avc1') encoding through OpenCV's FFmpeg writer, of rendered 640x480 frames.
+void Mp4Encode(benchmark::State& state) {
+  render::Renderer r(camera_scene(640, 480, 1), render::GlBackend::kOsmesa);
+  const cv::Mat frame = r.render_8u(mid_roll());
+  const std::string path =
+      (std::filesystem::temp_directory_path() / "flatland_bench_encode.mp4").string();
+  cv::VideoWriter writer(path, cv::CAP_FFMPEG, cv::VideoWriter::fourcc('a', 'v', 'c', '1'), 30.0,
+                         frame.size());
+  if (!writer.isOpened()) {
+    state.SkipWithError("the avc1 writer cannot be opened here");
+    return;
+  }
+  cv::Mat moving = frame.clone();
+  int i = 0;
+  for (auto _ : state) {
+    // Change a few pixels per frame so the encoder does real work, as with a moving disk.
+    cv::circle(moving, {100 + (i % 400), 100}, 20, cv::Scalar(255, i % 255, 0), -1);
+    writer.write(moving);
+    ++i;
+  }
+  writer.release();
+  std::filesystem::remove(path);
+  state.counters["fps"] =
+      benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
+}
+
+void register_all() {
+  for (const auto backend : {render::GlBackend::kOsmesa, render::GlBackend::kEgl}) {
+    const std::string b = render::to_string(backend);
+    for (const auto& [w, h] : {std::pair{640, 480}, std::pair{1280, 1024}}) {
+      const std::string size = std::to_string(w) + "x" + std::to_string(h);
+      benchmark::RegisterBenchmark(("BM_TrivialScene/" + b + "/" + size).c_str(), TrivialScene,
+                                   backend, w, h)
+          ->Unit(benchmark::kMicrosecond)
+          ->UseRealTime();
+      for (const int ss : {1, 2}) {
+        const std::string aa = ss == 1 ? "aa:off" : "aa:4x";  // supersample 2 = 4 samples/pixel
+        benchmark::RegisterBenchmark(("BM_Render/" + b + "/" + size + "/" + aa).c_str(), Render,
+                                     backend, w, h, ss)
+            ->Unit(benchmark::kMicrosecond)
+            ->UseRealTime();
+      }
+    }
+  }
+  benchmark::RegisterBenchmark("BM_Mp4Encode/640x480", Mp4Encode)
+      ->Unit(benchmark::kMicrosecond)
+      ->UseRealTime();
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  register_all();
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}
