@@ -416,9 +416,11 @@ std::vector<cv::Point3d> target_corners(const TargetSpec& t) {
   cv::Rodrigues(cv::Vec3d(t.rotation[0], t.rotation[1], t.rotation[2]), R);
   const cv::Vec3d p(t.position[0], t.position[1], t.position[2]);
   std::vector<cv::Point3d> out;
+  // OpenCV's board frame (object points, ChArUco corner ids) runs y down the printed board with
+  // z into it; ours is seen from +z with y up: (x, y)_opencv = (x, rows * square - y)_ours.
   for (int r = 1; r < t.rows; ++r)
     for (int c = 1; c < t.cols; ++c) {
-      const cv::Vec3d q = R * cv::Vec3d(c * t.square, r * t.square, 0) + p;
+      const cv::Vec3d q = R * cv::Vec3d(c * t.square, (t.rows - r) * t.square, 0) + p;
       out.emplace_back(q[0], q[1], q[2]);
     }
   return out;
@@ -652,10 +654,12 @@ struct Renderer::Impl {
 
   static int dictionary_id(const std::string& name) {
     static const std::vector<std::string> names = {
-        "DICT_4X4_50",   "DICT_4X4_100",       "DICT_4X4_250",  "DICT_4X4_1000", "DICT_5X5_50",
-        "DICT_5X5_100",  "DICT_5X5_250",       "DICT_5X5_1000", "DICT_6X6_50",   "DICT_6X6_100",
-        "DICT_6X6_250",  "DICT_6X6_1000",      "DICT_7X7_50",   "DICT_7X7_100",  "DICT_7X7_250",
-        "DICT_7X7_1000", "DICT_ARUCO_ORIGINAL"};
+        "DICT_4X4_50",         "DICT_4X4_100",       "DICT_4X4_250",       "DICT_4X4_1000",
+        "DICT_5X5_50",         "DICT_5X5_100",       "DICT_5X5_250",       "DICT_5X5_1000",
+        "DICT_6X6_50",         "DICT_6X6_100",       "DICT_6X6_250",       "DICT_6X6_1000",
+        "DICT_7X7_50",         "DICT_7X7_100",       "DICT_7X7_250",       "DICT_7X7_1000",
+        "DICT_ARUCO_ORIGINAL", "DICT_APRILTAG_16h5", "DICT_APRILTAG_25h9", "DICT_APRILTAG_36h10",
+        "DICT_APRILTAG_36h11"};  // cv::aruco::PREDEFINED_DICTIONARY_NAME order
     for (std::size_t i = 0; i < names.size(); ++i)
       if (names[i] == name) return static_cast<int>(i);
     throw std::invalid_argument("targets.dictionary: unknown ArUco dictionary '" + name + "'");
