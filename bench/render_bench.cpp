@@ -40,9 +40,11 @@ render::SceneState mid_roll() {
   return st;
 }
 
-// The reference: clear an FBO of the same size and read it back through the renderer's path
-// (RGBA readback, conversion to BGR).
-void TrivialScene(benchmark::State& state, render::GlBackend backend, int width, int height) {
+// The references: clear an FBO of the same size, optionally draw one triangle with a minimal
+// shader (a trivial scene: llvmpipe's per-draw cost without the scene's geometry), and read it
+// back through the renderer's path (RGBA readback, conversion to BGR).
+void TrivialScene(benchmark::State& state, render::GlBackend backend, int width, int height,
+                  bool one_triangle) {
   auto ctx = render::create_context(backend);
   auto get = [&](const char* n) { return ctx->proc_address(n); };
   auto gen_fb = reinterpret_cast<decltype(&glGenFramebuffers)>(get("glGenFramebuffers"));
@@ -66,9 +68,51 @@ void TrivialScene(benchmark::State& state, render::GlBackend backend, int width,
   storage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT24, width, height);
   attach(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, rb[1]);
   viewport(0, 0, width, height);
+  unsigned program = 0, vao = 0, vbo = 0;
+  auto draw = reinterpret_cast<decltype(&glDrawArrays)>(get("glDrawArrays"));
+  if (one_triangle) {
+    auto create_shader = reinterpret_cast<decltype(&glCreateShader)>(get("glCreateShader"));
+    auto source = reinterpret_cast<decltype(&glShaderSource)>(get("glShaderSource"));
+    auto compile = reinterpret_cast<decltype(&glCompileShader)>(get("glCompileShader"));
+    auto create_program = reinterpret_cast<decltype(&glCreateProgram)>(get("glCreateProgram"));
+    auto attach_shader = reinterpret_cast<decltype(&glAttachShader)>(get("glAttachShader"));
+    auto link = reinterpret_cast<decltype(&glLinkProgram)>(get("glLinkProgram"));
+    auto use = reinterpret_cast<decltype(&glUseProgram)>(get("glUseProgram"));
+    auto gen_va = reinterpret_cast<decltype(&glGenVertexArrays)>(get("glGenVertexArrays"));
+    auto bind_va = reinterpret_cast<decltype(&glBindVertexArray)>(get("glBindVertexArray"));
+    auto gen_b = reinterpret_cast<decltype(&glGenBuffers)>(get("glGenBuffers"));
+    auto bind_b = reinterpret_cast<decltype(&glBindBuffer)>(get("glBindBuffer"));
+    auto data = reinterpret_cast<decltype(&glBufferData)>(get("glBufferData"));
+    auto enable_attr =
+        reinterpret_cast<decltype(&glEnableVertexAttribArray)>(get("glEnableVertexAttribArray"));
+    auto attr = reinterpret_cast<decltype(&glVertexAttribPointer)>(get("glVertexAttribPointer"));
+    const char* vs =
+        "#version 330 core\nlayout(location=0) in vec2 p;\n"
+        "void main(){gl_Position=vec4(p,0.0,1.0);}\n";
+    const char* fs = "#version 330 core\nout vec4 c;\nvoid main(){c=vec4(0.9,0.9,0.9,1.0);}\n";
+    const unsigned v = create_shader(GL_VERTEX_SHADER), f = create_shader(GL_FRAGMENT_SHADER);
+    source(v, 1, &vs, nullptr);
+    source(f, 1, &fs, nullptr);
+    compile(v);
+    compile(f);
+    program = create_program();
+    attach_shader(program, v);
+    attach_shader(program, f);
+    link(program);
+    use(program);
+    const float tri[] = {-0.1f, -0.1f, 0.1f, -0.1f, 0.0f, 0.1f};  // about 1 % of the frame
+    gen_va(1, &vao);
+    bind_va(vao);
+    gen_b(1, &vbo);
+    bind_b(GL_ARRAY_BUFFER, vbo);
+    data(GL_ARRAY_BUFFER, sizeof tri, tri, GL_STATIC_DRAW);
+    enable_attr(0);
+    attr(0, 2, GL_FLOAT, GL_FALSE, 0, nullptr);
+  }
   cv::Mat rgba(height, width, CV_8UC4), bgr;
   for (auto _ : state) {
     clear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+    if (one_triangle) draw(GL_TRIANGLES, 0, 3);
     read(0, 0, width, height, GL_RGBA, GL_UNSIGNED_BYTE, rgba.data);
     cv::cvtColor(rgba, bgr, cv::COLOR_RGBA2BGR);
     benchmark::DoNotOptimize(bgr.data);
@@ -120,8 +164,12 @@ void register_all() {
     const std::string b = render::to_string(backend);
     for (const auto& [w, h] : {std::pair{640, 480}, std::pair{1280, 1024}}) {
       const std::string size = std::to_string(w) + "x" + std::to_string(h);
-      benchmark::RegisterBenchmark(("BM_TrivialScene/" + b + "/" + size).c_str(), TrivialScene,
-                                   backend, w, h)
+      benchmark::RegisterBenchmark(("BM_TrivialScene/" + b + "/" + size + "/clear").c_str(),
+                                   TrivialScene, backend, w, h, false)
+          ->Unit(benchmark::kMicrosecond)
+          ->UseRealTime();
+      benchmark::RegisterBenchmark(("BM_TrivialScene/" + b + "/" + size + "/one_triangle").c_str(),
+                                   TrivialScene, backend, w, h, true)
           ->Unit(benchmark::kMicrosecond)
           ->UseRealTime();
       for (const int ss : {1, 2}) {

@@ -11,6 +11,7 @@
 
 #include <array>
 #include <cmath>
+#include <map>
 #include <numbers>
 #include <stdexcept>
 #include <string>
@@ -460,6 +461,10 @@ struct Renderer::Impl {
   std::vector<Drawable> targets;
   bool textured_targets = false;
   bool table_fills_view = false;
+  struct Locations {
+    int model, specular;
+  };
+  std::map<unsigned, Locations> locations;  // per program
   cv::Vec3f table_color;
   EffectsRng rng;
   cv::Mat readback;  // CV_8UC4 (RGBA), reused
@@ -490,6 +495,12 @@ struct Renderer::Impl {
     const float shade = static_cast<float>(kAmbient + (1.0 - kAmbient) * std::max(kLight[2], 0.0));
     table_color = kTable * shade;
     table_fills_view = view_inside_table(s.render.table_extent);
+    // The camera and the light never change: their uniforms are set once, and each frame only
+    // uploads the moving parts' model matrices (llvmpipe re-validates state on every change).
+    for (unsigned p : {program, textured_program, disk_program}) set_frame_uniforms(p);
+    for (unsigned p : {program, textured_program, disk_program})
+      locations[p] = {gl->glGetUniformLocation(p, "model"),
+                      gl->glGetUniformLocation(p, "specular")};
   }
 
   // Whether every ray through the ideal image's corners meets the table plane inside the table.
@@ -688,7 +699,7 @@ struct Renderer::Impl {
             0};
   }
 
-  // Per-frame uniforms, set on both programs.
+  // Uniforms fixed for the renderer's life (camera, light), set on each program.
   void set_frame_uniforms(unsigned p) {
     gl->glUseProgram(p);
     const cv::Matx44f view = to_gl(rigid(camera.R, camera.t));
@@ -706,9 +717,10 @@ struct Renderer::Impl {
   void draw(const Drawable& d, float specular = 0.0f, unsigned use_program = 0) {
     const unsigned p = use_program ? use_program : d.texture ? textured_program : program;
     gl->glUseProgram(p);
+    const Locations& loc = locations.at(p);
     const cv::Matx44f m = to_gl(d.model);
-    gl->glUniformMatrix4fv(gl->glGetUniformLocation(p, "model"), 1, GL_FALSE, m.val);
-    gl->glUniform1f(gl->glGetUniformLocation(p, "specular"), specular);
+    gl->glUniformMatrix4fv(loc.model, 1, GL_FALSE, m.val);
+    gl->glUniform1f(loc.specular, specular);
     if (d.texture) {
       gl->glUniform1i(gl->glGetUniformLocation(p, "board"), 0);
       gl->glActiveTexture(GL_TEXTURE0);
@@ -740,9 +752,6 @@ struct Renderer::Impl {
     else
       gl->glClearColor(0, 0, 0, 1);
     gl->glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
-    set_frame_uniforms(program);
-    if (textured_targets) set_frame_uniforms(textured_program);
-    set_frame_uniforms(disk_program);
     if (!table_fills_view) draw(table);
     for (const Drawable& t : targets) draw(t);
     disk.model = rigid(rot_z(st.disk_angle), {st.disk_center.x, st.disk_center.y, 0});
