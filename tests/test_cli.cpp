@@ -1,6 +1,8 @@
 // End-to-end tests of the `flatland` program: run the built binary in a fresh temporary directory
 // and check exit codes, stdout JSON, stderr messages and the files it leaves behind. Reference
 // numbers come from the paper (section 4.3), never from the program's own output.
+#include "cli_support.hpp"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -18,67 +20,15 @@
 namespace {
 
 namespace fs = std::filesystem;
+using flatland_test::lines_of;
+using flatland_test::quote;
+using flatland_test::read_text;
+using flatland_test::Result;
+using flatland_test::write_text;
 using nlohmann::json;
 
-std::string read_text(const fs::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
-
-void write_text(const fs::path& p, const std::string& s) {
-  std::ofstream f(p, std::ios::binary);
-  f << s;
-}
-
-std::string quote(const std::string& s) {
-  std::string q = "'";
-  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return q + "'";
-}
-
-std::vector<std::string> lines_of(const std::string& s) {
-  std::vector<std::string> out;
-  std::stringstream ss(s);
-  for (std::string line; std::getline(ss, line);) out.push_back(line);
-  return out;
-}
-
-struct Result {
-  int code = -1;
-  std::string out, err;
-};
-
-// Every test gets its own empty working directory.
-class CliFixture : public ::testing::Test {
+class CliFixture : public flatland_test::CliTestBase {
  protected:
-  void SetUp() override {
-    static int counter = 0;
-    dir_ = fs::temp_directory_path() /
-           ("flatland_cli_test_" + std::to_string(::getpid()) + "_" + std::to_string(counter++));
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override {
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
-  }
-
-  // `env` is prepended to the command line (e.g. "PATH=/nonexistent").
-  Result run(const std::string& args, const std::string& env = "") const {
-    const std::string cmd = "cd " + quote(dir_.string()) + " && " + env + (env.empty() ? "" : " ") +
-                            quote(FLATLAND_CLI_PATH) + " " + args + " > stdout.txt 2> stderr.txt";
-    const int status = std::system(cmd.c_str());
-    Result r;
-    r.code = status != -1 && WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    r.out = read_text(dir_ / "stdout.txt");
-    r.err = read_text(dir_ / "stderr.txt");
-    fs::remove(dir_ / "stdout.txt");
-    fs::remove(dir_ / "stderr.txt");
-    return r;
-  }
-
   // A copy of the bundled paper scene with `from` replaced by `to` (which must occur).
   fs::path scene_with(const std::string& name, const std::string& from,
                       const std::string& to) const {
@@ -134,8 +84,6 @@ class CliFixture : public ::testing::Test {
   }
 
   static bool have_gnuplot() { return std::system("command -v gnuplot > /dev/null 2>&1") == 0; }
-
-  fs::path dir_;
 };
 
 using CliHelp = CliFixture;

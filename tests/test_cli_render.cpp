@@ -2,6 +2,8 @@
 // check exit codes, stdout JSON, stderr, the frames, the ground truth and the metadata it writes.
 // Image geometry is checked against the pinhole model worked out by hand for a camera looking
 // straight down, never against the program's own numbers.
+#include "cli_support.hpp"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -22,36 +24,16 @@
 namespace {
 
 namespace fs = std::filesystem;
+using flatland_test::lines_of;
+using flatland_test::quote;
+using flatland_test::read_text;
+using flatland_test::Result;
+using flatland_test::write_text;
 using nlohmann::json;
 
 const char* kTruthHeader =
     "frame,t,dropped,theta,s_h,disk_x,disk_y,disk_z,disk_u,disk_v,marker_x,marker_y,marker_z,"
     "marker_u,marker_v";
-
-std::string read_text(const fs::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
-
-void write_text(const fs::path& p, const std::string& s) {
-  std::ofstream f(p, std::ios::binary);
-  f << s;
-}
-
-std::string quote(const std::string& s) {
-  std::string q = "'";
-  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return q + "'";
-}
-
-std::vector<std::string> lines_of(const std::string& s) {
-  std::vector<std::string> out;
-  std::stringstream ss(s);
-  for (std::string line; std::getline(ss, line);) out.push_back(line);
-  return out;
-}
 
 std::vector<double> fields_of(const std::string& line) {
   std::vector<double> out;
@@ -78,38 +60,8 @@ std::pair<std::uint32_t, std::uint32_t> png_size(const fs::path& p) {
   return {be32(16), be32(20)};
 }
 
-struct Result {
-  int code = -1;
-  std::string out, err;
-};
-
-class CliRenderTest : public ::testing::Test {
+class CliRenderTest : public flatland_test::CliTestBase {
  protected:
-  void SetUp() override {
-    static int counter = 0;
-    dir_ = fs::temp_directory_path() / ("flatland_cli_render_test_" + std::to_string(::getpid()) +
-                                        "_" + std::to_string(counter++));
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override {
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
-  }
-
-  Result run(const std::string& args) const {
-    const std::string cmd = "cd " + quote(dir_.string()) + " && " + quote(FLATLAND_CLI_PATH) + " " +
-                            args + " > stdout.txt 2> stderr.txt";
-    const int status = std::system(cmd.c_str());
-    Result r;
-    r.code = status != -1 && WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    r.out = read_text(dir_ / "stdout.txt");
-    r.err = read_text(dir_ / "stderr.txt");
-    fs::remove(dir_ / "stdout.txt");
-    fs::remove(dir_ / "stderr.txt");
-    return r;
-  }
-
   static fs::path camera_scene() {
     return fs::path(FLATLAND_ASSET_DIR) / "scenes" / "butterfly-camera.yaml";
   }
@@ -199,8 +151,6 @@ class CliRenderTest : public ::testing::Test {
     }
     return rows;
   }
-
-  fs::path dir_;
 };
 
 // --------------------------------------------------------------------------------------------
