@@ -178,5 +178,7 @@ Command add_locus_command(CLI::App& app);
 Command add_surface_command(CLI::App& app);
 Command add_time_optimal_command(CLI::App& app);
 Command add_render_command(CLI::App& app);
+Command add_calibrate_command(CLI::App& app);
+Command add_track_command(CLI::App& app);
 
 }  // namespace flatland::app

@@ -36,6 +36,8 @@ int main(int argc, char** argv) {
   std::vector<Command> commands = {add_simulate_command(app),     add_solve_command(app),
                                    add_locus_command(app),        add_surface_command(app),
                                    add_time_optimal_command(app), add_render_command(app)};
+  commands.push_back(add_calibrate_command(app));
+  commands.push_back(add_track_command(app));
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {

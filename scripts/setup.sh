@@ -25,6 +25,7 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   gnuplot-nox
   libopencv-dev libosmesa6-dev mesa-common-dev libegl-dev libegl-mesa0 ffmpeg
+  libceres-dev
 )
 
 missing=()

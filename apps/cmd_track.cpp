@@ -1,0 +1,305 @@
+// flatland track: follow the disk through a video or an image sequence and write its centre per
+// frame (px, with uncertainty and track state) and, given the hand angle per frame, the contact
+// parameter s_h through the camera file's calibration (docs/VISION.md).
+#include "common.hpp"
+
+#include "flatland/calibration/camera_file.hpp"
+#include "flatland/vision/mapping.hpp"
+#include "flatland/vision/tracker.hpp"
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/videoio.hpp>
+
+#include <glob.h>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <optional>
+#include <sstream>
+
+namespace flatland::app {
+
+namespace {
+
+struct TrackOptions {
+  std::string scene, video, images, camera, out, method = "edge", encoder;
+  bool json = false;
+  double fps = 0;
+  CLI::Option* fps_opt = nullptr;
+};
+
+const char* kTrackColumns = "frame,t,u,v,sigma_px,quality,state,s_h";
+
+/// Files matching a shell pattern, sorted (glob(3) sorts by name).
+std::vector<std::string> expand_glob(const std::string& pattern) {
+  glob_t g{};
+  std::vector<std::string> out;
+  const int rc = ::glob(pattern.c_str(), 0, nullptr, &g);
+  if (rc == 0)
+    for (std::size_t i = 0; i < g.gl_pathc; ++i) out.emplace_back(g.gl_pathv[i]);
+  ::globfree(&g);
+  return out;
+}
+
+/// Encoder log: rows "t,theta" (s, rad), strictly increasing t; a header line is skipped.
+struct EncoderLog {
+  std::vector<double> t, theta;
+  /// Linear interpolation; nullopt outside the logged interval (no extrapolation).
+  std::optional<double> at(double time) const {
+    if (t.empty() || time < t.front() || time > t.back()) return std::nullopt;
+    if (t.size() == 1) return theta.front();
+    const auto it = std::upper_bound(t.begin(), t.end(), time);
+    const std::size_t i = std::min<std::size_t>(
+        t.size() - 2, static_cast<std::size_t>(std::max<std::ptrdiff_t>(0, it - t.begin() - 1)));
+    const double w = (time - t[i]) / (t[i + 1] - t[i]);
+    return theta[i] + w * (theta[i + 1] - theta[i]);
+  }
+};
+
+EncoderLog read_encoder(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw UsageError("--encoder: cannot read " + path);
+  EncoderLog log;
+  std::string line;
+  int line_no = 0;
+  while (std::getline(in, line)) {
+    ++line_no;
+    if (line.empty() || line[0] == '#') continue;
+    std::replace(line.begin(), line.end(), ',', ' ');
+    std::istringstream is(line);
+    double t = 0, theta = 0;
+    if (!(is >> t >> theta)) {
+      if (line_no == 1) continue;  // header
+      throw UsageError("--encoder: " + path + ":" + std::to_string(line_no) +
+                       ": expected two numbers t,theta");
+    }
+    if (!std::isfinite(t) || !std::isfinite(theta))
+      throw UsageError("--encoder: " + path + ":" + std::to_string(line_no) + ": not finite");
+    if (!log.t.empty() && !(t > log.t.back()))
+      throw UsageError("--encoder: " + path + ":" + std::to_string(line_no) +
+                       ": times must increase strictly");
+    log.t.push_back(t);
+    log.theta.push_back(theta);
+  }
+  if (log.t.empty()) throw UsageError("--encoder: " + path + " has no rows t,theta");
+  return log;
+}
+
+void run_track(const TrackOptions& o) {
+  // ---- everything that can be bad input, before any frame is read
+  if (o.video.empty() == o.images.empty())
+    throw UsageError("exactly one of --video FILE or --images GLOB is required");
+  if (o.out.empty()) throw UsageError("--out: required (FILE.csv)");
+  const fs::path out = o.out;
+  if (o.out.back() == '/' || fs::is_directory(out))
+    throw UsageError("--out: must be a file name (FILE.csv), not a directory: " + o.out);
+  const vision::TrackMethod method = vision::parse_track_method(o.method);
+  const calibration::CameraFile camfile = calibration::read_camera_file(o.camera);
+  const render::CameraModel& camera = camfile.camera;
+  if (o.fps_opt->count()) require_positive("--fps", o.fps, "frames per s");
+
+  CommonOptions common;
+  common.scene = o.scene;
+  const Scene scene = load_scene_with_overrides(common);
+  std::optional<EncoderLog> encoder;
+  std::optional<vision::HandMapping> mapping;
+  if (!o.encoder.empty()) {
+    if (!camfile.has_table_pose)
+      throw UsageError("--encoder: " + o.camera +
+                       " has no table pose (needed to map pixels to the table for s_h)");
+    encoder = read_encoder(o.encoder);
+    if (scene.sim.object.kind != sim::ObjectSpec::Kind::kDisk)
+      throw UsageError(scene.origin + ": object: track maps a disk's centre (object.type: disk)");
+    vision::HandMapping m;
+    m.camera = camera;
+    m.plane_z = scene.render.disk_thickness;  // the tracked edge lies on the disk's top face
+    m.disk_radius = scene.sim.object.radius;
+    m.hand =
+        sim::PolynomialHand(scene.sim.hand.a, scene.sim.hand.b, scene.sim.hand.c, scene.sim.hand.d);
+    if (camfile.joint) m.axis_table = camfile.joint->axis_table;
+    mapping = m;
+  }
+
+  std::vector<std::string> files;
+  cv::VideoCapture video;
+  vision::TrackerConfig cfg;
+  cfg.method = method;
+  if (camfile.has_table_pose) {
+    // With the pose known the edge method fits the circle on the table plane: exact through an
+    // oblique view and lens distortion (docs/VISION.md).
+    cfg.camera = camera;
+    cfg.plane_z = scene.render.disk_thickness;
+  }
+  long total = 0;
+  double fps = camera.fps > 0 ? camera.fps : 30.0;
+  if (!o.images.empty()) {
+    files = expand_glob(o.images);
+    if (files.empty()) throw UsageError("--images: no file matches " + o.images);
+    total = static_cast<long>(files.size());
+  } else {
+    if (!fs::is_regular_file(o.video)) throw UsageError("--video: no such file: " + o.video);
+    video.open(o.video);
+    if (!video.isOpened()) throw UsageError("--video: cannot open " + o.video + " as a video");
+    total = std::max(0L, static_cast<long>(video.get(cv::CAP_PROP_FRAME_COUNT)));
+    const double vfps = video.get(cv::CAP_PROP_FPS);
+    if (vfps > 0 && std::isfinite(vfps)) fps = vfps;
+  }
+  if (o.fps_opt->count()) fps = o.fps;
+
+  // ---- track
+  vision::Tracker tracker(cfg);
+  std::string csv = std::string(kTrackColumns) + "\n";
+  long frames = 0, found = 0, lost = 0, skipped = 0;
+  double sigma2 = 0;
+  double s_guess = NAN;  // previous s_h; NaN: none (first frame, after a loss)
+  bool size_checked = false;
+  {
+    ProgressBar bar("track");
+    for (long i = 0;; ++i) {
+      cv::Mat image;
+      if (!files.empty()) {
+        if (i >= total) break;
+        try {
+          image = cv::imread(files[static_cast<std::size_t>(i)], cv::IMREAD_COLOR);
+        } catch (const cv::Exception&) {
+          image.release();
+        }
+        if (image.empty()) {
+          std::cerr << "flatland: warning: skipping unreadable image " << files[i] << "\n";
+          ++skipped;
+          bar.update(i + 1, total);
+          continue;
+        }
+      } else if (!video.read(image) || image.empty()) {
+        break;
+      }
+      if (!size_checked && (mapping || cfg.camera) &&
+          (image.cols != camera.width || image.rows != camera.height))
+        throw UsageError("frames are " + std::to_string(image.cols) + " x " +
+                         std::to_string(image.rows) + " px but " + o.camera + " describes a " +
+                         std::to_string(camera.width) + " x " + std::to_string(camera.height) +
+                         " px camera");
+      size_checked = true;
+      const double t = static_cast<double>(i) / fps;
+      const vision::TrackResult r = tracker.track(image);
+      ++frames;
+      std::string row = std::to_string(i) + "," + format_number(t) + ",";
+      if (!r.ok()) {
+        ++lost;
+        s_guess = NAN;
+        row += ",,,0,lost,\n";
+      } else {
+        ++found;
+        sigma2 += r.sigma_px * r.sigma_px;
+        row += format_number(r.center.x) + "," + format_number(r.center.y) + "," +
+               format_number(r.sigma_px) + "," + format_number(r.quality) + "," +
+               vision::to_string(r.state) + ",";
+        std::optional<double> theta = encoder ? encoder->at(t) : std::nullopt;
+        if (mapping && theta) {
+          const double offset = camfile.joint ? camfile.joint->encoder_offset : 0.0;
+          // Near the previous frame's s_h when there is one, else over a whole period of the
+          // closed outline (s is periodic with period 4).
+          const auto c =
+              std::isfinite(s_guess)
+                  ? vision::pixel_to_contact(*mapping, r.center, *theta + offset, s_guess, 0.5)
+                  : vision::pixel_to_contact(*mapping, r.center, *theta + offset, 0.0, 2.0);
+          if (c) {
+            row += format_number(c->s_h);
+            s_guess = c->s_h;
+          }
+        }
+        row += "\n";
+      }
+      csv += row;
+      bar.update(i + 1, std::max(total, i + 1));
+    }
+  }
+  if (frames == 0)
+    throw UsageError(std::string(files.empty() ? "--video: " + o.video : "--images: " + o.images) +
+                     ": no readable frame");
+
+  OutputSet outputs;
+  outputs.ensure_directory(out.parent_path());
+  outputs.stage(out, csv);
+  outputs.commit();
+
+  const double rms_sigma = found > 0 ? std::sqrt(sigma2 / static_cast<double>(found)) : NAN;
+  if (o.json) {
+    Json j;
+    j["frames"] = frames;
+    j["found"] = found;
+    j["lost"] = lost;
+    j["skipped"] = skipped;
+    j["rms_sigma_px"] = number(rms_sigma);
+    j["method"] = vision::to_string(method);
+    j["fit"] = cfg.camera && method == vision::TrackMethod::kEdge ? "table-plane" : "pixel";
+    j["output"] = out.string();
+    emit_json(j);
+    return;
+  }
+  std::ostringstream os;
+  os << "flatland track: " << (files.empty() ? o.video : o.images) << "\n"
+     << "  method             " << vision::to_string(method)
+     << (cfg.camera && method == vision::TrackMethod::kEdge ? " (circle fitted on the table plane)"
+                                                            : "")
+     << "\n"
+     << "  frames             " << frames << " (" << found << " with the disk, " << lost
+     << " lost, " << skipped << " unreadable skipped) at " << format_number(fps) << " fps\n"
+     << "  rms sigma          " << format_number(rms_sigma) << " px\n"
+     << "  s_h                "
+     << (mapping ? "from " + o.encoder : std::string("not computed (no --encoder)")) << "\n"
+     << "  wrote              " << out.string() << "\n";
+  std::cout << os.str();
+}
+
+}  // namespace
+
+Command add_track_command(CLI::App& app) {
+  auto o = std::make_shared<TrackOptions>();
+  CLI::App* cmd = app.add_subcommand(
+      "track",
+      "Track the disk in a video or an image sequence: per frame its centre (px, sub-pixel), the "
+      "centre's 1-sigma uncertainty (px), a quality score (0..1), the track state (found, "
+      "tracking, lost) and, with --encoder, the hand contact parameter s_h (CSV).");
+  cmd->add_option("--video", o->video, "Input video file (anything OpenCV's FFmpeg backend reads)")
+      ->type_name("FILE");
+  cmd->add_option("--images", o->images,
+                  "Input images: a shell pattern, quoted (e.g. 'run/frame_*.png'), taken in name "
+                  "order; unreadable files are skipped with a warning")
+      ->type_name("GLOB");
+  cmd->add_option("--camera", o->camera,
+                  "Camera file (flatland calibrate's YAML: K, distortion, table pose, joint). "
+                  "Required")
+      ->type_name("FILE")
+      ->required();
+  cmd->add_option("--out", o->out, "Output CSV (" + std::string(kTrackColumns) + "). Required")
+      ->type_name("FILE.csv")
+      ->required();
+  cmd->add_flag("--json", o->json,
+                "Print exactly one JSON object on stdout ({frames, found, lost, skipped, fit, "
+                "rms_sigma_px, method, output}); logs go to stderr. Default: off");
+  o->fps_opt =
+      cmd->add_option("--fps", o->fps,
+                      "Frame rate for the time column, frames per s (> 0); t = frame "
+                      "index / fps. Default: the video's, else the camera file's, else 30");
+  cmd->add_option("--method", o->method,
+                  "Tracker: edge (sub-pixel face/O-ring edge + robust circle fit), moments "
+                  "(coverage-weighted moments) or hough (cv::HoughCircles baseline). Default: edge")
+      ->check(CLI::IsMember({"edge", "moments", "hough"}));
+  cmd->add_option("--encoder", o->encoder,
+                  "Hand angle log, CSV rows t,theta (s, rad; optional header), interpolated at "
+                  "each frame time; enables the s_h column (needs the camera file's table pose)")
+      ->type_name("FILE");
+  cmd->add_option("--scene", o->scene,
+                  "Scene file for the hand shape, disk radius and disk thickness used by the s_h "
+                  "mapping. Default: the bundled paper butterfly, " +
+                      default_scene_path())
+      ->type_name("FILE");
+  return {cmd, [o] { run_track(*o); }};
+}
+
+}  // namespace flatland::app

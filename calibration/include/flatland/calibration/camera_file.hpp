@@ -1,0 +1,45 @@
+// Camera files: OpenCV FileStorage YAML in the ROS camera_info layout (image_width, image_height,
+// camera_name, camera_matrix, distortion_model, distortion_coefficients) plus flatland's extras
+// (table pose, joint axis, encoder offset, calibration report).
+#pragma once
+
+#include "flatland/render/camera.hpp"
+
+#include <opencv2/core.hpp>
+
+#include <optional>
+#include <string>
+
+namespace flatland::calibration {
+
+/// The joint seen from the table frame (from `calibrate_joint`).
+struct JointCalibration {
+  cv::Point2d axis_table{0, 0};  ///< m, joint axis position in the table frame
+  double encoder_offset = 0;     ///< rad: true hand angle = encoder angle + offset
+};
+
+/// What a calibration produced, with its uncertainty.
+struct CalibrationReport {
+  double rms_px = 0;
+  std::vector<double> view_rms_px;
+  int views_used = 0;
+  std::vector<std::string> views_rejected;  ///< file names (or indices) and why
+  /// Standard deviations from Ceres' covariance: fx, fy, cx, cy, k1, k2, p1, p2, k3.
+  std::array<double, 9> std{};
+};
+
+struct CameraFile {
+  std::string camera_name = "flatland";
+  render::CameraModel camera;  ///< width, height, K, dist; R, t = table pose when known
+  bool has_table_pose = false;
+  std::optional<JointCalibration> joint;
+  std::optional<CalibrationReport> report;
+};
+
+/// Write atomically (temp file + rename). Throws std::runtime_error on I/O failure.
+void write_camera_file(const std::string& path, const CameraFile& file);
+/// Read and validate; throws std::invalid_argument "<path>: <field>: <reason>" on bad content
+/// (missing keys, wrong sizes, non-positive focal lengths, unknown distortion model).
+CameraFile read_camera_file(const std::string& path);
+
+}  // namespace flatland::calibration

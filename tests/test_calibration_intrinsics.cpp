@@ -1,0 +1,451 @@
+// Intrinsics calibration against known truth: 20 rendered chessboard views (σ = 1 DN noise) of a
+// distorted camera, the same corners through cv::calibrateCamera, outlier views, the bad-input
+// errors, ChArUco, and `flatland calibrate` end to end.
+#include "cli_support.hpp"
+
+#include "flatland/calibration/camera_file.hpp"
+#include "flatland/calibration/intrinsics.hpp"
+#include "flatland/render/effects.hpp"
+#include "flatland/render/renderer.hpp"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include <cmath>
+#include <cstdio>
+#include <numbers>
+#include <random>
+
+using namespace flatland;
+using namespace flatland::calibration;
+namespace fs = std::filesystem;
+
+namespace {
+
+// The camera under test: fx = fy = 800 px, principal point off centre, barrel distortion.
+CameraSpec truth_camera() {
+  CameraSpec c;
+  c.width = 640;
+  c.height = 480;
+  c.fx = c.fy = 800;
+  c.cx = 319.5 + 3;
+  c.cy = 239.5 - 2;
+  c.distortion = {-0.2, 0.08, 0.001, -0.0005, 0.0};
+  c.position = {0.0, 0.0, 1.0};
+  c.look_at = {0.0, 0.0, 0.0};
+  return c;
+}
+
+// Anti-aliasing of the test images. The renderer's corners carry a systematic error that
+// dominates the 1 DN noise: measured corner RMS against truth (17 x 17 cornerSubPix window)
+// 0.12 px at 2 x 2 samples per pixel, 0.07 px at 4 x 4. The principal point's 0.5 px bound
+// needs the latter.
+constexpr int kSupersample = 4;
+
+struct RenderedViews {
+  std::vector<cv::Mat> images;
+  std::vector<TargetSpec> targets;
+  std::vector<BoardView> views;  ///< detected, one per image
+};
+
+// `n` views of a board at random poses: centred anywhere in the view, 0.05-0.3 m above the
+// table, tilted 15-45 deg about a random in-plane axis and turned in-plane by up to 0.5 rad;
+// every corner of the printed board (with its margin) at least 12 px inside the image. Poses at
+// which the detector misses the board (rare: steep views near the image edge) are replaced.
+RenderedViews render_views(const TargetSpec& board_template, const BoardSpec& board, int n,
+                           std::uint64_t seed) {
+  RenderedViews out;
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> U(0.0, 1.0);
+  const CameraSpec cam = truth_camera();
+  const render::CameraModel model = render::CameraModel::from_spec(cam);
+  const double w = board_template.cols * board_template.square;
+  const double h = board_template.rows * board_template.square;
+  const double m = board_template.kind == TargetSpec::Kind::kChessboard ? board_template.square : 0;
+  while (static_cast<int>(out.targets.size()) < n) {
+    const double z = 0.05 + 0.25 * U(rng);
+    const double tilt = (15 + 30 * U(rng)) * std::numbers::pi / 180;
+    const double phi = 2 * std::numbers::pi * U(rng);
+    const double psi = (U(rng) - 0.5);
+    // Anywhere the board can still be wholly in view (the check below rejects the rest).
+    const cv::Point2d c(-0.32 + 0.64 * U(rng), -0.24 + 0.48 * U(rng));
+    cv::Matx33d Rt, Rz;
+    cv::Rodrigues(cv::Vec3d(tilt * std::cos(phi), tilt * std::sin(phi), 0), Rt);
+    cv::Rodrigues(cv::Vec3d(0, 0, psi), Rz);
+    const cv::Matx33d R = Rt * Rz;
+    const cv::Vec3d origin = cv::Vec3d(c.x, c.y, z) - R * cv::Vec3d(w / 2, h / 2, 0);
+    bool inside = true;
+    for (double bx : {-m, w + m})
+      for (double by : {-m, h + m}) {
+        const cv::Vec3d p = origin + R * cv::Vec3d(bx, by, 0);
+        const cv::Point2d px = model.project(cv::Point3d(p[0], p[1], p[2]));
+        inside =
+            inside && px.x > 12 && px.x < cam.width - 13 && px.y > 12 && px.y < cam.height - 13;
+      }
+    if (!inside) continue;
+    TargetSpec t = board_template;
+    cv::Vec3d rv;
+    cv::Rodrigues(R, rv);
+    t.position = {origin[0], origin[1], origin[2]};
+    t.rotation = {rv[0], rv[1], rv[2]};
+    Scene s;
+    s.camera = cam;
+    s.effects.supersample = kSupersample;
+    s.effects.noise_read_dn = 1.0;
+    s.targets = {t};
+    render::Renderer r(s);
+    render::SceneState state;
+    state.disk_center = {5.0, 5.0};  // the disk out of view
+    cv::Mat linear = r.render_linear(state);
+    render::EffectsRng noise(seed * 1000 + out.targets.size());
+    render::apply_noise(linear, s.effects.noise_read_dn, 0.0, noise);
+    const cv::Mat image = render::quantize(linear);
+    auto found = detect_board(image, board, "view" + std::to_string(out.views.size()));
+    if (!found) continue;
+    out.images.push_back(image);
+    out.targets.push_back(t);
+    out.views.push_back(*found);
+  }
+  return out;
+}
+
+TargetSpec chessboard_target() {
+  TargetSpec t;
+  t.cols = 16;
+  t.rows = 12;
+  t.square = 0.025;
+  return t;
+}
+
+// Rendered once for every test that needs them.
+const BoardSpec& chessboard_spec() {
+  static const BoardSpec b = BoardSpec::parse("chessboard:16x12:0.025");
+  return b;
+}
+
+// The first n of the 20 rendered views (the pose sequence is the same for every n), rendered
+// once per test process: ctest runs every test in its own process, and at ~1.6 s per view only
+// the tests that need all 20 should pay for them.
+const RenderedViews& chessboard_views(int n = 20) {
+  static RenderedViews cache;
+  if (static_cast<int>(cache.views.size()) < n)
+    cache = render_views(chessboard_target(), chessboard_spec(), n, 7);
+  return cache;
+}
+
+std::vector<BoardView> detected_chessboard_views(int n = 20) {
+  const std::vector<BoardView>& all = chessboard_views(n).views;
+  return std::vector<BoardView>(all.begin(), all.begin() + n);
+}
+
+std::array<double, 9> truth_params() {
+  const CameraSpec c = truth_camera();
+  return {c.fx,
+          c.fy,
+          c.cx,
+          c.cy,
+          c.distortion[0],
+          c.distortion[1],
+          c.distortion[2],
+          c.distortion[3],
+          c.distortion[4]};
+}
+
+const char* kNames[9] = {"fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"};
+
+// Views of a synthetic board projected exactly (no renderer), with Gaussian corner noise.
+std::vector<BoardView> projected_views(const std::vector<cv::Vec3d>& rvecs,
+                                       const std::vector<cv::Vec3d>& tvecs, double sigma,
+                                       cv::Size size = {640, 480}) {
+  const CameraSpec c = truth_camera();
+  const cv::Matx33d K(c.fx, 0, c.cx, 0, c.fy, c.cy, 0, 0, 1);
+  const cv::Vec<double, 5> dist(c.distortion.data());
+  const std::vector<cv::Point3f> obj = chessboard_spec().corners();
+  std::mt19937_64 rng(3);
+  std::normal_distribution<double> N(0.0, sigma);
+  std::vector<BoardView> out;
+  for (std::size_t i = 0; i < rvecs.size(); ++i) {
+    std::vector<cv::Point2f> px;
+    cv::projectPoints(obj, rvecs[i], tvecs[i], K, dist, px);
+    for (auto& p : px) p += cv::Point2f(static_cast<float>(N(rng)), static_cast<float>(N(rng)));
+    out.push_back({"synthetic" + std::to_string(i), size, px, obj});
+  }
+  return out;
+}
+
+std::string expect_invalid(const std::vector<BoardView>& views) {
+  try {
+    calibrate_intrinsics(views);
+  } catch (const std::invalid_argument& e) {
+    return e.what();
+  }
+  ADD_FAILURE() << "no std::invalid_argument";
+  return "";
+}
+
+}  // namespace
+
+TEST(CalibrationIntrinsics, BoardSpecParsing) {
+  const BoardSpec c = BoardSpec::parse("chessboard:9x6:0.02");
+  EXPECT_EQ(c.kind, BoardSpec::Kind::kChessboard);
+  EXPECT_EQ(c.cols, 9);
+  EXPECT_EQ(c.rows, 6);
+  EXPECT_DOUBLE_EQ(c.square, 0.02);
+  EXPECT_EQ(c.corners().size(), 40u);
+  const BoardSpec a = BoardSpec::parse("charuco:7x5:0.04:0.03:DICT_5X5_100");
+  EXPECT_EQ(a.kind, BoardSpec::Kind::kCharuco);
+  EXPECT_DOUBLE_EQ(a.marker, 0.03);
+  EXPECT_EQ(a.dictionary, "DICT_5X5_100");
+  EXPECT_EQ(BoardSpec::parse("charuco:7x5:0.04:0.03").dictionary, "DICT_4X4_50");
+  for (const char* bad :
+       {"chess:9x6:0.02", "chessboard:9x6", "chessboard:9by6:0.02", "chessboard:9x6:-1",
+        "chessboard:1x6:0.02", "charuco:7x5:0.04", "charuco:7x5:0.04:0.05",
+        "charuco:7x5:0.04:0.03:DICT_9X9_1", "chessboard:9x6:abc"})
+    EXPECT_THROW(BoardSpec::parse(bad), std::invalid_argument) << bad;
+}
+
+TEST(CalibrationIntrinsics, RenderedChessboardViewsRecoverTheTruth) {
+  const std::vector<BoardView> views = detected_chessboard_views();
+  ASSERT_EQ(views.size(), 20u) << "the chessboard was not found in every rendered view";
+  const IntrinsicsResult r = calibrate_intrinsics(views);
+  const std::array<double, 9> p = r.params(), t = truth_params();
+  std::printf("rms %.4f px, %d views used\n", r.rms_px, r.views_used());
+  for (int k = 0; k < 9; ++k)
+    std::printf("%s = %.6f (truth %.6f, std %.2g, %.2f sigma)\n", kNames[k], p[k], t[k], r.std[k],
+                (p[k] - t[k]) / r.std[k]);
+  EXPECT_EQ(r.views_used(), 20);
+  EXPECT_TRUE(r.rejected.empty());
+  EXPECT_LT(r.rms_px, 0.2);
+  EXPECT_NEAR(p[0], t[0], 0.002 * t[0]);
+  EXPECT_NEAR(p[1], t[1], 0.002 * t[1]);
+  EXPECT_NEAR(p[2], t[2], 0.5);
+  EXPECT_NEAR(p[3], t[3], 0.5);
+  EXPECT_NEAR(p[4], t[4], 0.01);
+  for (int k = 0; k < 9; ++k) {
+    ASSERT_TRUE(std::isfinite(r.std[k]) && r.std[k] > 0) << kNames[k];
+    EXPECT_LE(std::abs(p[k] - t[k]), 3 * r.std[k]) << kNames[k] << " is more than 3 sigma off";
+  }
+}
+
+TEST(CalibrationIntrinsics, AgreesWithOpenCvOnTheSameCorners) {
+  const std::vector<BoardView> views = detected_chessboard_views();
+  ASSERT_GE(views.size(), 10u);
+  const IntrinsicsResult r = calibrate_intrinsics(views);
+  std::vector<std::vector<cv::Point3f>> obj;
+  std::vector<std::vector<cv::Point2f>> img;
+  for (const BoardView& v : views) {
+    obj.push_back(v.object_points);
+    img.push_back(v.image_points);
+  }
+  cv::Mat K, dist;
+  std::vector<cv::Mat> rv, tv;
+  const double rms = cv::calibrateCamera(obj, img, views[0].image_size, K, dist, rv, tv, 0);
+  std::printf("rms ours %.6f px, OpenCV %.6f px\n", r.rms_px, rms);
+  EXPECT_NEAR(r.rms_px, rms, 1e-3);
+  const double cv_p[4] = {K.at<double>(0, 0), K.at<double>(1, 1), K.at<double>(0, 2),
+                          K.at<double>(1, 2)};
+  const std::array<double, 9> p = r.params();
+  for (int k = 0; k < 4; ++k) EXPECT_NEAR(p[k], cv_p[k], 1e-3 * cv_p[k]) << kNames[k];
+  for (int k = 0; k < 5; ++k) EXPECT_NEAR(p[4 + k], dist.at<double>(k), 2e-3) << kNames[4 + k];
+}
+
+TEST(CalibrationIntrinsics, OutlierViewIsFlaggedAndDropped) {
+  std::vector<BoardView> views = detected_chessboard_views(10);
+  // A view whose corners were matched to the wrong board points (a detector gone wrong):
+  // neighbouring corners swapped along every row. (Reversing whole rows would not do: a mirrored
+  // board is still a consistent plane, seen from behind.)
+  BoardView bad = views[3];
+  bad.name = "bad.png";
+  for (std::size_t k = 0; k + 1 < bad.object_points.size(); k += 2)
+    std::swap(bad.object_points[k], bad.object_points[k + 1]);
+  views.push_back(bad);
+  const IntrinsicsResult r = calibrate_intrinsics(views);
+  EXPECT_EQ(r.views_used(), 10);
+  ASSERT_EQ(r.rejected.size(), 1u);
+  EXPECT_NE(r.rejected[0].find("bad.png"), std::string::npos) << r.rejected[0];
+  EXPECT_FALSE(r.used.back());
+  EXPECT_NEAR(r.params()[0], 800, 0.005 * 800);
+  EXPECT_LT(r.rms_px, 0.2);
+}
+
+TEST(CalibrationIntrinsics, TooFewViewsIsAnError) {
+  std::vector<BoardView> views = detected_chessboard_views(2);
+  EXPECT_NE(expect_invalid(views).find("fewer than 3 usable views"), std::string::npos);
+  EXPECT_NE(expect_invalid({}).find("no views"), std::string::npos);
+}
+
+TEST(CalibrationIntrinsics, FrontoParallelViewsAreAnError) {
+  std::vector<cv::Vec3d> rvecs, tvecs;
+  for (int i = 0; i < 8; ++i) {
+    rvecs.emplace_back(0, 0, 0.2 * i);  // turned in the image plane only
+    tvecs.emplace_back(-0.1 + 0.02 * i, -0.08 + 0.01 * i, 0.5 + 0.05 * i);
+  }
+  const std::string msg = expect_invalid(projected_views(rvecs, tvecs, 0.05));
+  EXPECT_NE(msg.find("focal length unobservable: all views are fronto-parallel"), std::string::npos)
+      << msg;
+  // The same views tilted by 25 deg calibrate.
+  for (auto& r : rvecs) r[0] = 0.44;
+  EXPECT_NO_THROW(calibrate_intrinsics(projected_views(rvecs, tvecs, 0.05)));
+}
+
+TEST(CalibrationIntrinsics, MixedImageSizesAreAnError) {
+  std::vector<BoardView> views = detected_chessboard_views(5);
+  views[2].image_size = cv::Size(800, 600);
+  views[2].name = "big.png";
+  const std::string msg = expect_invalid(views);
+  EXPECT_NE(msg.find("mixed image sizes"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("big.png is 800x600"), std::string::npos) << msg;
+}
+
+TEST(CalibrationIntrinsics, BoardNotFoundInABlankImage) {
+  const cv::Mat blank(480, 640, CV_8UC3, cv::Scalar(128, 128, 128));
+  EXPECT_FALSE(detect_board(blank, chessboard_spec()).has_value());
+  EXPECT_FALSE(detect_board(blank, BoardSpec::parse("charuco:7x5:0.04:0.03")).has_value());
+  EXPECT_FALSE(detect_board(cv::Mat(), chessboard_spec()).has_value());
+}
+
+TEST(CalibrationIntrinsics, RenderedCharucoViewsCalibrate) {
+  TargetSpec t;
+  t.kind = TargetSpec::Kind::kCharuco;
+  t.cols = 7;
+  t.rows = 5;
+  t.square = 0.05;
+  t.marker = 0.037;
+  const BoardSpec board = BoardSpec::parse("charuco:7x5:0.05:0.037");
+  const RenderedViews rendered = render_views(t, board, 12, 11);
+  const std::vector<BoardView>& views = rendered.views;
+  // The detected ids map to the renderer's truth: corner id k is target_corners(t)[k].
+  {
+    const render::CameraModel model = render::CameraModel::from_spec(truth_camera());
+    const std::vector<cv::Point2d> truth =
+        model.project(render::target_corners(rendered.targets[0]));
+    const std::vector<cv::Point3f> all = board.corners();
+    double sum = 0;
+    for (std::size_t k = 0; k < views[0].image_points.size(); ++k) {
+      const auto id = std::find(all.begin(), all.end(), views[0].object_points[k]) - all.begin();
+      const cv::Point2d d = cv::Point2d(views[0].image_points[k]) - truth[id];
+      sum += d.dot(d);
+    }
+    const double rms = std::sqrt(sum / views[0].image_points.size());
+    std::printf("charuco corner rms vs truth %.4f px\n", rms);
+    EXPECT_LT(rms, 0.2) << "refined ChArUco corners vs truth, px";
+  }
+  const IntrinsicsResult r = calibrate_intrinsics(views);
+  const std::array<double, 9> p = r.params(), tr = truth_params();
+  std::printf("charuco: rms %.4f px\n", r.rms_px);
+  for (int k = 0; k < 9; ++k)
+    std::printf("  %s = %.6f (truth %.6f, std %.2g)\n", kNames[k], p[k], tr[k], r.std[k]);
+  // Fewer, sparser corners than the chessboard test: looser bounds, and 3 sigma as there.
+  EXPECT_NEAR(p[0], tr[0], 0.005 * tr[0]);
+  EXPECT_NEAR(p[1], tr[1], 0.005 * tr[1]);
+  EXPECT_NEAR(p[4], tr[4], 0.02);
+  for (int k = 0; k < 4; ++k)
+    EXPECT_LE(std::abs(p[k] - tr[k]), 3 * r.std[k]) << kNames[k] << " is more than 3 sigma off";
+}
+
+// ---------------------------------------------------------------- flatland calibrate
+
+namespace {
+
+using flatland_test::Result;
+
+class CalibrateCli : public flatland_test::CliTestBase {
+ protected:
+  // The rendered chessboard views as view_00.png ... in DIR/imgs.
+  void write_views(int n) {
+    fs::create_directories(dir_ / "imgs");
+    const RenderedViews& v = chessboard_views(n);
+    for (int i = 0; i < n; ++i) {
+      char name[32];
+      std::snprintf(name, sizeof name, "view_%02d.png", i);
+      ASSERT_TRUE(
+          cv::imwrite((dir_ / "imgs" / name).string(), v.images[static_cast<std::size_t>(i)]));
+    }
+  }
+  bool only_stdio_files_left() const {
+    for (const auto& e : fs::recursive_directory_iterator(dir_))
+      if (e.is_regular_file() && e.path().extension() != ".png") return false;
+    return true;
+  }
+  static constexpr const char* kBoard = "--board chessboard:16x12:0.025";
+};
+
+}  // namespace
+
+TEST_F(CalibrateCli, CalibratesRenderedViewsAndWritesTheCameraFile) {
+  write_views(20);
+  flatland_test::write_text(dir_ / "imgs" / "corrupt.png", "not a png at all");
+  const Result r =
+      run(std::string("calibrate --images 'imgs/*.png' ") + kBoard + " --out camera.yaml --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.err.find("corrupt.png"), std::string::npos) << r.err;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  for (const char* key :
+       {"rms_px", "fx", "fy", "cx", "cy", "dist", "std", "views_used", "views_rejected"})
+    EXPECT_TRUE(j.contains(key)) << key;
+  EXPECT_EQ(j["views_used"], 20);
+  EXPECT_NEAR(j["fx"].get<double>(), 800, 1.6);
+  ASSERT_EQ(j["dist"].size(), 5u);
+  for (const char* k : kNames) EXPECT_TRUE(j["std"].contains(k)) << k;
+  const CameraFile f = read_camera_file((dir_ / "camera.yaml").string());
+  EXPECT_DOUBLE_EQ(f.camera.K(0, 0), j["fx"].get<double>());
+  EXPECT_EQ(f.camera.width, 640);
+  ASSERT_TRUE(f.report.has_value());
+  EXPECT_EQ(f.report->views_used, 20);
+}
+
+TEST_F(CalibrateCli, BadInputExitsTwoAndWritesNothing) {
+  // No file matches.
+  Result r = run(std::string("calibrate --images 'imgs/*.png' ") + kBoard + " --out camera.yaml");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("no file matches"), std::string::npos) << r.err;
+  // Fewer than 3 usable views.
+  write_views(2);
+  r = run(std::string("calibrate --images 'imgs/*.png' ") + kBoard + " --out camera.yaml");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("fewer than 3 usable views"), std::string::npos) << r.err;
+  // Board found in no image (the wrong board size).
+  r = run("calibrate --images 'imgs/*.png' --board chessboard:7x7:0.04 --out camera.yaml");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("board found in no image"), std::string::npos) << r.err;
+  // Mixed image sizes.
+  write_views(4);
+  cv::Mat big;
+  cv::resize(chessboard_views(4).images[3], big, cv::Size(800, 600));
+  cv::imwrite((dir_ / "imgs" / "view_99.png").string(), big);
+  r = run(std::string("calibrate --images 'imgs/*.png' ") + kBoard + " --out camera.yaml");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("mixed image sizes"), std::string::npos) << r.err;
+  // A bad --board.
+  r = run("calibrate --images 'imgs/*.png' --board square:9x6:0.02 --out camera.yaml");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("--board"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "camera.yaml"));
+  EXPECT_TRUE(only_stdio_files_left());
+}
+
+TEST_F(CalibrateCli, FrontoParallelImagesExitTwo) {
+  // Boards seen straight on: the camera looks down and the boards lie flat on the table.
+  fs::create_directories(dir_ / "imgs");
+  for (int i = 0; i < 4; ++i) {
+    TargetSpec t = chessboard_target();
+    t.position = {-0.2 + 0.01 * i, -0.15 + 0.01 * i, 0.02 * i};
+    t.rotation = {0, 0, 0.03 * i};
+    Scene s;
+    s.camera = truth_camera();
+    s.effects.supersample = 2;
+    s.targets = {t};
+    render::Renderer rr(s);
+    render::SceneState st;
+    st.disk_center = {5.0, 5.0};
+    cv::imwrite((dir_ / "imgs" / ("flat" + std::to_string(i) + ".png")).string(), rr.render_8u(st));
+  }
+  const Result r =
+      run(std::string("calibrate --images 'imgs/*.png' ") + kBoard + " --out camera.yaml");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("focal length unobservable"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "camera.yaml"));
+}

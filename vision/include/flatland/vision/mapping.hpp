@@ -1,0 +1,60 @@
+// Pixel -> table plane -> hand frame -> hand contact parameter s_h: the chain that turns a tracked
+// disk centre into the quantity the controller compares with its plan (docs/VISION.md).
+#pragma once
+
+#include "flatland/render/camera.hpp"
+#include "flatland/sim/curve.hpp"
+
+#include <opencv2/core.hpp>
+
+#include <optional>
+#include <vector>
+
+namespace flatland::vision {
+
+/// Normalised, undistorted image coordinates (x/z, y/z in the camera frame) of a pixel
+/// (cv::undistortPoints with the camera's K and distortion).
+cv::Point2d undistort_pixel(const render::CameraModel& camera, cv::Point2d px);
+
+/// The table-frame point on the plane z = plane_z (m) seen at pixel px: the undistorted ray
+/// intersected with the plane. nullopt when the ray is parallel to the plane or meets it behind
+/// the camera.
+std::optional<cv::Point2d> pixel_to_table(const render::CameraModel& camera, cv::Point2d px,
+                                          double plane_z);
+
+/// The same for many pixels at once (one cv::undistortPoints call, 30 fixed iterations: for the
+/// tracker's edge points); NaN points where the ray misses the plane.
+std::vector<cv::Point2d> pixels_to_table(const render::CameraModel& camera,
+                                         const std::vector<cv::Point2d>& px, double plane_z);
+
+/// Table frame -> hand frame: the hand pivots about `axis_table` and is turned by theta (rad,
+/// counter-clockwise seen from +z), so p_hand = R(-theta) (p_table - axis).
+cv::Point2d table_to_hand(cv::Point2d p_table, cv::Point2d axis_table, double theta);
+
+struct ContactEstimate {
+  double s_h = 0;       ///< global hand parameter (pieces m cover [2m-1, 2m+1])
+  double distance = 0;  ///< m, |q(s_h) - p|: how far the point is from the offset curve
+  int piece = 0;
+};
+
+/// The hand parameter s whose offset point q(s) = c(s) + r n(s) (the centre of a disk of radius r
+/// touching the hand at c(s), n the outward normal) is nearest to p_hand: a grid scan over
+/// [guess - half_window, guess + half_window], then Brent's minimiser on |q(s) - p|^2 in the best
+/// grid cell, each piece by its own formula.
+ContactEstimate contact_parameter(const sim::PolynomialHand& hand, double disk_radius,
+                                  cv::Point2d p_hand, double guess, double half_window = 1.0);
+
+/// Everything needed to map a tracked centre to s_h.
+struct HandMapping {
+  render::CameraModel camera;    ///< K, dist and the table pose R, t
+  cv::Point2d axis_table{0, 0};  ///< m, joint axis in the table frame
+  double plane_z = 0;            ///< m, height of the tracked point (the disk's top face)
+  double disk_radius = 0;        ///< m
+  sim::PolynomialHand hand{0.18, -0.18, -0.252, 0.216};
+};
+
+/// Pixel -> s_h at hand angle theta. nullopt if the ray misses the plane.
+std::optional<ContactEstimate> pixel_to_contact(const HandMapping& m, cv::Point2d px, double theta,
+                                                double guess, double half_window = 1.0);
+
+}  // namespace flatland::vision
