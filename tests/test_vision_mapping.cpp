@@ -5,6 +5,7 @@
 #include "flatland/sim/spec.hpp"
 #include "flatland/vision/mapping.hpp"
 #include "flatland/vision/tracker.hpp"
+#include "scene_support.hpp"
 
 #include "cli_support.hpp"
 
@@ -20,24 +21,7 @@ using namespace flatland;
 namespace {
 
 Scene mapping_scene(double noise_dn, bool blur) {
-  Scene s;
-  s.sim.tilt = 5.0 * std::numbers::pi / 180.0;
-  s.sim.motion.period = 4.0;
-  s.sim.motion.k = -1.1395840;
-  s.sim.duration = 4.0;
-  CameraSpec cam;
-  cam.fx = cam.fy = 900;
-  cam.cx = 319.5;
-  cam.cy = 239.5;
-  cam.position = {0.0, 0.0, 1.2};
-  cam.look_at = {0.0, 0.0, 0.0};
-  cam.exposure = blur ? 1.0 / 30.0 : 0.0;
-  s.camera = cam;
-  s.effects.supersample = 2;
-  s.effects.blur_subframes = blur ? 8 : 1;
-  s.effects.noise_read_dn = noise_dn;
-  s.effects.seed = 11;
-  return s;
+  return flatland_test::air_table_experiment(noise_dn, blur, 11);
 }
 
 vision::HandMapping mapping_for(const Scene& s, const render::CameraModel& camera) {

@@ -4,6 +4,7 @@
 #include "flatland/render/renderer.hpp"
 #include "flatland/sim/spec.hpp"
 #include "flatland/vision/tracker.hpp"
+#include "scene_support.hpp"
 
 #include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
@@ -21,27 +22,7 @@ namespace {
 // The FLATLAND experiment: the butterfly at 5 deg tilt, 2T = 4 s (k solves it), the 640 x 480
 // overhead camera at 1.2 m, 30 Hz with a full-frame exposure (blur over 8 sub-frames).
 Scene experiment_scene(double noise_dn, bool blur) {
-  Scene s;
-  s.sim.tilt = 5.0 * std::numbers::pi / 180.0;
-  s.sim.motion.period = 4.0;
-  s.sim.motion.k = -1.1395840;
-  s.sim.duration = 4.0;
-  CameraSpec cam;
-  cam.width = 640;
-  cam.height = 480;
-  cam.fx = cam.fy = 900;
-  cam.cx = 319.5;
-  cam.cy = 239.5;
-  cam.position = {0.0, 0.0, 1.2};
-  cam.look_at = {0.0, 0.0, 0.0};
-  cam.fps = 30;
-  cam.exposure = blur ? 1.0 / 30.0 : 0.0;
-  s.camera = cam;
-  s.effects.supersample = 2;
-  s.effects.blur_subframes = blur ? 8 : 1;
-  s.effects.noise_read_dn = noise_dn;
-  s.effects.seed = 7;
-  return s;
+  return flatland_test::air_table_experiment(noise_dn, blur, 7);
 }
 
 struct Sequence {
