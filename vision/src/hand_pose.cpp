@@ -9,6 +9,8 @@
 // there, which removes that bias for any camera pose and lens distortion.
 #include "flatland/vision/hand_pose.hpp"
 
+#include "flatland/vision/mapping.hpp"
+
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -191,25 +193,17 @@ HandPose measure_hand_pose(const cv::Mat& image, const render::CameraModel& came
   auto face_level = [&](int ix, int iy) { return level_fit.dot(basis(ix, iy)); };
 
   // 5. Footprints on the plane z = plate_height: map the pixel corners of the ROI through the
-  //    lens (undistortPoints) and the table pose, then each pixel is the quadrilateral of its four
+  //    lens and the table pose (pixels_to_table), then each pixel is the quadrilateral of its four
   //    corners (area and centroid by the shoelace formula).
   const int cw = roi.width + 1, ch = roi.height + 1;
   std::vector<cv::Point2d> corners_px;
   corners_px.reserve(static_cast<std::size_t>(cw) * ch);
   for (int y = 0; y < ch; ++y)
     for (int x = 0; x < cw; ++x) corners_px.emplace_back(roi.x + x - 0.5, roi.y + y - 0.5);
-  std::vector<cv::Point2d> normalized;
-  cv::undistortPoints(corners_px, normalized, cv::Mat(camera.K), cv::Mat(camera.dist));
-  const cv::Matx33d Rt = camera.R.t();
-  const cv::Vec3d centre = -(Rt * camera.t);  // camera centre, table frame
-  std::vector<cv::Point2d> plane(normalized.size());
-  for (std::size_t i = 0; i < normalized.size(); ++i) {
-    const cv::Vec3d d = Rt * cv::Vec3d(normalized[i].x, normalized[i].y, 1.0);
-    if (!(d[2] < 0) || !(centre[2] > plate_height))
+  const std::vector<cv::Point2d> plane = pixels_to_table(camera, corners_px, plate_height);
+  for (const cv::Point2d& p : plane)
+    if (!std::isfinite(p.x))
       fail("a pixel's ray does not meet the table plane (is the table pose right?)");
-    const double lambda = (plate_height - centre[2]) / d[2];
-    plane[i] = {centre[0] + lambda * d[0], centre[1] + lambda * d[1]};
-  }
 
   // Accumulate moments about a reference point near the centroid (better conditioned sums).
   const cv::Point2d ref = plane[static_cast<std::size_t>(ch / 2) * cw + cw / 2];
