@@ -8,8 +8,6 @@
 #include <opencv2/core/utils/logger.hpp>
 #include <opencv2/imgcodecs.hpp>
 
-#include <glob.h>
-
 #include <algorithm>
 #include <array>
 #include <cstdio>
@@ -31,30 +29,13 @@ const char* kParamNames[9] = {"fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k
 
 void warn(const std::string& message) { std::cerr << "flatland: warning: " << message << "\n"; }
 
-/// Every file matching each pattern (glob(3), sorted), or the name itself when it is a file.
-std::vector<std::string> expand(const std::vector<std::string>& patterns) {
-  std::vector<std::string> files;
-  for (const std::string& p : patterns) {
-    glob_t g{};
-    const int rc = ::glob(p.c_str(), GLOB_TILDE | GLOB_BRACE, nullptr, &g);
-    if (rc == 0)
-      for (std::size_t i = 0; i < g.gl_pathc; ++i) files.emplace_back(g.gl_pathv[i]);
-    ::globfree(&g);
-    if (rc == GLOB_NOMATCH) throw UsageError("--images: no file matches '" + p + "'");
-    if (rc != 0) throw UsageError("--images: cannot expand '" + p + "'");
-  }
-  std::sort(files.begin(), files.end());
-  files.erase(std::unique(files.begin(), files.end()), files.end());
-  return files;
-}
-
 void run_calibrate(const CalibrateOptions& o) {
   // ---- bad input first: options, then the images themselves
   const calibration::BoardSpec board = calibration::BoardSpec::parse(o.board);
   const fs::path out = o.out;
   if (o.out.empty() || o.out.back() == '/' || fs::is_directory(out))
     throw UsageError("--out: must be a file (camera.yaml), got '" + o.out + "'");
-  const std::vector<std::string> files = expand(o.images);
+  const std::vector<std::string> files = expand_file_patterns(o.images, "--images");
 
   // libpng/libjpeg complain on stderr about corrupt files; our own warning names the file.
   cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_ERROR);

@@ -11,8 +11,6 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
 
-#include <glob.h>
-
 #include <algorithm>
 #include <cmath>
 #include <fstream>
@@ -33,17 +31,6 @@ struct TrackOptions {
 };
 
 const char* kTrackColumns = "frame,t,u,v,sigma_px,quality,state,s_h";
-
-/// Files matching a shell pattern, sorted (glob(3) sorts by name).
-std::vector<std::string> expand_glob(const std::string& pattern) {
-  glob_t g{};
-  std::vector<std::string> out;
-  const int rc = ::glob(pattern.c_str(), 0, nullptr, &g);
-  if (rc == 0)
-    for (std::size_t i = 0; i < g.gl_pathc; ++i) out.emplace_back(g.gl_pathv[i]);
-  ::globfree(&g);
-  return out;
-}
 
 /// Encoder log: rows "t,theta" (s, rad), strictly increasing t; a header line is skipped.
 struct EncoderLog {
@@ -137,8 +124,7 @@ void run_track(const TrackOptions& o) {
   long total = 0;
   double fps = camera.fps > 0 ? camera.fps : 30.0;
   if (!o.images.empty()) {
-    files = expand_glob(o.images);
-    if (files.empty()) throw UsageError("--images: no file matches " + o.images);
+    files = expand_file_patterns({o.images}, "--images");
     total = static_cast<long>(files.size());
   } else {
     if (!fs::is_regular_file(o.video)) throw UsageError("--video: no such file: " + o.video);

@@ -1,5 +1,6 @@
 #include "common.hpp"
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
@@ -9,6 +10,7 @@
 #include <sstream>
 #include <system_error>
 
+#include <glob.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -456,6 +458,23 @@ void write_solution_outputs(OutputSet& outputs, const fs::path& dir, const sim::
                 col("mu_required") +
                 ")) with lines lw 2 title '|f_t|/f_n'\n"
                 "unset multiplot\n"});
+}
+
+std::vector<std::string> expand_file_patterns(const std::vector<std::string>& patterns,
+                                              const std::string& option) {
+  std::vector<std::string> files;
+  for (const std::string& p : patterns) {
+    glob_t g{};
+    const int rc = ::glob(p.c_str(), GLOB_TILDE | GLOB_BRACE, nullptr, &g);
+    if (rc == 0)
+      for (std::size_t i = 0; i < g.gl_pathc; ++i) files.emplace_back(g.gl_pathv[i]);
+    ::globfree(&g);
+    if (rc == GLOB_NOMATCH) throw UsageError(option + ": no file matches '" + p + "'");
+    if (rc != 0) throw UsageError(option + ": cannot expand '" + p + "'");
+  }
+  std::sort(files.begin(), files.end());
+  files.erase(std::unique(files.begin(), files.end()), files.end());
+  return files;
 }
 
 }  // namespace flatland::app

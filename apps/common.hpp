@@ -28,6 +28,11 @@ class UsageError : public std::invalid_argument {
   using std::invalid_argument::invalid_argument;
 };
 
+/// Files named by shell patterns (glob(3) with ~ and {a,b}; a plain file name matches itself),
+/// sorted and without duplicates. A pattern that matches nothing is a UsageError naming `option`.
+std::vector<std::string> expand_file_patterns(const std::vector<std::string>& patterns,
+                                              const std::string& option);
+
 /// Options every command has; the integrator ones override the scene's `simulator` settings.
 struct CommonOptions {
   std::string scene;  ///< empty: default_scene_path()
