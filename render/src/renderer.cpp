@@ -827,12 +827,20 @@ cv::Mat Renderer::render_8u(const SceneState& state) { return impl_->render_8u(s
 FrameTruth Renderer::truth(const SceneState& state) const { return impl_->truth(state); }
 
 Frame Renderer::capture(const sim::Trajectory& trajectory, double t) {
+  return capture(
+      [&](double ts) {
+        return SceneState::from_sample(
+            trajectory.sample(std::clamp(ts, trajectory.t_begin(), trajectory.t_end())));
+      },
+      t);
+}
+
+Frame Renderer::capture(const StateAt& state_at, double t) {
   const EffectsSpec& fx = impl_->scene.effects;
   EffectsRng& rng = impl_->rng;
   Frame frame;
   const double t_capture = jittered_time(t, fx.jitter_s, rng);
-  const double tc = std::clamp(t_capture, trajectory.t_begin(), trajectory.t_end());
-  const SceneState mid = SceneState::from_sample(trajectory.sample(tc));
+  const SceneState mid = state_at(t_capture);
   frame.truth = impl_->truth(mid);
   frame.truth.t = t_capture;
   if (dropped(fx.drop_probability, rng)) {
@@ -852,8 +860,7 @@ Frame Renderer::capture(const sim::Trajectory& trajectory, double t) {
     std::vector<cv::Mat> subs;
     for (int i = 0; i < fx.blur_subframes; ++i) {
       const double ts = t_capture - 0.5 * exposure + (i + 0.5) * exposure / fx.blur_subframes;
-      const double tcl = std::clamp(ts, trajectory.t_begin(), trajectory.t_end());
-      subs.push_back(impl_->render_linear(SceneState::from_sample(trajectory.sample(tcl))));
+      subs.push_back(impl_->render_linear(state_at(ts)));
     }
     linear = average_frames(subs);
   } else {

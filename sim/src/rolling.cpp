@@ -305,10 +305,19 @@ void ReducedDiskRolling::derivative(double t, const State& y, const Pieces& p, S
   dy[2] = sddot(h, g, y[2]);
 }
 
+double ReducedDiskRolling::acceleration(const HandKinematics& h, double s_h, double sdot_h,
+                                        int hand_piece) const {
+  return sddot(h, problem_->hand->geometry(s_h, hand_piece), sdot_h);
+}
+
 Sample ReducedDiskRolling::sample(double t, const State& y, const Pieces& p) const {
+  return sample_with(problem_->motion->at(t, p.motion), t, y, p.hand);
+}
+
+Sample ReducedDiskRolling::sample_with(const HandKinematics& h, double t, const State& y,
+                                       int hand_piece) const {
   const RollingProblem& pb = *problem_;
-  const HandKinematics h = pb.motion->at(t, p.motion);
-  const CurveGeometry g = pb.hand->geometry(y[0], p.hand);
+  const CurveGeometry g = pb.hand->geometry(y[0], hand_piece);
   const double sd = y[2];
   const double sdd = sddot(h, g, sd);
   const double one_rk = 1.0 + r_ * g.curvature;

@@ -11,6 +11,7 @@
 
 #include <opencv2/core.hpp>
 
+#include <functional>
 #include <memory>
 #include <optional>
 #include <vector>
@@ -73,6 +74,10 @@ class Renderer {
   /// quantisation, dropped frames, per the scene's effects. The renderer's RNG
   /// (scene.effects.seed) advances frame by frame, so a scene and seed give identical frames.
   Frame capture(const sim::Trajectory& trajectory, double t);
+  /// The same for a world that is not a finished run (a closed loop in progress): `state_at`
+  /// gives the scene at any time the exposure needs (it clamps to what it knows).
+  using StateAt = std::function<SceneState(double t)>;
+  Frame capture(const StateAt& state_at, double t);
   /// Truth for a state (also usable without rendering).
   FrameTruth truth(const SceneState& state) const;
 

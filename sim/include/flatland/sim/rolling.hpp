@@ -125,6 +125,12 @@ class ReducedDiskRolling {
   static double sdot_h(const State& y) { return y[2]; }
   const RollingProblem& problem() const { return *problem_; }
 
+  /// The same physics with the hand's kinematics given explicitly instead of taken from the
+  /// problem's motion: for hands driven step by step (a joint under control) and for estimators
+  /// that propagate with measured hand kinematics. `hand_piece` as from pieces_for.
+  double acceleration(const HandKinematics& h, double s_h, double sdot_h, int hand_piece) const;
+  Sample sample_with(const HandKinematics& h, double t, const State& y, int hand_piece) const;
+
  private:
   double sddot(const HandKinematics& h, const CurveGeometry& g, double sdot) const;
   std::shared_ptr<const RollingProblem> problem_;

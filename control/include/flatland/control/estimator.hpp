@@ -1,0 +1,97 @@
+// The contact estimator of the closed loop (paper section 5: "a simple estimator was used to
+// estimate the disk's position between vision data frames"): an extended Kalman filter on
+// (s_h, sdot_h). Between camera frames it propagates at the loop's rate (1 kHz) with the rolling
+// model of a disk on the hand, driven by the hand's measured angle/rate and commanded
+// acceleration; at each frame it corrects with the measured s_h. Frames arrive late (camera
+// latency); with latency compensation the filter rewinds to the capture time through its stored
+// history, corrects there and re-propagates to the present with the stored inputs.
+//
+// A constant-velocity model (sddot_h = 0) is the measured baseline.
+#pragma once
+
+#include "flatland/control/types.hpp"
+#include "flatland/sim/rolling.hpp"
+
+#include <Eigen/Core>
+
+#include <deque>
+#include <memory>
+#include <string>
+
+namespace flatland::control {
+
+enum class EstimatorModel {
+  kRolling,           ///< sddot_h from the rolling dynamics (ReducedDiskRolling)
+  kConstantVelocity,  ///< sddot_h = 0 (baseline)
+};
+std::string to_string(EstimatorModel m);            ///< "rolling", "constant-velocity"
+EstimatorModel parse_estimator_model(const std::string& name);  ///< invalid_argument otherwise
+
+struct EstimatorConfig {
+  EstimatorModel model = EstimatorModel::kRolling;
+  bool latency_compensation = true;
+  /// White acceleration noise on sddot_h (1/s^2 per sqrt(Hz)): the model's mismatch (table tilt,
+  /// disk size, the joint's tracking error) the filter admits. Q over a step dt is
+  /// q^2 [dt^3/3, dt^2/2; dt^2/2, dt].
+  double process_noise = 0.05;
+  double history = 0.3;  ///< s of stored steps for re-propagation (must exceed the latency)
+  double initial_sigma_s = 0.02;      ///< 1-sigma of the initial s_h
+  double initial_sigma_sdot = 0.02;   ///< 1/s, of the initial sdot_h
+};
+
+/// What one measurement update did (for logs, consistency tests and fault detection).
+struct UpdateReport {
+  bool applied = false;    ///< false if the capture time is older than the stored history
+  double innovation = 0;   ///< z - predicted s_h at the capture time
+  double innovation_sigma = 0;  ///< sqrt(H P H^T + R)
+  double nis = 0;          ///< normalised innovation squared (chi-square, 1 dof)
+  int repropagated_steps = 0;
+};
+
+class Estimator {
+ public:
+  /// `model`: the nominal hand, disk and in-plane gravity (its motion is not used: the hand's
+  /// kinematics come from HandInput). Throws std::invalid_argument if the object is not a disk.
+  Estimator(std::shared_ptr<const sim::RollingProblem> model, EstimatorConfig config);
+
+  /// Start at time t from (s_h, sdot_h) with the configured initial covariance; clears history.
+  void reset(double t, double s_h, double sdot_h);
+  /// Advance the belief from its current time to t_next (> current time) with the hand input
+  /// held over the interval (angle and rate at the start, acceleration constant). Stored for
+  /// re-propagation.
+  void propagate(double t_next, const HandInput& input);
+  /// Fold in a measurement. z.t_capture <= the current time. With latency compensation the
+  /// update is made at t_capture (rewind + re-propagate); without, at the current time.
+  UpdateReport update(const Measurement& z);
+  Estimate estimate() const;
+  const EstimatorConfig& config() const { return config_; }
+
+  long steps() const { return steps_; }                    ///< propagation steps taken
+  long repropagated_steps() const { return repropagated_; }  ///< of which re-propagations
+  long updates() const { return updates_; }
+
+ private:
+  struct Stored {
+    double t0 = 0, t1 = 0;  ///< the step
+    HandInput input;
+    Eigen::Vector2d x0;     ///< state at t0 (before the step)
+    Eigen::Matrix2d P0;
+  };
+  void step(double t0, double t1, const HandInput& u, Eigen::Vector2d& x, Eigen::Matrix2d& P) const;
+  Eigen::Vector2d derivative(const Eigen::Vector2d& x, const sim::HandKinematics& h) const;
+
+  std::shared_ptr<const sim::RollingProblem> model_;
+  std::unique_ptr<sim::ReducedDiskRolling> rolling_;
+  EstimatorConfig config_;
+  double t_ = 0;
+  Eigen::Vector2d x_ = Eigen::Vector2d::Zero();
+  Eigen::Matrix2d P_ = Eigen::Matrix2d::Zero();
+  std::deque<Stored> history_;
+  long steps_ = 0, repropagated_ = 0, updates_ = 0;
+};
+
+/// Normalised estimation error squared of an estimate against the truth (chi-square, 2 dof when
+/// the filter is consistent).
+double nees(const Estimate& e, double s_h_true, double sdot_h_true);
+
+}  // namespace flatland::control
