@@ -404,6 +404,23 @@ std::string format_value(double v) {
   return std::string(buf, res.ptr);
 }
 
+/// A number in [lo, hi] (bounds included).
+double number_in(const MapReader& m, const char* key, double lo, double hi, double fallback) {
+  if (!m.has(key)) return fallback;
+  const double v = m.number(key);
+  if (!(v >= lo && v <= hi))
+    m.fail_at(key, "must be in [" + format_value(lo) + ", " + format_value(hi) + "], got " +
+                       m.node(key).Scalar());
+  return v;
+}
+
+double non_negative(const MapReader& m, const char* key, double fallback) {
+  if (!m.has(key)) return fallback;
+  const double v = m.number(key);
+  if (!(v >= 0)) m.fail_at(key, "must be >= 0, got " + m.node(key).Scalar());
+  return v;
+}
+
 // ---- camera, effects, render, targets (the renderer's plain data) ------------------------------
 
 /// What the renderer's camera model needs and plain data can tell: positive focal lengths and
@@ -411,7 +428,8 @@ std::string format_value(double v) {
 void read_camera(const MapReader& root, Scene& scene) {
   const auto c =
       root.optional_section("camera", {"width", "height", "fx", "fy", "cx", "cy", "distortion",
-                                       "position", "look_at", "up", "fps", "exposure"});
+                                       "position", "look_at", "up", "fps", "exposure", "latency",
+                                       "latency_jitter"});
   if (!c) return;
   CameraSpec cam;
   constexpr long long kMaxSide = 16384;  // px; beyond any GL framebuffer this renders into
@@ -427,6 +445,12 @@ void read_camera(const MapReader& root, Scene& scene) {
   cam.up = c->numbers_or<3>("up", "[x, y, z]", cam.up);
   cam.fps = c->positive_or("fps", cam.fps);
   cam.exposure = c->number_or("exposure", cam.exposure);
+  cam.latency = non_negative(*c, "latency", cam.latency);
+  cam.latency_jitter = non_negative(*c, "latency_jitter", cam.latency_jitter);
+  if (!(cam.latency_jitter <= cam.latency))
+    c->fail_at("latency_jitter", "must not exceed camera.latency (" + format_value(cam.latency) +
+                                     " s): a frame cannot arrive before it is taken, got " +
+                                     c->node("latency_jitter").Scalar());
 
   if (!(cam.position[2] > 0))
     c->fail_at("position", "the camera must be above the table (z > 0), got z = " +
@@ -451,23 +475,6 @@ void read_camera(const MapReader& root, Scene& scene) {
                "must not exceed the frame interval 1/fps = " + format_value(1.0 / cam.fps) +
                    " s, got " + c->node("exposure").Scalar());
   scene.camera = cam;
-}
-
-/// A number in [lo, hi] (bounds included).
-double number_in(const MapReader& m, const char* key, double lo, double hi, double fallback) {
-  if (!m.has(key)) return fallback;
-  const double v = m.number(key);
-  if (!(v >= lo && v <= hi))
-    m.fail_at(key, "must be in [" + format_value(lo) + ", " + format_value(hi) + "], got " +
-                       m.node(key).Scalar());
-  return v;
-}
-
-double non_negative(const MapReader& m, const char* key, double fallback) {
-  if (!m.has(key)) return fallback;
-  const double v = m.number(key);
-  if (!(v >= 0)) m.fail_at(key, "must be >= 0, got " + m.node(key).Scalar());
-  return v;
 }
 
 void read_effects(const MapReader& root, Scene& scene) {
@@ -504,6 +511,87 @@ void read_render(const MapReader& root, Scene& scene) {
   rs.hand_thickness = r->positive_or("hand_thickness", rs.hand_thickness);
   rs.disk_thickness = r->positive_or("disk_thickness", rs.disk_thickness);
   rs.table_extent = r->positive_or("table_extent", rs.table_extent);
+}
+
+// ---- joint, controller, estimator, faults (the closed loop's plain data) -----------------------
+
+void read_joint(const MapReader& root, Scene& scene) {
+  const auto j = root.optional_section(
+      "joint", {"inertia", "viscous", "coulomb", "torque_limit", "encoder_counts", "kp", "kd",
+                "velocity_filter", "rate"});
+  if (!j) return;
+  JointSpec& js = scene.joint;
+  js.inertia = j->positive_or("inertia", js.inertia);
+  js.viscous = non_negative(*j, "viscous", js.viscous);
+  js.coulomb = non_negative(*j, "coulomb", js.coulomb);
+  js.torque_limit = j->positive_or("torque_limit", js.torque_limit);
+  js.encoder_counts =
+      static_cast<long>(j->integer_or("encoder_counts", 4, 1LL << 40, js.encoder_counts));
+  js.kp = j->positive_or("kp", js.kp);
+  js.kd = non_negative(*j, "kd", js.kd);
+  js.velocity_filter = non_negative(*j, "velocity_filter", js.velocity_filter);
+  js.rate = number_in(*j, "rate", 10.0, 1e5, js.rate);
+  if (!(js.coulomb < js.torque_limit))
+    j->fail_at("coulomb", "must be below joint.torque_limit (" + format_value(js.torque_limit) +
+                              " N m) or the joint cannot move, got " + format_value(js.coulomb));
+  // The PD loop runs at the servo rate; a discrete PD loop with omega dt near 1 rings or diverges.
+  const double omega_dt = std::sqrt(js.kp / js.inertia) / js.rate;
+  if (!(omega_dt < 0.5))
+    j->fail_at("kp", "too stiff for the servo rate: sqrt(kp/inertia)/rate = " +
+                         format_value(omega_dt) + " (must be < 0.5)");
+}
+
+void read_controller(const MapReader& root, Scene& scene) {
+  const auto c = root.optional_section(
+      "controller", {"mode", "plan", "kp", "kd", "dip_until", "finish_after", "lost_timeout",
+                     "innovation_gate", "innovation_strikes", "max_joint_jump",
+                     "stop_deceleration", "settle"});
+  if (!c) return;
+  ControllerSpec& cs = scene.controller;
+  cs.mode = c->choice_or("mode", {"feedback", "open-loop"}, cs.mode.c_str());
+  cs.plan = c->choice_or("plan", {"scene", "solve"}, cs.plan.c_str());
+  cs.kp = c->positive_or("kp", cs.kp);
+  cs.kd = non_negative(*c, "kd", cs.kd);
+  cs.dip_until = number_in(*c, "dip_until", -1.0, 1.0, cs.dip_until);
+  cs.finish_after = number_in(*c, "finish_after", -1.0, 1.0, cs.finish_after);
+  if (!(cs.dip_until < cs.finish_after))
+    c->fail_at("finish_after", "must exceed controller.dip_until (" + format_value(cs.dip_until) +
+                                   "), got " + format_value(cs.finish_after));
+  cs.lost_timeout = c->positive_or("lost_timeout", cs.lost_timeout);
+  cs.innovation_gate = c->positive_or("innovation_gate", cs.innovation_gate);
+  cs.innovation_strikes =
+      static_cast<int>(c->integer_or("innovation_strikes", 1, 1000, cs.innovation_strikes));
+  cs.max_joint_jump = c->positive_or("max_joint_jump", cs.max_joint_jump);
+  cs.stop_deceleration = c->positive_or("stop_deceleration", cs.stop_deceleration);
+  cs.settle = non_negative(*c, "settle", cs.settle);
+}
+
+void read_estimator(const MapReader& root, Scene& scene) {
+  const auto e =
+      root.optional_section("estimator", {"model", "latency_compensation", "process_noise"});
+  if (!e) return;
+  EstimatorSpec& es = scene.estimator;
+  es.model = e->choice_or("model", {"rolling", "constant-velocity"}, es.model.c_str());
+  es.latency_compensation = e->boolean_or("latency_compensation", es.latency_compensation);
+  es.process_noise = e->positive_or("process_noise", es.process_noise);
+}
+
+void read_faults(const MapReader& root, Scene& scene) {
+  const auto f = root.optional_section(
+      "faults", {"camera_stop", "camera_stall", "occlusion", "occlusion_duration",
+                 "encoder_glitch", "encoder_glitch_size"});
+  if (!f) return;
+  FaultSpec& fs = scene.faults;
+  const auto time = [&](const char* key) -> std::optional<double> {
+    if (!f->has(key)) return std::nullopt;
+    return non_negative(*f, key, 0.0);
+  };
+  fs.camera_stop = time("camera_stop");
+  fs.camera_stall = time("camera_stall");
+  fs.occlusion = time("occlusion");
+  fs.occlusion_duration = f->positive_or("occlusion_duration", fs.occlusion_duration);
+  fs.encoder_glitch = time("encoder_glitch");
+  fs.encoder_glitch_size = f->number_or("encoder_glitch_size", fs.encoder_glitch_size);
 }
 
 /// OpenCV's predefined ArUco dictionaries (cv::aruco::PREDEFINED_DICTIONARY_NAME), by name.
@@ -584,7 +672,8 @@ Scene parse_scene(const std::string& yaml_text, const std::string& origin) {
   scene.origin = origin;
   const MapReader root(docs.front(), "", origin,
                        {"name", "gravity", "hand", "object", "motion", "initial", "duration",
-                        "integrator", "contact", "camera", "effects", "render", "targets"});
+                        "integrator", "contact", "camera", "effects", "render", "targets",
+                        "joint", "controller", "estimator", "faults"});
   if (root.has("name")) scene.name = root.text("name");
   sim::SimulationSpec& spec = scene.sim;
   read_gravity(root, spec);
@@ -599,6 +688,10 @@ Scene parse_scene(const std::string& yaml_text, const std::string& origin) {
   read_effects(root, scene);  // after the camera: exposure blur needs its exposure
   read_render(root, scene);
   read_targets(root, scene);
+  read_joint(root, scene);
+  read_controller(root, scene);
+  read_estimator(root, scene);
+  read_faults(root, scene);
 
   // Physics that needs more than one field (hand shape against the disk, k = -2, inertia bounds,
   // formulation against the object) is validated where it is implemented; its messages already

@@ -33,6 +33,8 @@ struct CameraSpec {
   std::array<double, 3> up{0.0, 1.0, 0.0};        ///< image "up" direction (table frame)
   double fps = 30.0;                     ///< frames per second
   double exposure = 0.0;                 ///< s, exposure time (blur when > 0 and effects.blur_subframes > 1)
+  double latency = 0.0;         ///< s, capture (mid-exposure) to arrival at the control loop
+  double latency_jitter = 0.0;  ///< s, half-width of a uniform spread of the latency
 };
 
 /// Image effects (section `effects`); each is off unless the scene asks for it.
@@ -69,6 +71,55 @@ struct RenderSpec {
   double table_extent = 0.6;       ///< m, half-size of the drawn table
 };
 
+/// The joint that turns the hand (section `joint`), the paper's scheme: the commanded
+/// acceleration is integrated into a reference angle and rate, which a PD torque loop tracks on a
+/// motor model; the disk's contact force loads the joint.
+struct JointSpec {
+  double inertia = 0.05;          ///< kg m^2, hand plate + reflected rotor, about the joint axis
+  double viscous = 0.02;          ///< N m s/rad, viscous friction
+  double coulomb = 0.05;          ///< N m, Coulomb (dry) friction
+  double torque_limit = 10.0;     ///< N m, the drive saturates here
+  long encoder_counts = 65536;    ///< counts per revolution
+  double kp = 500.0;              ///< N m/rad, PD torque loop
+  double kd = 10.0;               ///< N m s/rad
+  double velocity_filter = 0.002;  ///< s, time constant of the drive's velocity estimate
+  double rate = 1000.0;           ///< Hz, servo and control-loop rate
+};
+
+/// The paper's vision-feedback controller (section `controller`, section 5 of the paper).
+struct ControllerSpec {
+  std::string mode = "feedback";  ///< feedback | open-loop
+  /// Plan: the scene's motion as given ("scene") or with k solved for the scene's period ("solve").
+  std::string plan = "scene";
+  double kp = 100.0;              ///< 1/s^2, stage 2: theta'' = kp (theta_p(s) - theta) + ...
+  double kd = 20.0;               ///< 1/s
+  double dip_until = -0.9;        ///< stage 1 ends when the estimated s_h exceeds this
+  double finish_after = 0.9;      ///< stage 3 starts when the estimated s_h exceeds this
+  double lost_timeout = 0.25;     ///< s without a usable measurement -> safe stop
+  double innovation_gate = 50.0;  ///< NIS above this (chi-square, 1 dof) is implausible
+  int innovation_strikes = 3;     ///< consecutive implausible innovations -> safe stop
+  double max_joint_jump = 0.05;   ///< rad, a reading further than this from the prediction is a glitch
+  double stop_deceleration = 20.0;  ///< rad/s^2, safe stop
+  double settle = 1.0;            ///< s the loop keeps running after the hand stops
+};
+
+/// The contact estimator (section `estimator`).
+struct EstimatorSpec {
+  std::string model = "rolling";  ///< rolling | constant-velocity
+  bool latency_compensation = true;
+  double process_noise = 0.05;    ///< 1/s^2 per sqrt(Hz), white noise on sddot_h
+};
+
+/// Faults injected into a synthetic experiment (section `faults`), to test the safe stop.
+struct FaultSpec {
+  std::optional<double> camera_stop;      ///< s, no frames after this
+  std::optional<double> camera_stall;     ///< s, frames freeze (the same image, stale stamps)
+  std::optional<double> occlusion;        ///< s, the disk is hidden from here ...
+  double occlusion_duration = 0.5;        ///< s, ... for this long
+  std::optional<double> encoder_glitch;   ///< s, one encoder reading jumps ...
+  double encoder_glitch_size = 0.5;       ///< rad, ... by this much
+};
+
 struct Scene {
   std::string origin;  ///< file path (or "<string>")
   std::string name;    ///< optional `name:` key
@@ -77,6 +128,10 @@ struct Scene {
   EffectsSpec effects;
   RenderSpec render;
   std::vector<TargetSpec> targets;
+  JointSpec joint;
+  ControllerSpec controller;
+  EstimatorSpec estimator;
+  FaultSpec faults;
 };
 
 /// Parse and validate a scene (strict: unknown keys, wrong types, NaN/inf, missing required keys,

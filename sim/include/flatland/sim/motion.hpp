@@ -47,6 +47,26 @@ class FixedHand final : public HandMotion {
   HandKinematics pose_;
 };
 
+/// A hand turning about a fixed pivot with its angular acceleration held from t0 on: the motion
+/// between two ticks of a joint under digital control (zero-order hold).
+class HeldAcceleration final : public HandMotion {
+ public:
+  HeldAcceleration(double t0, double angle, double angular_velocity, double angular_acceleration)
+      : t0_(t0), angle_(angle), rate_(angular_velocity), accel_(angular_acceleration) {}
+  using HandMotion::at;
+  HandKinematics at(double t, int) const override {
+    const double tau = t - t0_;
+    HandKinematics h;
+    h.angle = angle_ + tau * (rate_ + 0.5 * tau * accel_);
+    h.angular_velocity = rate_ + tau * accel_;
+    h.angular_acceleration = accel_;
+    return h;
+  }
+
+ private:
+  double t0_, angle_, rate_, accel_;
+};
+
 /// The paper's symmetric motion (section 4.2) in normalised time u = (t - T)/T, t in [0, 2T]:
 ///   theta(t) = pi P(u) / (2 P(1)) + pi/2,  P(u) = j u + k u^3 + l u^5,  j = 1,
 /// with l = -(1 + 3k)/5 so that theta'(0) = theta'(2T) = 0. k = -2/3 gives no dip; the dip grows

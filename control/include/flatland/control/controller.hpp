@@ -1,0 +1,112 @@
+// The paper's vision-feedback controller for the butterfly (section 5) and the safe stop.
+//
+//  1. Open-loop dip: the plan's acceleration until the estimated s_h exceeds dip_until (-0.9).
+//  2. Servo: theta'' = kp (theta_p(s_h) - theta) + kd (thetadot_p(s_h) - thetadot), the plan
+//     indexed by the estimated s_h (monotonic in this stage), theta and thetadot as read.
+//  3. Open-loop finish once s_h exceeds finish_after (0.9): the rest of the plan from the planned
+//     time at which s_h = finish_after, plus a cubic that removes, by the plan's end, the angle and
+//     rate offsets the hand had when stage 3 began (so it stops at rest on the plan's end).
+// The commanded acceleration is integrated by the joint into a reference that its PD torque loop
+// tracks. Open-loop mode plays the plan's acceleration from t = 0.
+#pragma once
+
+#include "flatland/control/types.hpp"
+#include "flatland/sim/motion.hpp"
+#include "flatland/sim/simulate.hpp"
+
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace flatland::control {
+
+/// A planned hand motion over [0, duration] and the disk's planned s_h along it, with the inverse
+/// lookup t_p(s_h) over the stretch where s_h rises monotonically.
+class Plan {
+ public:
+  /// `run` is the recorded nominal simulation of `motion` (dense output over [0, duration]).
+  /// The lookup covers s_h in [s_from, s_to]; throws std::invalid_argument when the planned s_h
+  /// does not rise monotonically through that range.
+  Plan(std::shared_ptr<const sim::HandMotion> motion, double duration, const sim::RunResult& run,
+       double s_from, double s_to);
+  double duration() const { return duration_; }
+  sim::HandKinematics hand(double t) const { return motion_->at(t); }
+  /// Planned time at which s_h reaches s (clamped to the lookup range).
+  double time_at(double s_h) const;
+  /// Planned s_h at time t.
+  double s_h_at(double t) const;
+  double s_from() const { return s_.front(); }
+  double s_to() const { return s_.back(); }
+
+ private:
+  std::shared_ptr<const sim::HandMotion> motion_;
+  double duration_;
+  std::vector<double> s_, t_;          ///< lookup table, s increasing
+  std::vector<double> plan_t_, plan_s_;  ///< s_h(t) at fine steps over the whole plan
+};
+
+struct ControllerConfig {
+  bool feedback = true;  ///< false: open-loop playback of the plan
+  double kp = 100.0, kd = 20.0;
+  double dip_until = -0.9, finish_after = 0.9;
+  double stop_deceleration = 20.0;  ///< rad/s^2
+  double dt = 1e-3;                 ///< s, the control period
+};
+
+class ButterflyController {
+ public:
+  ButterflyController(std::shared_ptr<const Plan> plan, ControllerConfig config);
+  /// The command for the tick starting at t. `estimate` is ignored in open-loop mode.
+  Command step(double t, const JointReading& joint, const Estimate& estimate);
+  /// Switch to the safe stop (stays there). `reason` is kept for the log.
+  void safe_stop(double t, const std::string& reason);
+  Stage stage() const { return stage_; }
+  bool finished() const { return stage_ == Stage::kDone; }
+  bool stopped_safely() const { return stage_ == Stage::kSafeStop; }
+  const std::string& stop_reason() const { return stop_reason_; }
+  std::optional<double> t_motion_end() const { return t_end_; }  ///< when the hand stopped
+  std::optional<double> t_stage2() const { return t_stage2_; }
+  std::optional<double> t_stage3() const { return t_stage3_; }
+
+ private:
+  double plan_acceleration(double tau) const;  ///< mid-tick value for a 2nd-order reference
+  std::shared_ptr<const Plan> plan_;
+  ControllerConfig config_;
+  Stage stage_ = Stage::kWaiting;
+  std::string stop_reason_;
+  std::optional<double> t_end_, t_stage2_, t_stage3_;
+  // Stage 3: plan time at its start and the cubic correction's coefficients.
+  double tau3_ = 0, t3_ = 0, c2_ = 0, c3_ = 0;
+};
+
+/// Watches the loop's inputs for faults that call for a safe stop.
+struct SafetyConfig {
+  double lost_timeout = 0.25;      ///< s without a new measurement
+  double innovation_gate = 50.0;   ///< NIS beyond this is implausible
+  int innovation_strikes = 3;      ///< consecutive implausible innovations
+  double max_joint_jump = 0.05;    ///< rad, reading vs. prediction from the previous reading
+};
+
+class SafetyMonitor {
+ public:
+  SafetyMonitor(SafetyConfig config, double t_start);
+  /// Per tick, with the joint reading. Returns a reason when the joint reading is implausible.
+  std::optional<std::string> check_joint(const JointReading& joint);
+  /// A camera frame arrived: `fresh` if its capture time is newer than the last one, `tracked`
+  /// if the disk was found and mapped to s_h.
+  void frame(double t, bool fresh, bool tracked);
+  /// A measurement was folded in with this NIS. Returns a reason after too many strikes.
+  std::optional<std::string> innovation(double nis);
+  /// Per tick: a reason when nothing usable has been measured for too long.
+  std::optional<std::string> check_time(double t) const;
+
+ private:
+  SafetyConfig config_;
+  std::optional<JointReading> last_joint_;
+  double t_last_measurement_, t_last_frame_, t_last_fresh_;
+  bool any_frame_ = false;
+  int strikes_ = 0;
+};
+
+}  // namespace flatland::control

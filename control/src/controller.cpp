@@ -1,0 +1,242 @@
+#include "flatland/control/controller.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+namespace flatland::control {
+namespace {
+
+std::string fmt(double v, int precision = 4) {
+  std::ostringstream s;
+  s.precision(precision);
+  s << v;
+  return s.str();
+}
+
+/// Linear interpolation in a table with increasing x.
+double interpolate(const std::vector<double>& x, const std::vector<double>& y, double at) {
+  if (at <= x.front()) return y.front();
+  if (at >= x.back()) return y.back();
+  const auto it = std::upper_bound(x.begin(), x.end(), at);
+  const std::size_t i = static_cast<std::size_t>(it - x.begin());
+  const double w = (at - x[i - 1]) / (x[i] - x[i - 1]);
+  return y[i - 1] + w * (y[i] - y[i - 1]);
+}
+
+}  // namespace
+
+Plan::Plan(std::shared_ptr<const sim::HandMotion> motion, double duration,
+           const sim::RunResult& run, double s_from, double s_to)
+    : motion_(std::move(motion)), duration_(duration) {
+  if (!motion_) throw std::invalid_argument("plan: no motion");
+  if (!(duration > 0)) throw std::invalid_argument("plan: duration must be positive");
+  if (run.trajectory.empty()) throw std::invalid_argument("plan: the nominal run was not recorded");
+  if (!(s_from < s_to)) throw std::invalid_argument("plan: s_from must be below s_to");
+  // s_h(t) at 1 ms (or finer) over the plan: the stage-2 lookup interpolates linearly in it,
+  // with an error far below the tracker's (s_h moves ~1e-3 per ms at the fastest).
+  const int n = std::max(2000, static_cast<int>(std::ceil(duration / 5e-4)));
+  const double t_last = std::min(duration, run.trajectory.t_end());
+  plan_t_.reserve(n + 1);
+  plan_s_.reserve(n + 1);
+  for (int i = 0; i <= n; ++i) {
+    const double t = t_last * i / n;
+    plan_t_.push_back(t);
+    plan_s_.push_back(run.trajectory.s_h(t));
+  }
+  // The stretch from the first crossing of s_from to the first crossing of s_to.
+  std::size_t i0 = 0;
+  while (i0 < plan_s_.size() && plan_s_[i0] < s_from) ++i0;
+  if (i0 == 0 || i0 == plan_s_.size())
+    throw std::invalid_argument("plan: the planned s_h never rises through " + fmt(s_from) +
+                                " (it starts at " + fmt(plan_s_.front()) + ")");
+  std::size_t i1 = i0;
+  while (i1 < plan_s_.size() && plan_s_[i1] < s_to) ++i1;
+  if (i1 == plan_s_.size())
+    throw std::invalid_argument("plan: the planned s_h never reaches " + fmt(s_to) +
+                                " (it ends at " + fmt(plan_s_.back()) + ")");
+  const auto crossing = [&](std::size_t i, double s) {
+    const double w = (s - plan_s_[i - 1]) / (plan_s_[i] - plan_s_[i - 1]);
+    return plan_t_[i - 1] + w * (plan_t_[i] - plan_t_[i - 1]);
+  };
+  s_.push_back(s_from);
+  t_.push_back(crossing(i0, s_from));
+  for (std::size_t i = i0; i < i1; ++i) {
+    if (!(plan_s_[i] > s_.back()))
+      throw std::invalid_argument("plan: the planned s_h is not monotonic between " +
+                                  fmt(s_from) + " and " + fmt(s_to) + " (at t = " +
+                                  fmt(plan_t_[i]) + " s); stage 2 cannot index the plan by s_h");
+    s_.push_back(plan_s_[i]);
+    t_.push_back(plan_t_[i]);
+  }
+  s_.push_back(s_to);
+  t_.push_back(crossing(i1, s_to));
+}
+
+double Plan::time_at(double s_h) const { return interpolate(s_, t_, s_h); }
+double Plan::s_h_at(double t) const { return interpolate(plan_t_, plan_s_, t); }
+
+// ---------------------------------------------------------------------------------------------
+
+ButterflyController::ButterflyController(std::shared_ptr<const Plan> plan, ControllerConfig config)
+    : plan_(std::move(plan)), config_(config) {
+  if (!plan_) throw std::invalid_argument("controller: no plan");
+  if (!(config_.dt > 0)) throw std::invalid_argument("controller: dt must be positive");
+}
+
+double ButterflyController::plan_acceleration(double tau) const {
+  // The joint integrates the held command over the tick; the mid-tick value makes that
+  // integration second-order accurate, so open-loop playback ends on the plan's final angle.
+  return plan_->hand(tau + 0.5 * config_.dt).angular_acceleration;
+}
+
+void ButterflyController::safe_stop(double t, const std::string& reason) {
+  if (stage_ == Stage::kSafeStop) return;
+  stage_ = Stage::kSafeStop;
+  stop_reason_ = reason;
+  t_end_.reset();
+  (void)t;
+}
+
+Command ButterflyController::step(double t, const JointReading& joint, const Estimate& estimate) {
+  Command c;
+  c.t = t;
+  const double dt = config_.dt;
+  const double T = plan_->duration();
+
+  if (stage_ == Stage::kSafeStop) {
+    // Decelerate at most at stop_deceleration, and to exactly zero rate within one tick at the end.
+    const double a = std::min(config_.stop_deceleration, std::abs(joint.theta_dot) / dt);
+    c.theta_ddot = joint.theta_dot > 0 ? -a : a;
+    c.stage = stage_;
+    return c;
+  }
+  if (stage_ == Stage::kWaiting && t >= 0) stage_ = config_.feedback ? Stage::kDip : Stage::kOpenLoop;
+
+  switch (stage_) {
+    case Stage::kWaiting:
+      c.theta_ddot = 0;
+      break;
+    case Stage::kOpenLoop:
+      if (t >= T) {
+        stage_ = Stage::kDone;
+        t_end_ = T;
+        break;
+      }
+      c.theta_ddot = plan_acceleration(t);
+      break;
+    case Stage::kDip:
+      if (estimate.s_h > config_.dip_until) {
+        stage_ = Stage::kServo;
+        t_stage2_ = t;
+      } else {
+        c.theta_ddot = plan_acceleration(t);
+        break;
+      }
+      [[fallthrough]];
+    case Stage::kServo: {
+      if (estimate.s_h > config_.finish_after) {
+        stage_ = Stage::kFinish;
+        t_stage3_ = t;
+        t3_ = t;
+        tau3_ = plan_->time_at(config_.finish_after);
+        const double tr = T - tau3_;
+        const sim::HandKinematics p = plan_->hand(tau3_);
+        const double d_theta = joint.theta - p.angle;
+        const double d_rate = joint.theta_dot - p.angular_velocity;
+        if (tr > dt) {
+          c3_ = (2.0 * d_theta + d_rate * tr) / (tr * tr * tr);
+          c2_ = -(d_rate + 3.0 * c3_ * tr * tr) / (2.0 * tr);
+        } else {
+          c2_ = c3_ = 0;
+        }
+      } else {
+        const double tp = plan_->time_at(estimate.s_h);
+        const sim::HandKinematics p = plan_->hand(tp);
+        c.theta_ddot = config_.kp * (p.angle - joint.theta) +
+                       config_.kd * (p.angular_velocity - joint.theta_dot);
+        break;
+      }
+    }
+      [[fallthrough]];
+    case Stage::kFinish: {
+      const double elapsed = t - t3_;
+      if (tau3_ + elapsed >= T) {
+        stage_ = Stage::kDone;
+        t_end_ = t3_ + (T - tau3_);
+        break;
+      }
+      const double s = elapsed + 0.5 * dt;
+      c.theta_ddot = plan_acceleration(tau3_ + elapsed) + 2.0 * c2_ + 6.0 * c3_ * s;
+      break;
+    }
+    case Stage::kDone:
+    case Stage::kSafeStop:
+      break;
+  }
+  if (stage_ == Stage::kDone) {
+    // Hold the plan's final angle (the joint's reference would otherwise keep any rate left over
+    // from rounding).
+    const double hold = plan_->hand(T).angle;
+    c.theta_ddot = config_.kp * (hold - joint.theta) - config_.kd * joint.theta_dot;
+  }
+  c.stage = stage_;
+  return c;
+}
+
+// ---------------------------------------------------------------------------------------------
+
+SafetyMonitor::SafetyMonitor(SafetyConfig config, double t_start)
+    : config_(config),
+      t_last_measurement_(t_start),
+      t_last_frame_(t_start),
+      t_last_fresh_(t_start) {}
+
+std::optional<std::string> SafetyMonitor::check_joint(const JointReading& joint) {
+  if (!std::isfinite(joint.theta) || !std::isfinite(joint.theta_dot))
+    return "joint: non-finite reading at t = " + fmt(joint.t) + " s";
+  if (last_joint_) {
+    const double predicted =
+        last_joint_->theta + last_joint_->theta_dot * (joint.t - last_joint_->t);
+    const double jump = joint.theta - predicted;
+    if (std::abs(jump) > config_.max_joint_jump)
+      return "joint: encoder glitch at t = " + fmt(joint.t) + " s (reading " + fmt(joint.theta) +
+             " rad, " + fmt(jump) + " rad from the prediction; limit " +
+             fmt(config_.max_joint_jump) + ")";
+  }
+  last_joint_ = joint;
+  return std::nullopt;
+}
+
+void SafetyMonitor::frame(double t, bool fresh, bool tracked) {
+  any_frame_ = true;
+  t_last_frame_ = t;
+  if (fresh) t_last_fresh_ = t;
+  if (fresh && tracked) t_last_measurement_ = t;
+}
+
+std::optional<std::string> SafetyMonitor::innovation(double nis) {
+  if (nis > config_.innovation_gate) {
+    if (++strikes_ >= config_.innovation_strikes)
+      return "estimator: " + std::to_string(strikes_) +
+             " implausible innovations in a row (NIS " + fmt(nis) + " > " +
+             fmt(config_.innovation_gate) + ")";
+  } else {
+    strikes_ = 0;
+  }
+  return std::nullopt;
+}
+
+std::optional<std::string> SafetyMonitor::check_time(double t) const {
+  const double since = t - t_last_measurement_;
+  if (since <= config_.lost_timeout) return std::nullopt;
+  if (!any_frame_ || t - t_last_frame_ > config_.lost_timeout)
+    return "camera: no frames for " + fmt(t - t_last_frame_, 3) + " s (at t = " + fmt(t) + " s)";
+  if (t - t_last_fresh_ > config_.lost_timeout)
+    return "camera: stalled, no new image for " + fmt(t - t_last_fresh_, 3) + " s (at t = " +
+           fmt(t) + " s)";
+  return "tracking: disk lost for " + fmt(since, 3) + " s (at t = " + fmt(t) + " s)";
+}
+
+}  // namespace flatland::control

@@ -1,0 +1,153 @@
+// The synthetic world behind the loop's interfaces: the simulated plant (the disk rolling on the
+// hand by the exact rolling dynamics, the joint's reference integration, PD torque loop and motor
+// model loaded by the disk's contact force), a camera that renders it, and a clock that advances
+// it. Faults from the scene's `faults` section are injected here.
+#pragma once
+
+#include "flatland/drivers/interfaces.hpp"
+#include "flatland/render/renderer.hpp"
+#include "flatland/scene/scene.hpp"
+#include "flatland/sim/rolling.hpp"
+
+#include <deque>
+#include <memory>
+#include <optional>
+#include <random>
+#include <string>
+#include <vector>
+
+namespace flatland::drivers {
+
+/// The world's truth at one servo tick.
+struct WorldSample {
+  double t = 0;
+  double theta = 0, theta_dot = 0, theta_ddot = 0;  ///< hand, rad
+  double s_h = 0, sdot_h = 0;
+  double disk_angle = 0, disk_rate = 0;  ///< rad, rad/s
+  double fn_ratio = 0, ft_ratio = 0, mu_required = 0;
+  double torque = 0;     ///< N m, the drive's torque
+  double theta_ref = 0;  ///< rad, the drive's reference
+};
+
+/// Whether the disk ended in the goal well (the back well, s_h near +1) with too little energy to
+/// leave it: the energy (kinetic + potential in the table plane) below the lower of the well's rims.
+struct GoalCheck {
+  bool in_goal = false;
+  double s_h = 0;
+  double well_bottom = 0;           ///< s_h of the well's lowest point
+  double rim_left = 0, rim_right = 0;  ///< s_h of its rims
+  double energy_margin = 0;  ///< J: (lowest rim's potential) - (disk's energy); > 0 to stay
+  std::string reason;        ///< why not, when not
+};
+
+class SimWorld {
+ public:
+  /// `truth` is the scene the world obeys (perhaps perturbed from what the controller assumes).
+  /// Needs a disk. The hand rests at its motion's angle at t = 0; time starts at t_start.
+  SimWorld(const Scene& truth, double t_start);
+
+  double t() const { return t_; }
+  double servo_period() const { return dt_; }
+  /// The acceleration the loop commands, held until the next command.
+  void command(double theta_ddot) { command_ = theta_ddot; }
+  /// Advance by whole servo periods to the last tick <= t (+ half a period of slack).
+  void advance_to(double t);
+  /// The encoder's angle (quantised) and the drive's velocity estimate at the current tick.
+  control::JointReading read_encoder() const;
+
+  const std::vector<WorldSample>& history() const { return history_; }
+  /// The truth at time t, Hermite-interpolated between ticks (clamped to what has been simulated).
+  WorldSample state_at(double t) const;
+  /// What the renderer needs at time t.
+  render::SceneState scene_state_at(double t) const;
+
+  /// Set when the disk lost contact, slipped (at the scene's mu) or rolled off the hand; the
+  /// world stops there.
+  const std::optional<std::string>& failure() const { return failure_; }
+  double fn_min_ratio() const { return fn_min_; }
+  double mu_max() const { return mu_max_; }
+  GoalCheck goal_check() const;
+  const sim::RollingProblem& problem() const { return *problem_; }
+
+ private:
+  void servo_step();
+  double reaction_torque(const WorldSample& s, double alpha, double* fn_ratio) const;
+
+  Scene scene_;
+  std::shared_ptr<const sim::RollingProblem> problem_;
+  std::unique_ptr<sim::ReducedDiskRolling> rolling_;
+  sim::RunOptions step_options_;
+  double dt_ = 1e-3;
+  long tick_ = 0;
+  double t_start_ = 0, t_ = 0;
+  double command_ = 0;
+  // Plant state.
+  double theta_ = 0, theta_dot_ = 0;
+  double s_h_ = 0, sdot_h_ = 0, disk_angle_ = 0;
+  // Drive state.
+  double theta_ref_ = 0, theta_dot_ref_ = 0;
+  double encoder_ = 0, velocity_estimate_ = 0;
+  std::vector<WorldSample> history_;
+  std::optional<std::string> failure_;
+  double fn_min_ = 1e300, mu_max_ = 0;
+};
+
+/// The clock of a synthetic experiment: simulated time; sleeping advances the world.
+class SimClock final : public Clock {
+ public:
+  SimClock(SimWorld* world, double t_start) : world_(world), t_(t_start) {}
+  double now() const override { return t_; }
+  void sleep_until(double t) override {
+    if (world_) world_->advance_to(t);
+    t_ = t;
+  }
+
+ private:
+  SimWorld* world_;
+  double t_;
+};
+
+/// The simulated joint: reads the world's encoder, commands its drive. An encoder glitch from the
+/// scene's faults corrupts one reading.
+class SimJoint final : public Joint {
+ public:
+  SimJoint(SimWorld& world, const FaultSpec& faults) : world_(world), faults_(faults) {}
+  control::JointReading read(double t) override;
+  void command(double, double theta_ddot) override { world_.command(theta_ddot); }
+  std::string describe() const override { return "simulated"; }
+
+ private:
+  SimWorld& world_;
+  FaultSpec faults_;
+  bool glitched_ = false;
+};
+
+/// Renders the world through the scene's camera and effects at camera.fps from t_start, and
+/// delivers each frame camera.latency (+- latency_jitter, seeded) after its capture. Camera
+/// faults (stop, stall, occlusion) from the scene's `faults` section.
+class SyntheticCamera final : public Camera {
+ public:
+  SyntheticCamera(const Scene& scene, const SimWorld& world, double t_start);
+  std::optional<CameraFrame> poll(double now) override;
+  std::string describe() const override { return "synthetic"; }
+  const std::vector<render::FrameTruth>& truths() const { return truths_; }
+  long rendered() const { return rendered_; }
+  long dropped() const { return dropped_; }
+  std::string gl_description() const { return renderer_.gl_description(); }
+
+ private:
+  const SimWorld& world_;
+  CameraSpec camera_;
+  FaultSpec faults_;
+  render::Renderer renderer_;
+  double t_start_;
+  long next_ = 0;  ///< next nominal frame number
+  std::deque<CameraFrame> queue_;
+  std::optional<CameraFrame> last_;
+  double last_arrival_ = -1e300;
+  std::mt19937_64 latency_rng_;
+  std::vector<render::FrameTruth> truths_;
+  long rendered_ = 0, dropped_ = 0;
+};
+
+}  // namespace flatland::drivers
