@@ -262,6 +262,27 @@ TEST_F(RecordedDrivers, RecorderDestroyedWithoutFinishLeavesNothing) {
   EXPECT_TRUE(entries(dir_ / "out").empty());
 }
 
+TEST_F(RecordedDrivers, RecorderWriteFailureNamesTheFileAndLeavesNothing) {
+  const fs::path rec = dir_ / "run";
+  Recorder r(rec, {});
+  // Pull the frames directory from under the recorder: the PNG writes fail (on the writer
+  // thread; the error surfaces in a later add_frame or in finish()).
+  const auto during = entries(dir_);
+  ASSERT_EQ(during.size(), 1u);
+  fs::remove_all(dir_ / during[0] / "frames");
+  const std::string msg = message_of([&] {
+    for (int k = 0; k < 3; ++k) {
+      r.add_frame(frame(k));
+      r.add_tick(reading(k), 0);
+    }
+    r.finish();
+  });
+  EXPECT_EQ(msg, (dir_ / during[0] / "frames" / "000000.png").string() +
+                     ": cannot write the frame image");
+  EXPECT_FALSE(fs::exists(rec));
+  EXPECT_TRUE(entries(dir_).empty());
+}
+
 TEST_F(RecordedDrivers, RecorderRefusesAnExistingDirectory) {
   const fs::path rec = dir_ / "run";
   fs::create_directories(rec);
@@ -426,6 +447,12 @@ TEST_F(RecordedDrivers, BadRecordingsGiveOneLineErrorsNamingTheFileAndReason) {
          fs::resize_file(p, fs::file_size(p) - 20);
        },
        "frames/000001.png", "truncated PNG"},
+      {"directory for an image", good,
+       [](const fs::path& d) {
+         fs::remove(d / "frames/000001.png");
+         fs::create_directory(d / "frames/000001.png");
+       },
+       "frames/000001.png", "not a regular file"},
       {"not a PNG", good,
        [](const fs::path& d) { write_text(d / "frames/000000.png", "GIF89a..."); },
        "frames/000000.png", "not a PNG file"},

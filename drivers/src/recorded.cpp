@@ -423,13 +423,19 @@ void Recorder::require_open(const char* what) const {
     throw std::logic_error(std::string("Recorder::") + what + " on an abandoned recording");
 }
 
-void Recorder::check_stream(const std::ofstream& f, const std::string& name) const {
-  if (!f) throw std::runtime_error((tmp_ / name).string() + ": write error");
+void Recorder::check_stream(const std::ofstream& f, const std::string& name) {
+  if (f) return;
+  const std::string msg = (tmp_ / name).string() + ": write error";
+  abandon();  // the recording is lost: later calls fail fast instead of writing more of it
+  throw std::runtime_error(msg);
 }
 
 void Recorder::add_frame(const CameraFrame& frame) {
   require_open("add_frame");
-  if (const std::string e = writer_->first_error(); !e.empty()) throw std::runtime_error(e);
+  if (const std::string e = writer_->first_error(); !e.empty()) {
+    abandon();
+    throw std::runtime_error(e);
+  }
   const std::string which = "Recorder: frame " + std::to_string(frame.index) + ": ";
   if (frame.image.empty()) throw std::logic_error(which + "no image");
   if (frame.index < 0) throw std::logic_error(which + "negative index");

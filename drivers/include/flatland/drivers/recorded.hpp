@@ -51,7 +51,8 @@ class Recorder {
   /// acceleration it commanded.
   void add_tick(const control::JointReading& reading, double theta_ddot_cmd);
   /// Write recording.json and rename the temporary directory to DIR. std::runtime_error (naming
-  /// the file) on an I/O failure; the recording is then abandoned.
+  /// the file) on an I/O failure, here or in add_frame/add_tick; the recording is then abandoned
+  /// (its temporary directory removed) and further calls throw std::logic_error.
   void finish();
 
   const std::filesystem::path& directory() const { return dir_; }
@@ -62,7 +63,7 @@ class Recorder {
   struct FrameWriter;  // encodes PNGs on a background thread (recorded.cpp)
 
   void require_open(const char* what) const;
-  void check_stream(const std::ofstream& f, const std::string& name) const;
+  void check_stream(const std::ofstream& f, const std::string& name);
   void abandon() noexcept;
 
   std::filesystem::path dir_;
