@@ -547,6 +547,10 @@ TEST_F(RecordedVideo, PlaysEveryFrameWithItsTimestamps) {
   EXPECT_FALSE(cam.poll(1e9));
   EXPECT_EQ(cam.delivered(), 12);
   EXPECT_EQ(cam.skipped(), 0);
+
+  // The timestamps may also be named after the video's stem.
+  fs::rename(video.string() + ".timestamps.csv", dir_ / "clip.timestamps.csv");
+  EXPECT_EQ(RecordedCamera(video).records().size(), 12u);
 }
 
 TEST_F(RecordedVideo, UndecodableFrameIsSkippedWithAWarning) {
@@ -664,6 +668,7 @@ TEST(LiveDrivers, SteadyClockCountsSecondsFromItsStartAndSleeps) {
   const auto before = std::chrono::steady_clock::now();
   sleeper.sleep_until(-5.0);
   EXPECT_LT(std::chrono::steady_clock::now() - before, std::chrono::milliseconds(100));
+  EXPECT_THROW(sleeper.sleep_until(std::numeric_limits<double>::infinity()), std::invalid_argument);
   // Started 2 s ago.
   const SteadyClock old(std::chrono::steady_clock::now() - std::chrono::seconds(2));
   EXPECT_GE(old.now(), 2.0);

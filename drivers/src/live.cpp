@@ -36,6 +36,10 @@ double SteadyClock::now() const {
 }
 
 void SteadyClock::sleep_until(double t) {
+  // Converting inf or NaN to a steady_clock duration is undefined behaviour, not a long sleep.
+  if (!std::isfinite(t))
+    throw std::invalid_argument("SteadyClock::sleep_until: t must be finite, got " +
+                                std::to_string(t));
   std::this_thread::sleep_until(
       start_ + std::chrono::duration_cast<std::chrono::steady_clock::duration>(Seconds(t)));
 }

@@ -541,7 +541,11 @@ RecordedCamera::RecordedCamera(const fs::path& path) : path_(path) {
   const auto size = fs::file_size(path_, ec);
   if (ec) throw std::invalid_argument(path_.string() + ": unreadable (" + ec.message() + ")");
   if (size == 0) throw std::invalid_argument(path_.string() + ": zero-length file");
-  const fs::path stamps = path_.string() + ".timestamps.csv";
+  // run.avi.timestamps.csv, or run.timestamps.csv (named after the stem) if only that exists.
+  fs::path stamps = path_.string() + ".timestamps.csv";
+  if (fs::path alt = fs::path(path_).replace_extension(".timestamps.csv");
+      !fs::exists(stamps, ec) && fs::exists(alt, ec))
+    stamps = alt;
   if (!fs::exists(stamps, ec))
     throw std::invalid_argument(stamps.string() +
                                 ": missing (a video needs its frame times beside it)");

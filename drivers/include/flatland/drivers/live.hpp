@@ -19,7 +19,8 @@ class SteadyClock : public Clock {
   explicit SteadyClock(std::chrono::steady_clock::time_point start) : start_(start) {}
 
   double now() const override;
-  /// std::this_thread::sleep_until; returns at once for a time already past.
+  /// std::this_thread::sleep_until; returns at once for a time already past. A non-finite t is
+  /// std::invalid_argument (there is no "forever" on this clock).
   void sleep_until(double t) override;
   std::chrono::steady_clock::time_point start() const { return start_; }
 

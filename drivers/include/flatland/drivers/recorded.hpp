@@ -87,8 +87,9 @@ struct FrameRecord {
 };
 
 /// Plays back frames: either a recording directory (DIR/frames.csv and the images it lists) or a
-/// video file with its timestamps in FILE.timestamps.csv beside it (columns
-/// index,t_capture,t_arrival; one row per video frame, in order). Everything that can be checked
+/// video file with its timestamps in FILE.timestamps.csv beside it ("run.avi.timestamps.csv";
+/// "run.timestamps.csv" is taken if only that exists; columns index,t_capture,t_arrival; one row
+/// per video frame, in order). Everything that can be checked
 /// without decoding every frame is checked by the constructor, which throws a one-line
 /// std::invalid_argument naming the file and the reason. Frames are decoded when poll() hands
 /// them out; one that fails to decode then is skipped with a warning on stderr.
