@@ -62,9 +62,10 @@ SimWorld::SimWorld(const Scene& truth, double t_start)
   const double q = 2.0 * M_PI / static_cast<double>(truth.joint.encoder_counts);
   encoder_ = std::round(theta_ / q) * q;
   history_.reserve(8192);
+  history_.push_back(sample_now(0.0, 0.0));
 }
 
-double SimWorld::reaction_torque(const WorldSample& w, double alpha, double* fn_ratio) const {
+double SimWorld::reaction_torque(const WorldSample& w, double alpha) const {
   sim::HandKinematics h;
   h.angle = w.theta;
   h.angular_velocity = w.theta_dot;
@@ -78,21 +79,39 @@ double SimWorld::reaction_torque(const WorldSample& w, double alpha, double* fn_
   const sim::Vec2 force_on_disk =
       s.force_normal * (R * g.normal) + s.force_tangential * (R * g.tangent);
   const sim::Vec2 contact = R * g.point;  // from the pivot
-  if (fn_ratio) *fn_ratio = s.fn_ratio;
   // The disk pushes back on the hand with -force_on_disk at the contact point.
   return -(contact.x() * force_on_disk.y() - contact.y() * force_on_disk.x());
 }
 
-void SimWorld::servo_step() {
-  const JointSpec& j = scene_.joint;
+WorldSample SimWorld::sample_now(double alpha, double torque) const {
   WorldSample w;
   w.t = t_;
   w.theta = theta_;
   w.theta_dot = theta_dot_;
+  w.theta_ddot = alpha;
   w.s_h = s_h_;
   w.sdot_h = sdot_h_;
   w.disk_angle = disk_angle_;
   w.theta_ref = theta_ref_;
+  w.torque = torque;
+  sim::HandKinematics h;
+  h.angle = theta_;
+  h.angular_velocity = theta_dot_;
+  h.angular_acceleration = alpha;
+  const int piece = problem_->hand->piece_at(s_h_, sdot_h_ >= 0 ? +1 : -1);
+  sim::ReducedDiskRolling::State y;
+  y << s_h_, disk_angle_, sdot_h_;
+  const sim::Sample s = rolling_->sample_with(h, t_, y, piece);
+  w.fn_ratio = s.fn_ratio;
+  w.ft_ratio = s.ft_ratio;
+  w.mu_required = s.mu_required;
+  w.disk_rate = s.object_angular_velocity;
+  return w;
+}
+
+void SimWorld::servo_step() {
+  const JointSpec& j = scene_.joint;
+  const WorldSample& now = history_.back();
 
   // The drive: feedforward of the commanded acceleration on the nominal inertia, PD on the
   // reference, saturated.
@@ -100,8 +119,8 @@ void SimWorld::servo_step() {
                          j.kd * (theta_dot_ref_ - velocity_estimate_);
   const double tau = std::clamp(tau_cmd, -j.torque_limit, j.torque_limit);
   // The disk's reaction is affine in the hand's acceleration: tau_disk = r0 + r1 alpha.
-  const double r0 = reaction_torque(w, 0.0, nullptr);
-  const double r1 = reaction_torque(w, 1.0, nullptr) - r0;
+  const double r0 = reaction_torque(now, 0.0);
+  const double r1 = reaction_torque(now, 1.0) - r0;
   const double drive = tau - j.viscous * theta_dot_ + r0;
   double alpha = 0;
   bool stop_at_end = false;
@@ -118,27 +137,10 @@ void SimWorld::servo_step() {
       stop_at_end = true;
     }
   }
-  w.theta_ddot = alpha;
-  w.torque = tau;
-  double fn_ratio = 0;
-  (void)reaction_torque(w, alpha, &fn_ratio);
-  {
-    sim::HandKinematics h;
-    h.angle = theta_;
-    h.angular_velocity = theta_dot_;
-    h.angular_acceleration = alpha;
-    const int piece = problem_->hand->piece_at(s_h_, sdot_h_ >= 0 ? +1 : -1);
-    sim::ReducedDiskRolling::State y;
-    y << s_h_, disk_angle_, sdot_h_;
-    const sim::Sample s = rolling_->sample_with(h, t_, y, piece);
-    w.fn_ratio = s.fn_ratio;
-    w.ft_ratio = s.ft_ratio;
-    w.mu_required = s.mu_required;
-    w.disk_rate = s.object_angular_velocity;
-  }
-  history_.push_back(w);
-  fn_min_ = std::min(fn_min_, w.fn_ratio);
-  if (std::isfinite(w.mu_required)) mu_max_ = std::max(mu_max_, w.mu_required);
+  // The forces just after this tick (the acceleration jumps at ticks, and with it the force).
+  const WorldSample start = sample_now(alpha, tau);
+  fn_min_ = std::min(fn_min_, start.fn_ratio);
+  if (std::isfinite(start.mu_required)) mu_max_ = std::max(mu_max_, start.mu_required);
 
   // The disk over this period, by the exact rolling dynamics under the held acceleration.
   auto problem = std::make_shared<sim::RollingProblem>(*problem_);
@@ -176,6 +178,8 @@ void SimWorld::servo_step() {
   encoder_ = std::round(theta_ / q) * q;
   const double raw = (encoder_ - previous) / dt_;
   velocity_estimate_ += (raw - velocity_estimate_) * dt_ / (j.velocity_filter + dt_);
+  // The state at the new tick (forces with the acceleration held up to it).
+  history_.push_back(sample_now(alpha, tau));
 }
 
 void SimWorld::advance_to(double t) {

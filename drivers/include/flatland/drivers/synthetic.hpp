@@ -71,7 +71,8 @@ class SimWorld {
 
  private:
   void servo_step();
-  double reaction_torque(const WorldSample& s, double alpha, double* fn_ratio) const;
+  double reaction_torque(const WorldSample& s, double alpha) const;
+  WorldSample sample_now(double alpha, double torque) const;
 
   Scene scene_;
   std::shared_ptr<const sim::RollingProblem> problem_;

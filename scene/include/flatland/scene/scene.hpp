@@ -79,7 +79,7 @@ struct JointSpec {
   double viscous = 0.02;          ///< N m s/rad, viscous friction
   double coulomb = 0.05;          ///< N m, Coulomb (dry) friction
   double torque_limit = 10.0;     ///< N m, the drive saturates here
-  long encoder_counts = 65536;    ///< counts per revolution
+  long encoder_counts = 1048576;  ///< counts per revolution (a 20-bit encoder)
   double kp = 500.0;              ///< N m/rad, PD torque loop
   double kd = 10.0;               ///< N m s/rad
   double velocity_filter = 0.002;  ///< s, time constant of the drive's velocity estimate

@@ -1,0 +1,115 @@
+// The closed loop of one butterfly experiment (paper section 5), run against any Clock, Camera
+// and Joint: each 1 kHz tick reads the joint, turns arrived frames into measurements of s_h
+// (tracker -> pixel -> table -> hand -> s_h at the hand angle of the capture time), folds them
+// into the estimator, asks the controller for an acceleration, commands the joint and propagates
+// the estimator over the tick. The same code runs synthetic, recorded and live experiments.
+#pragma once
+
+#include "flatland/control/controller.hpp"
+#include "flatland/control/estimator.hpp"
+#include "flatland/drivers/interfaces.hpp"
+#include "flatland/drivers/synthetic.hpp"
+#include "flatland/scene/scene.hpp"
+#include "flatland/vision/mapping.hpp"
+#include "flatland/vision/tracker.hpp"
+
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace flatland::drivers {
+
+class Recorder;
+
+/// The nominal plan of a scene: its motion (k as given, or solved for the period when
+/// controller.plan is "solve"), simulated once on the nominal model.
+struct PlanInfo {
+  std::shared_ptr<const control::Plan> plan;
+  double period = 0, k = 0;
+  bool solved = false;
+};
+PlanInfo make_plan(const Scene& nominal);
+
+/// One row of the 1 kHz log.
+struct TickLog {
+  double t = 0;
+  double theta = 0, theta_dot = 0;  ///< as read
+  double command = 0;               ///< rad/s^2
+  control::Stage stage = control::Stage::kWaiting;
+  double s_est = 0, sdot_est = 0, var_s = 0, var_sdot = 0;  ///< estimate at t (before the tick)
+  bool estimating = false;
+  bool measured = false;  ///< a measurement was folded in at this tick
+  double s_meas = 0, nis = 0;
+  double theta_plan = 0;  ///< the plan's angle for the estimated s_h (stage 2) or time
+  // Truth (synthetic runs only; NaN otherwise).
+  double s_true = 0, sdot_true = 0, theta_true = 0, fn_ratio = 0, mu_required = 0, nees = 0;
+};
+
+struct LoopOptions {
+  double t_start = -0.25;  ///< s; the hand waits until t = 0 while the estimator locks on
+  std::optional<long> max_ticks;  ///< replay: stop after the recorded number of ticks
+  Recorder* recorder = nullptr;
+  /// Synthetic runs: the world's truth and its failure (contact lost, slip).
+  const SimWorld* world = nullptr;
+  /// Called for each frame the loop receives, with what the tracker made of it.
+  std::function<void(const CameraFrame&, const vision::TrackResult&,
+                     const std::optional<control::Measurement>&)>
+      on_frame;
+  std::function<void(double t, double t_end_estimate)> progress;
+};
+
+struct LoopResult {
+  std::vector<TickLog> log;
+  double duration_s = 0;  ///< from t = 0 until the hand stopped (NaN if it never finished)
+  bool finished = false;  ///< the controller completed its motion
+  bool safe_stop = false;
+  std::string stop_reason;  ///< safe-stop or failure reason
+  long frames = 0;          ///< frames received
+  long frames_lost = 0;     ///< received but not usable (disk not found, stale, not mapped)
+  long measurements = 0;
+  std::optional<double> t_stage2, t_stage3;
+  double k = 0, period = 0;  ///< the plan used
+  long estimator_steps = 0, estimator_repropagated = 0;
+};
+
+/// Everything the loop needs from the nominal scene; built once per experiment.
+struct LoopSetup {
+  explicit LoopSetup(const Scene& nominal);
+  Scene scene;
+  PlanInfo plan;
+  vision::HandMapping mapping;
+  vision::TrackerConfig tracker;
+  control::EstimatorConfig estimator;
+  control::ControllerConfig controller;
+  control::SafetyConfig safety;
+};
+
+LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint& joint,
+                    const LoopOptions& options);
+
+/// A whole synthetic experiment: the world obeys `truth`, the loop assumes `setup.scene`.
+struct SyntheticResult {
+  LoopResult loop;
+  bool success = false;
+  std::string failure;  ///< why not (contact lost, slip, not in the goal well, safe stop)
+  double s_end = 0;
+  double fn_min_ratio = 0, mu_max = 0;
+  GoalCheck goal;
+  long frames_rendered = 0, frames_dropped = 0;
+  double nees_mean = 0;  ///< over frame-arrival ticks
+  long nees_samples = 0;
+  std::string gl;
+};
+struct SyntheticOptions {
+  Recorder* recorder = nullptr;
+  std::function<void(const CameraFrame&, const vision::TrackResult&,
+                     const std::optional<control::Measurement>&)>
+      on_frame;
+  std::function<void(double t, double t_end_estimate)> progress;
+};
+SyntheticResult run_synthetic(const LoopSetup& setup, const Scene& truth,
+                              const SyntheticOptions& options = {});
+
+}  // namespace flatland::drivers

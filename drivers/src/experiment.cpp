@@ -1,0 +1,298 @@
+#include "flatland/drivers/experiment.hpp"
+
+#include "flatland/drivers/recorded.hpp"
+#include "flatland/render/camera.hpp"
+#include "flatland/sim/search.hpp"
+#include "flatland/sim/spec.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <deque>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+
+namespace flatland::drivers {
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+std::string fmt(double v) {
+  std::ostringstream s;
+  s.precision(5);
+  s << v;
+  return s.str();
+}
+
+/// The hand angle at a past time from the joint readings of the last ticks (linear between
+/// ticks: the frames' capture times fall between them).
+class AngleHistory {
+ public:
+  void add(double t, double theta) {
+    samples_.push_back({t, theta});
+    while (samples_.size() > 1024) samples_.pop_front();
+  }
+  std::optional<double> at(double t) const {
+    if (samples_.empty() || t < samples_.front().first) return std::nullopt;
+    if (t >= samples_.back().first) return samples_.back().second;
+    auto it = std::upper_bound(samples_.begin(), samples_.end(), t,
+                               [](double v, const auto& s) { return v < s.first; });
+    const auto& b = *it;
+    const auto& a = *(it - 1);
+    const double w = (t - a.first) / (b.first - a.first);
+    return a.second + w * (b.second - a.second);
+  }
+
+ private:
+  std::deque<std::pair<double, double>> samples_;
+};
+
+}  // namespace
+
+PlanInfo make_plan(const Scene& nominal) {
+  const sim::SimulationSpec& spec = nominal.sim;
+  if (spec.motion.kind != sim::MotionSpec::Kind::kButterfly)
+    throw std::invalid_argument(nominal.origin +
+                                ": motion: the closed loop follows a butterfly plan "
+                                "(motion.type: butterfly)");
+  PlanInfo info;
+  info.period = spec.motion.period;
+  info.k = spec.motion.k;
+  sim::SimulationSpec plan_spec = spec;
+  plan_spec.duration = info.period;
+  plan_spec.run.record = true;
+  plan_spec.run.events.stop_on_contact_loss = false;  // the plan is followed whatever it does
+  plan_spec.run.events.mu.reset();
+  if (nominal.controller.plan == "solve") {
+    const sim::SolveReport sol = sim::solve_k(spec, info.period);
+    info.k = sol.k;
+    info.solved = true;
+  }
+  plan_spec.motion.k = info.k;
+  const sim::RunResult run = sim::run_spec(plan_spec);
+  auto motion = std::make_shared<sim::ButterflyMotion>(info.period, info.k);
+  info.plan = std::make_shared<control::Plan>(motion, info.period, run,
+                                              nominal.controller.dip_until,
+                                              nominal.controller.finish_after);
+  return info;
+}
+
+LoopSetup::LoopSetup(const Scene& nominal) : scene(nominal) {
+  if (!nominal.camera)
+    throw std::invalid_argument(nominal.origin +
+                                ": camera: the closed loop needs a camera section (its model "
+                                "maps tracked pixels to the table)");
+  if (nominal.sim.object.kind != sim::ObjectSpec::Kind::kDisk)
+    throw std::invalid_argument(nominal.origin +
+                                ": object: the closed loop rolls a disk (object.type: disk)");
+  plan = make_plan(nominal);
+  const render::CameraModel camera = render::CameraModel::from_spec(*nominal.camera);
+  mapping.camera = camera;
+  mapping.plane_z = nominal.render.disk_thickness;  // the tracked edge is the disk's top face
+  mapping.disk_radius = nominal.sim.object.radius;
+  const sim::HandSpec& h = nominal.sim.hand;
+  mapping.hand = sim::PolynomialHand(h.a, h.b, h.c, h.d);
+  tracker.camera = camera;
+  tracker.plane_z = nominal.render.disk_thickness;
+
+  estimator.model = control::parse_estimator_model(nominal.estimator.model);
+  estimator.latency_compensation = nominal.estimator.latency_compensation;
+  estimator.process_noise = nominal.estimator.process_noise;
+  estimator.history = std::max(estimator.history, 3.0 * (nominal.camera->latency +
+                                                          nominal.camera->latency_jitter) +
+                                                      2.0 / nominal.camera->fps);
+
+  const ControllerSpec& c = nominal.controller;
+  controller.feedback = c.mode == "feedback";
+  controller.kp = c.kp;
+  controller.kd = c.kd;
+  controller.dip_until = c.dip_until;
+  controller.finish_after = c.finish_after;
+  controller.stop_deceleration = c.stop_deceleration;
+  controller.dt = 1.0 / nominal.joint.rate;
+  safety.lost_timeout = c.lost_timeout;
+  safety.innovation_gate = c.innovation_gate;
+  safety.innovation_strikes = c.innovation_strikes;
+  safety.max_joint_jump = c.max_joint_jump;
+}
+
+LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint& joint,
+                    const LoopOptions& options) {
+  const Scene& scene = setup.scene;
+  const double dt = 1.0 / scene.joint.rate;
+  const double t_start = options.t_start;
+  const control::Plan& plan = *setup.plan.plan;
+  const double t_limit = 2.0 * plan.duration() + 2.0;  // a stalled stage 2 ends in a safe stop
+
+  LoopResult out;
+  out.k = setup.plan.k;
+  out.period = setup.plan.period;
+  out.duration_s = kNaN;
+  auto nominal_problem = sim::build_problem(scene.sim);
+  control::Estimator estimator(nominal_problem, setup.estimator);
+  control::ButterflyController controller(setup.plan.plan, setup.controller);
+  control::SafetyMonitor safety(setup.safety, t_start);
+  vision::Tracker tracker(setup.tracker);
+  AngleHistory angles;
+  bool estimating = false;
+  double last_capture = -std::numeric_limits<double>::infinity();
+  std::optional<double> t_rest;  // when the hand came to rest after finishing or stopping
+  const double settle = scene.controller.settle;
+  out.log.reserve(static_cast<std::size_t>((t_limit - t_start + settle) * scene.joint.rate) + 16);
+
+  for (long tick = 0;; ++tick) {
+    if (options.max_ticks && tick >= *options.max_ticks) break;
+    // Integer tick arithmetic: a replay computes the very same times.
+    const double t = t_start + static_cast<double>(tick) * dt;
+    if (options.world && options.world->failure()) {
+      out.stop_reason = *options.world->failure();
+      break;
+    }
+    TickLog row;
+    row.t = t;
+    const control::JointReading reading = joint.read(t);
+    row.theta = reading.theta;
+    row.theta_dot = reading.theta_dot;
+    angles.add(t, reading.theta);
+    if (auto why = safety.check_joint(reading)) controller.safe_stop(t, *why);
+
+    // Frames that have arrived: track, map to s_h, fold in.
+    while (auto frame = camera.poll(t)) {
+      ++out.frames;
+      if (options.recorder) options.recorder->add_frame(*frame);
+      const bool fresh = frame->t_capture > last_capture;
+      vision::TrackResult tr;
+      std::optional<control::Measurement> z;
+      if (fresh) {
+        last_capture = frame->t_capture;
+        tr = tracker.track(frame->image);
+        const std::optional<double> theta = angles.at(frame->t_capture);
+        if (tr.ok() && theta) {
+          const double guess = estimating ? estimator.estimate().s_h : scene.sim.initial.s_h;
+          const auto c = vision::pixel_to_contact(setup.mapping, tr.center, *theta, guess, 0.5);
+          if (c) {
+            // The tracker's 1-sigma per pixel coordinate, carried through the mapping by finite
+            // differences (a floor for what the tracker's own estimate leaves out).
+            const double sp = std::max(tr.sigma_px, 0.02);
+            const auto cx = vision::pixel_to_contact(setup.mapping, tr.center + cv::Point2d(sp, 0),
+                                                     *theta, c->s_h, 0.05);
+            const auto cy = vision::pixel_to_contact(setup.mapping, tr.center + cv::Point2d(0, sp),
+                                                     *theta, c->s_h, 0.05);
+            double sigma = 1e-4;
+            if (cx && cy) sigma = std::max(std::hypot(cx->s_h - c->s_h, cy->s_h - c->s_h), 1e-6);
+            z = control::Measurement{frame->t_capture, frame->t_arrival, c->s_h, sigma};
+          }
+        }
+      }
+      safety.frame(t, fresh, z.has_value());
+      if (z) {
+        ++out.measurements;
+        if (!estimating) {
+          estimator.reset(t, z->s_h, 0.0);
+          estimating = true;
+        } else {
+          const control::UpdateReport u = estimator.update(*z);
+          row.nis = u.nis;
+          if (auto why = safety.innovation(u.nis)) controller.safe_stop(t, *why);
+        }
+        row.measured = true;
+        row.s_meas = z->s_h;
+      } else {
+        ++out.frames_lost;
+      }
+      if (options.on_frame) options.on_frame(*frame, tr, z);
+    }
+    if (auto why = safety.check_time(t)) controller.safe_stop(t, *why);
+    if (t > t_limit) controller.safe_stop(t, "timeout: the motion did not finish by t = " +
+                                                 fmt(t_limit) + " s");
+
+    control::Estimate est;
+    if (estimating) est = estimator.estimate();
+    else est.s_h = scene.sim.initial.s_h;
+    row.estimating = estimating;
+    row.s_est = est.s_h;
+    row.sdot_est = est.sdot_h;
+    row.var_s = est.covariance(0, 0);
+    row.var_sdot = est.covariance(1, 1);
+    const control::Command cmd = controller.step(t, reading, est);
+    row.command = cmd.theta_ddot;
+    row.stage = cmd.stage;
+    row.theta_plan = cmd.stage == control::Stage::kServo
+                         ? plan.hand(plan.time_at(est.s_h)).angle
+                         : plan.hand(std::max(t, 0.0)).angle;
+    joint.command(t, cmd.theta_ddot);
+    if (options.recorder) options.recorder->add_tick(reading, cmd.theta_ddot);
+    if (options.world) {
+      const WorldSample w = options.world->state_at(t);
+      row.s_true = w.s_h;
+      row.sdot_true = w.sdot_h;
+      row.theta_true = w.theta;
+      row.fn_ratio = w.fn_ratio;
+      row.mu_required = w.mu_required;
+      row.nees = estimating ? control::nees(est, w.s_h, w.sdot_h) : kNaN;
+    } else {
+      row.s_true = row.sdot_true = row.theta_true = row.fn_ratio = row.mu_required = row.nees =
+          kNaN;
+    }
+    out.log.push_back(row);
+
+    // Ending: settle after the hand has stopped (finished or safe-stopped).
+    if ((controller.finished() || controller.stopped_safely()) && !t_rest &&
+        std::abs(reading.theta_dot) < 1e-3)
+      t_rest = t;
+    if (t_rest && t >= *t_rest + settle) break;
+
+    const double t_next = t_start + static_cast<double>(tick + 1) * dt;
+    if (estimating) estimator.propagate(t_next, {reading.theta, reading.theta_dot, cmd.theta_ddot});
+    if (options.progress && tick % 100 == 0)
+      options.progress(t, plan.duration() + settle);
+    clock.sleep_until(t_next);
+  }
+  out.finished = controller.finished();
+  out.safe_stop = controller.stopped_safely();
+  if (out.safe_stop) out.stop_reason = controller.stop_reason();
+  if (controller.t_motion_end()) out.duration_s = *controller.t_motion_end();
+  out.t_stage2 = controller.t_stage2();
+  out.t_stage3 = controller.t_stage3();
+  out.estimator_steps = estimator.steps();
+  out.estimator_repropagated = estimator.repropagated_steps();
+  return out;
+}
+
+SyntheticResult run_synthetic(const LoopSetup& setup, const Scene& truth,
+                              const SyntheticOptions& options) {
+  LoopOptions lo;
+  SimWorld world(truth, lo.t_start);
+  SimClock clock(&world, lo.t_start);
+  SimJoint joint(world, truth.faults);
+  SyntheticCamera camera(truth, world, lo.t_start);
+  lo.world = &world;
+  lo.recorder = options.recorder;
+  lo.on_frame = options.on_frame;
+  lo.progress = options.progress;
+
+  SyntheticResult r;
+  r.loop = run_loop(setup, clock, camera, joint, lo);
+  r.gl = camera.gl_description();
+  r.frames_rendered = camera.rendered();
+  r.frames_dropped = camera.dropped();
+  r.goal = world.goal_check();
+  r.s_end = r.goal.s_h;
+  r.fn_min_ratio = world.fn_min_ratio();
+  r.mu_max = world.mu_max();
+  double nees_sum = 0;
+  for (const TickLog& row : r.loop.log)
+    if (row.measured && std::isfinite(row.nees)) {
+      nees_sum += row.nees;
+      ++r.nees_samples;
+    }
+  r.nees_mean = r.nees_samples ? nees_sum / static_cast<double>(r.nees_samples) : kNaN;
+  if (world.failure()) r.failure = *world.failure();
+  else if (r.loop.safe_stop) r.failure = "safe stop: " + r.loop.stop_reason;
+  else if (!r.loop.finished) r.failure = "the motion did not finish";
+  else if (!r.goal.in_goal) r.failure = r.goal.reason;
+  r.success = r.failure.empty();
+  return r;
+}
+
+}  // namespace flatland::drivers
