@@ -1,0 +1,132 @@
+// Cost of the contact estimator per 1 kHz tick (docs/ESTIMATOR.md): one propagation step, one
+// latency-compensated update (rewind 33 ms, correct, re-propagate), and the average tick of a
+// loop with a 30 Hz camera. The budget for estimator + controller is 5 us per tick.
+// Run: build/bin/flatland_control_bench
+#include <benchmark/benchmark.h>
+
+#include "flatland/control/estimator.hpp"
+#include "flatland/sim/spec.hpp"
+
+#include <numbers>
+
+using namespace flatland;
+
+namespace {
+
+constexpr double kDt = 1e-3;
+
+// The air-table butterfly (5 deg, 2T = 4 s): the model and, from its motion, realistic inputs.
+sim::SimulationSpec spec() {
+  sim::SimulationSpec spec;
+  spec.tilt = 5.0 * std::numbers::pi / 180.0;
+  spec.motion.period = 4.0;
+  spec.motion.k = -1.1395840;
+  return spec;
+}
+
+std::shared_ptr<const sim::RollingProblem> model() {
+  static const auto pb = sim::build_problem(spec());
+  return pb;
+}
+
+// Mid-roll (from t = 1.5 s, the disk moving toward the fingertip): the true trajectory and the
+// inputs for a window of ticks, precomputed so the benchmark measures the estimator only.
+struct Window {
+  static constexpr int kCount = 1000;
+  double t0 = 1.5;
+  control::HandInput u[kCount];
+  double s_true[kCount + 1], sdot0 = 0;
+  Window() {
+    const sim::RunResult run = sim::run_spec(spec());
+    const sim::HandMotion& m = *model()->motion;
+    for (int i = 0; i < kCount; ++i) {
+      const sim::HandKinematics k = m.at(t0 + i * kDt);
+      u[i] = {k.angle, k.angular_velocity, m.at(t0 + (i + 0.5) * kDt).angular_acceleration};
+    }
+    for (int i = 0; i <= kCount; ++i) s_true[i] = run.trajectory.s_h(t0 + i * kDt);
+    sdot0 = run.trajectory.sample(t0).sdot_h;
+  }
+};
+const Window& inputs() {
+  static const Window in;
+  return in;
+}
+using Inputs = Window;
+
+// Starts the estimator at t0 on the true state with 400 ms of history behind it.
+control::Estimator warmed_up(control::EstimatorConfig cfg = {}) {
+  const Window& w = inputs();
+  control::Estimator est(model(), cfg);
+  est.reset(w.t0, w.s_true[0], w.sdot0);
+  for (int i = 0; i < 400; ++i) est.propagate(w.t0 + (i + 1) * kDt, w.u[i]);
+  return est;
+}
+
+void BM_EstimatorPropagate(benchmark::State& state) {
+  control::EstimatorConfig cfg;
+  cfg.model = static_cast<control::EstimatorModel>(state.range(0));
+  control::Estimator est = warmed_up(cfg);
+  const Inputs& in = inputs();
+  long i = 400;
+  for (auto _ : state) {
+    if (i == Inputs::kCount) {  // stay inside the window: restart (outside the timing)
+      state.PauseTiming();
+      est = warmed_up(cfg);
+      i = 400;
+      state.ResumeTiming();
+    }
+    est.propagate(in.t0 + (i + 1) * kDt, in.u[i]);
+    ++i;
+    benchmark::DoNotOptimize(est);
+  }
+  state.SetLabel(control::to_string(cfg.model));
+}
+BENCHMARK(BM_EstimatorPropagate)->Arg(0)->Arg(1);
+
+// One update captured 33 ms ago (mid-tick): rewinds through 33 stored steps.
+void BM_EstimatorUpdateWithLatency(benchmark::State& state) {
+  const control::Estimator base = warmed_up();
+  const double now = base.estimate().t;
+  const control::Measurement z{now - 0.0325, now, inputs().s_true[367] + 1e-4, 2e-4};
+  control::Estimator est = base;
+  int repropagated = 0;
+  for (auto _ : state) {
+    state.PauseTiming();
+    est = base;  // the same history every time
+    state.ResumeTiming();
+    const control::UpdateReport r = est.update(z);
+    repropagated = r.repropagated_steps;
+    benchmark::DoNotOptimize(r);
+  }
+  state.counters["repropagated"] = repropagated;
+}
+BENCHMARK(BM_EstimatorUpdateWithLatency);
+
+// The loop's average tick: propagate every 1 ms, an update (33 ms old) every 33 ticks.
+void BM_EstimatorTick(benchmark::State& state) {
+  control::Estimator est = warmed_up();
+  const Inputs& in = inputs();
+  long i = 400, tick = 0;
+  for (auto _ : state) {
+    if (i == Inputs::kCount) {
+      state.PauseTiming();
+      est = warmed_up();
+      i = 400;
+      state.ResumeTiming();
+    }
+    const double t1 = in.t0 + (i + 1) * kDt;
+    est.propagate(t1, in.u[i]);
+    if (++tick % 33 == 0) {
+      // Captured 32.5 ms ago (mid-tick): the truth there, near enough for timing.
+      const control::UpdateReport r = est.update({t1 - 0.0325, t1, in.s_true[i - 32], 2e-4});
+      benchmark::DoNotOptimize(r);
+    }
+    ++i;
+    benchmark::DoNotOptimize(est);
+  }
+}
+BENCHMARK(BM_EstimatorTick);
+
+}  // namespace
+
+BENCHMARK_MAIN();
