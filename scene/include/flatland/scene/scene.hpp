@@ -91,8 +91,8 @@ struct ControllerSpec {
   std::string mode = "feedback";  ///< feedback | open-loop
   /// Plan: the scene's motion as given ("scene") or with k solved for the scene's period ("solve").
   std::string plan = "scene";
-  double kp = 100.0;              ///< 1/s^2, stage 2: theta'' = kp (theta_p(s) - theta) + ...
-  double kd = 20.0;               ///< 1/s
+  double kp = 900.0;              ///< 1/s^2, stage 2: theta'' = kp (theta_p(s) - theta) + ...
+  double kd = 60.0;               ///< 1/s (critically damped at 30 rad/s with kp)
   double dip_until = -0.9;        ///< stage 1 ends when the estimated s_h exceeds this
   double finish_after = 0.9;      ///< stage 3 starts when the estimated s_h exceeds this
   double lost_timeout = 0.25;     ///< s without a usable measurement -> safe stop
@@ -107,7 +107,7 @@ struct ControllerSpec {
 struct EstimatorSpec {
   std::string model = "rolling";  ///< rolling | constant-velocity
   bool latency_compensation = true;
-  double process_noise = 0.05;    ///< 1/s^2 per sqrt(Hz), white noise on sddot_h
+  double process_noise = 0.0043;  ///< 1/s^2 per sqrt(Hz), white noise on sddot_h (docs/ESTIMATOR.md)
 };
 
 /// Faults injected into a synthetic experiment (section `faults`), to test the safe stop.
