@@ -144,10 +144,6 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
     if (options.max_ticks && tick >= *options.max_ticks) break;
     // Integer tick arithmetic: a replay computes the very same times.
     const double t = t_start + static_cast<double>(tick) * dt;
-    if (options.world && options.world->failure()) {
-      out.stop_reason = *options.world->failure();
-      break;
-    }
     TickLog row;
     row.t = t;
     const control::JointReading reading = joint.read(t);
@@ -203,6 +199,9 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
       if (options.on_frame) options.on_frame(*frame, tr, z);
     }
     if (auto why = safety.check_time(t)) controller.safe_stop(t, *why);
+    // Synthetic runs: the disk has left the hand (contact lost, slip); stop the hand safely.
+    if (options.world && options.world->failure())
+      controller.safe_stop(t, "disk: " + *options.world->failure());
     if (t > t_limit) controller.safe_stop(t, "timeout: the motion did not finish by t = " +
                                                  fmt(t_limit) + " s");
 

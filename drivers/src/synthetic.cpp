@@ -94,6 +94,7 @@ WorldSample SimWorld::sample_now(double alpha, double torque) const {
   w.disk_angle = disk_angle_;
   w.theta_ref = theta_ref_;
   w.torque = torque;
+  if (failure_) return w;  // the disk has left the hand: no contact forces
   sim::HandKinematics h;
   h.angle = theta_;
   h.angular_velocity = theta_dot_;
@@ -109,39 +110,7 @@ WorldSample SimWorld::sample_now(double alpha, double torque) const {
   return w;
 }
 
-void SimWorld::servo_step() {
-  const JointSpec& j = scene_.joint;
-  const WorldSample& now = history_.back();
-
-  // The drive: feedforward of the commanded acceleration on the nominal inertia, PD on the
-  // reference, saturated.
-  const double tau_cmd = j.inertia * command_ + j.kp * (theta_ref_ - encoder_) +
-                         j.kd * (theta_dot_ref_ - velocity_estimate_);
-  const double tau = std::clamp(tau_cmd, -j.torque_limit, j.torque_limit);
-  // The disk's reaction is affine in the hand's acceleration: tau_disk = r0 + r1 alpha.
-  const double r0 = reaction_torque(now, 0.0);
-  const double r1 = reaction_torque(now, 1.0) - r0;
-  const double drive = tau - j.viscous * theta_dot_ + r0;
-  double alpha = 0;
-  bool stop_at_end = false;
-  if (theta_dot_ == 0.0 && std::abs(drive) <= j.coulomb) {
-    alpha = 0;  // stiction holds
-  } else {
-    const double direction = theta_dot_ != 0.0 ? (theta_dot_ > 0 ? 1.0 : -1.0)
-                                               : (drive > 0 ? 1.0 : -1.0);
-    alpha = (drive - j.coulomb * direction) / (j.inertia - r1);
-    const double next_rate = theta_dot_ + alpha * dt_;
-    if (theta_dot_ != 0.0 && next_rate * theta_dot_ < 0 && std::abs(drive) <= j.coulomb) {
-      // Dry friction brings the joint to rest within this period rather than reversing it.
-      alpha = -theta_dot_ / dt_;
-      stop_at_end = true;
-    }
-  }
-  // The forces just after this tick (the acceleration jumps at ticks, and with it the force).
-  const WorldSample start = sample_now(alpha, tau);
-  fn_min_ = std::min(fn_min_, start.fn_ratio);
-  if (std::isfinite(start.mu_required)) mu_max_ = std::max(mu_max_, start.mu_required);
-
+void SimWorld::step_disk(double alpha) {
   // The disk over this period, by the exact rolling dynamics under the held acceleration.
   auto problem = std::make_shared<sim::RollingProblem>(*problem_);
   problem->motion = std::make_shared<sim::HeldAcceleration>(t_, theta_, theta_dot_, alpha);
@@ -162,8 +131,47 @@ void SimWorld::servo_step() {
                                                            fmt(*opt.events.mu) + ")"
                                                      : "disk rolled off the hand") +
                std::string(" at t = ") + fmt(r.final.t) + " s, s_h = " + fmt(r.final.s_h);
+    failure_time_ = r.final.t;
     fn_min_ = std::min(fn_min_, r.final.fn_ratio);
-    return;
+  }
+
+}
+
+void SimWorld::servo_step() {
+  const JointSpec& j = scene_.joint;
+  const WorldSample& now = history_.back();
+
+  // The drive: feedforward of the commanded acceleration on the nominal inertia, PD on the
+  // reference, saturated.
+  const double tau_cmd = j.inertia * command_ + j.kp * (theta_ref_ - encoder_) +
+                         j.kd * (theta_dot_ref_ - velocity_estimate_);
+  const double tau = std::clamp(tau_cmd, -j.torque_limit, j.torque_limit);
+  // The disk's reaction is affine in the hand's acceleration: tau_disk = r0 + r1 alpha. Once
+  // the disk has left the hand (a failure), the joint moves alone.
+  const double r0 = failure_ ? 0.0 : reaction_torque(now, 0.0);
+  const double r1 = failure_ ? 0.0 : reaction_torque(now, 1.0) - r0;
+  const double drive = tau - j.viscous * theta_dot_ + r0;
+  double alpha = 0;
+  bool stop_at_end = false;
+  if (theta_dot_ == 0.0 && std::abs(drive) <= j.coulomb) {
+    alpha = 0;  // stiction holds
+  } else {
+    const double direction = theta_dot_ != 0.0 ? (theta_dot_ > 0 ? 1.0 : -1.0)
+                                               : (drive > 0 ? 1.0 : -1.0);
+    alpha = (drive - j.coulomb * direction) / (j.inertia - r1);
+    const double next_rate = theta_dot_ + alpha * dt_;
+    if (theta_dot_ != 0.0 && next_rate * theta_dot_ < 0 && std::abs(drive) <= j.coulomb) {
+      // Dry friction brings the joint to rest within this period rather than reversing it.
+      alpha = -theta_dot_ / dt_;
+      stop_at_end = true;
+    }
+  }
+  if (!failure_) {
+    // The forces just after this tick (the acceleration jumps at ticks, and the force with it).
+    const WorldSample start = sample_now(alpha, tau);
+    fn_min_ = std::min(fn_min_, start.fn_ratio);
+    if (std::isfinite(start.mu_required)) mu_max_ = std::max(mu_max_, start.mu_required);
+    step_disk(alpha);
   }
 
   theta_ += dt_ * (theta_dot_ + 0.5 * dt_ * alpha);
@@ -183,7 +191,7 @@ void SimWorld::servo_step() {
 }
 
 void SimWorld::advance_to(double t) {
-  while (!failure_ && t_ + 0.5 * dt_ <= t) servo_step();
+  while (t_ + 0.5 * dt_ <= t) servo_step();
 }
 
 control::JointReading SimWorld::read_encoder() const {
@@ -235,6 +243,8 @@ render::SceneState SimWorld::scene_state_at(double t) const {
   s.t = t;
   s.hand_angle = w.theta;
   s.disk_center = {c.x(), c.y()};
+  // After the disk left the hand its free flight is not simulated: it is drawn off the table.
+  if (failure_ && t > failure_time_) s.disk_center = {1e3, 1e3};
   s.disk_angle = w.disk_angle;
   s.s_h = w.s_h;
   s.force_normal_ratio = w.fn_ratio;

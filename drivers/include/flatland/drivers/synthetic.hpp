@@ -61,8 +61,8 @@ class SimWorld {
   /// What the renderer needs at time t.
   render::SceneState scene_state_at(double t) const;
 
-  /// Set when the disk lost contact, slipped (at the scene's mu) or rolled off the hand; the
-  /// world stops there.
+  /// Set when the disk lost contact, slipped (at the scene's mu) or rolled off the hand. The disk
+  /// is no longer simulated from there (nor drawn); the joint keeps moving, unloaded.
   const std::optional<std::string>& failure() const { return failure_; }
   double fn_min_ratio() const { return fn_min_; }
   double mu_max() const { return mu_max_; }
@@ -71,6 +71,7 @@ class SimWorld {
 
  private:
   void servo_step();
+  void step_disk(double alpha);
   double reaction_torque(const WorldSample& s, double alpha) const;
   WorldSample sample_now(double alpha, double torque) const;
 
@@ -90,6 +91,7 @@ class SimWorld {
   double encoder_ = 0, velocity_estimate_ = 0;
   std::vector<WorldSample> history_;
   std::optional<std::string> failure_;
+  double failure_time_ = 0;
   double fn_min_ = 1e300, mu_max_ = 0;
 };
 
