@@ -9,10 +9,12 @@
 #include <opencv2/aruco/charuco.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <map>
 #include <numbers>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -199,7 +201,9 @@ void add_quad(Mesh& m, const cv::Vec3d& a, const cv::Vec3d& b, const cv::Vec3d& 
   add_triangle(m, a, c, d, normal, color);
 }
 
-// Ear clipping of a simple polygon (counter-clockwise), for the hand's top and bottom faces.
+// Ear clipping of a simple polygon (counter-clockwise). Of the ears that can be cut, the best
+// shaped one (largest smallest angle) goes first: clipping ears in order would fan long slivers
+// from one vertex, and llvmpipe pays for a sliver by its length (see banded_triangulation).
 std::vector<std::array<int, 3>> triangulate(const std::vector<cv::Point2d>& poly) {
   std::vector<int> idx(poly.size());
   for (std::size_t i = 0; i < poly.size(); ++i) idx[i] = static_cast<int>(i);
@@ -207,10 +211,17 @@ std::vector<std::array<int, 3>> triangulate(const std::vector<cv::Point2d>& poly
   auto cross = [](const cv::Point2d& o, const cv::Point2d& a, const cv::Point2d& b) {
     return (a.x - o.x) * (b.y - o.y) - (a.y - o.y) * (b.x - o.x);
   };
-  std::size_t guard = 0;
-  while (idx.size() > 3 && guard < poly.size() * poly.size()) {
-    ++guard;
-    bool clipped = false;
+  auto smallest_angle = [](const cv::Point2d& a, const cv::Point2d& b, const cv::Point2d& c) {
+    const double ab = cv::norm(b - a), bc = cv::norm(c - b), ca = cv::norm(a - c);
+    auto angle = [](double opposite, double s1, double s2) {
+      return std::acos(
+          std::clamp((s1 * s1 + s2 * s2 - opposite * opposite) / (2 * s1 * s2), -1.0, 1.0));
+    };
+    return std::min({angle(bc, ab, ca), angle(ca, ab, bc), angle(ab, bc, ca)});
+  };
+  while (idx.size() > 3) {
+    std::size_t best = idx.size();
+    double best_quality = -1;
     for (std::size_t i = 0; i < idx.size(); ++i) {
       const int a = idx[(i + idx.size() - 1) % idx.size()], b = idx[i],
                 c = idx[(i + 1) % idx.size()];
@@ -225,14 +236,18 @@ std::vector<std::array<int, 3>> triangulate(const std::vector<cv::Point2d>& poly
         }
       }
       if (!empty) continue;
-      tris.push_back({a, b, c});
-      idx.erase(idx.begin() + static_cast<long>(i));
-      clipped = true;
-      break;
+      const double quality = smallest_angle(poly[a], poly[b], poly[c]);
+      if (quality > best_quality) {
+        best_quality = quality;
+        best = i;
+      }
     }
-    if (!clipped) throw std::runtime_error("render: cannot triangulate the hand outline");
+    if (best == idx.size()) throw std::runtime_error("render: cannot triangulate the hand outline");
+    tris.push_back(
+        {idx[(best + idx.size() - 1) % idx.size()], idx[best], idx[(best + 1) % idx.size()]});
+    idx.erase(idx.begin() + static_cast<long>(best));
   }
-  if (idx.size() == 3) tris.push_back({idx[0], idx[1], idx[2]});
+  tris.push_back({idx[0], idx[1], idx[2]});
   return tris;
 }
 
@@ -272,16 +287,66 @@ std::vector<double> adaptive_samples(const sim::Curve& curve, int piece, double 
 
 constexpr double kOutlineTolerance = 2e-5;  // m: 0.02 px at 1 px/mm
 
+// The hand's top face in well-shaped triangles. llvmpipe pays for a triangle by the 4x4 pixel
+// blocks it touches, besides a fixed cost per triangle, so long slivers (slabs across the hand,
+// fans from one vertex) cost several times the face's own area. Here the face is a coarse inner
+// polygon through points `depth` inside the outline at key vertices about `spacing` apart (ear
+// clipped, best ears first: large triangles), and a band between that polygon and the outline,
+// fanned to every outline vertex (short triangles). The outline polygon is covered exactly.
+// Returns nothing when the band folds over itself (depth too large for the outline's curvature).
+struct PolygonMesh {
+  std::vector<cv::Point2d> points;
+  std::vector<std::array<int, 3>> triangles;
+};
+
+std::optional<PolygonMesh> banded_triangulation(const std::vector<cv::Point2d>& outline,
+                                                double depth, double spacing) {
+  const int n = static_cast<int>(outline.size());
+  std::vector<int> keys{0};
+  double run = 0;
+  for (int i = 1; i < n; ++i) {
+    run += cv::norm(outline[i] - outline[i - 1]);
+    if (run >= spacing && n - i > 1) {
+      keys.push_back(i);
+      run = 0;
+    }
+  }
+  const int K = static_cast<int>(keys.size());
+  if (K < 3) return std::nullopt;
+  PolygonMesh out;
+  out.points = outline;  // then the K inner points
+  std::vector<cv::Point2d> inner;
+  for (int k : keys) {
+    const cv::Point2d t = outline[(k + 1) % n] - outline[(k + n - 1) % n];
+    inner.push_back(outline[k] + depth / cv::norm(t) * cv::Point2d(-t.y, t.x));  // inward (left)
+  }
+  out.points.insert(out.points.end(), inner.begin(), inner.end());
+  for (int j = 0; j < K; ++j) {
+    const int a = keys[j], b = j + 1 < K ? keys[j + 1] : n, mid = a + (b - a) / 2;
+    const int ia = n + j, ib = n + (j + 1) % K;
+    for (int i = a; i < mid; ++i) out.triangles.push_back({i, (i + 1) % n, ia});
+    out.triangles.push_back({mid % n, ib, ia});
+    for (int i = mid; i < b; ++i) out.triangles.push_back({i, (i + 1) % n, ib});
+  }
+  for (const auto& t : triangulate(inner)) out.triangles.push_back({n + t[0], n + t[1], n + t[2]});
+  // Every triangle counter-clockwise and the boundary the (simple) outline: then the triangles
+  // cover the polygon exactly once (the degree of the map is the winding number, 1 or 0).
+  for (const auto& t : out.triangles) {
+    const cv::Point2d u = out.points[t[1]] - out.points[t[0]];
+    const cv::Point2d v = out.points[t[2]] - out.points[t[0]];
+    if (!(u.x * v.y - u.y * v.x > 1e-6 * depth * depth)) return std::nullopt;
+  }
+  return out;
+}
+
 Mesh hand_mesh(const sim::PolynomialHand& hand, double thickness) {
   // Right half from the tip (u = 0) to the middle of the palm/back (u = 1); the paper's shape is
   // symmetric about the x axis within a half (x even, y odd in u) and the halves mirror x -> -x.
   const std::vector<double> u = adaptive_samples(hand, 0, 0.0, 1.0, kOutlineTolerance);
   std::vector<cv::Point2d> half;  // (x(u), |y(u)|)
-  bool monotone = true;
   for (std::size_t i = 0; i < u.size(); ++i) {
     const sim::Vec2 p = hand.geometry(u[i], 0).point;
     half.emplace_back(p.x(), std::abs(p.y()));
-    if (i > 0 && !(p.x() < half[i - 1].x)) monotone = false;
   }
   // Closed outline, counter-clockwise: up the right half from the back's middle (bottom) over the
   // tip to the palm's middle (top), then down the mirrored half. Junction points appear once.
@@ -293,19 +358,19 @@ Mesh hand_mesh(const sim::PolynomialHand& hand, double thickness) {
   for (std::size_t i = 1; i < last; ++i) outline.emplace_back(-half[i].x, -half[i].y);
   Mesh m;
   const double z0 = 0.0005, z1 = thickness;
-  if (monotone) {
-    // Vertical slabs between the upper and lower chains: well-shaped triangles, few of them.
-    for (double side : {1.0, -1.0})
-      for (std::size_t i = 0; i + 1 < half.size(); ++i) {
-        const cv::Point2d a = half[i], b = half[i + 1];
-        add_quad(m, {side * a.x, -a.y, z1}, {side * b.x, -b.y, z1}, {side * b.x, b.y, z1},
-                 {side * a.x, a.y, z1}, {0, 0, 1}, kAluminium);
-      }
-  } else {
-    for (const auto& t : triangulate(outline)) {
-      auto P = [&](int i) { return cv::Vec3d(outline[i].x, outline[i].y, z1); };
-      add_triangle(m, P(t[0]), P(t[1]), P(t[2]), {0, 0, 1}, kAluminium);
-    }
+  // The top face. Band depth and key spacing scale with the hand (about 8 mm and 33 mm for the
+  // paper's hand: band triangles a few pixels long, inner ones tens of pixels); the depth is
+  // halved until the band fits the outline's curvature, and plain ear clipping is the fallback.
+  double area = 0;
+  for (std::size_t i = 0; i < outline.size(); ++i)
+    area += outline[i].cross(outline[(i + 1) % outline.size()]) / 2;
+  std::optional<PolygonMesh> top;
+  for (double depth = 0.04 * std::sqrt(area); !top && depth > 1e-4; depth /= 2)
+    top = banded_triangulation(outline, depth, 4 * depth);
+  if (!top) top = PolygonMesh{outline, triangulate(outline)};
+  for (const auto& t : top->triangles) {
+    auto P = [&](int i) { return cv::Vec3d(top->points[i].x, top->points[i].y, z1); };
+    add_triangle(m, P(t[0]), P(t[1]), P(t[2]), {0, 0, 1}, kAluminium);
   }
   const std::size_t n = outline.size();
   for (std::size_t i = 0; i < n; ++i) {
