@@ -45,6 +45,11 @@ Plan::Plan(std::shared_ptr<const sim::HandMotion> motion, double duration,
     plan_t_.push_back(t);
     plan_s_.push_back(run.trajectory.s_h(t));
   }
+  plan_sdot_.resize(plan_s_.size());
+  for (std::size_t i = 0; i < plan_s_.size(); ++i) {
+    const std::size_t a = i == 0 ? 0 : i - 1, b = std::min(i + 1, plan_s_.size() - 1);
+    plan_sdot_[i] = (plan_s_[b] - plan_s_[a]) / (plan_t_[b] - plan_t_[a]);
+  }
   // The stretch from the first crossing of s_from to the first crossing of s_to.
   std::size_t i0 = 0;
   while (i0 < plan_s_.size() && plan_s_[i0] < s_from) ++i0;
@@ -76,6 +81,18 @@ Plan::Plan(std::shared_ptr<const sim::HandMotion> motion, double duration,
 
 double Plan::time_at(double s_h) const { return interpolate(s_, t_, s_h); }
 double Plan::s_h_at(double t) const { return interpolate(plan_t_, plan_s_, t); }
+double Plan::sdot_h_at(double t) const { return interpolate(plan_t_, plan_sdot_, t); }
+
+std::string to_string(ServoLaw law) {
+  return law == ServoLaw::kPaper ? "paper" : "time-scaled";
+}
+
+ServoLaw parse_servo_law(const std::string& name) {
+  if (name == "paper") return ServoLaw::kPaper;
+  if (name == "time-scaled") return ServoLaw::kTimeScaled;
+  throw std::invalid_argument("controller.law: unknown value '" + name +
+                              "' (allowed: paper, time-scaled)");
+}
 
 // ---------------------------------------------------------------------------------------------
 
@@ -154,8 +171,17 @@ Command ButterflyController::step(double t, const JointReading& joint, const Est
       } else {
         const double tp = plan_->time_at(estimate.s_h);
         const sim::HandKinematics p = plan_->hand(tp);
-        c.theta_ddot = config_.kp * (p.angle - joint.theta) +
-                       config_.kd * (p.angular_velocity - joint.theta_dot);
+        if (config_.law == ServoLaw::kPaper) {
+          c.theta_ddot = config_.kp * (p.angle - joint.theta) +
+                         config_.kd * (p.angular_velocity - joint.theta_dot);
+        } else {
+          // The disk's pace against the plan's at the same s_h; bounded so that a noisy rate
+          // estimate cannot reverse or race the hand.
+          const double rate = std::clamp(estimate.sdot_h / plan_->sdot_h_at(tp), 0.5, 2.0);
+          c.theta_ddot = rate * rate * p.angular_acceleration +
+                         config_.kp * (p.angle - joint.theta) +
+                         config_.kd * (rate * p.angular_velocity - joint.theta_dot);
+        }
         break;
       }
     }

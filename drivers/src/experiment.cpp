@@ -104,6 +104,7 @@ LoopSetup::LoopSetup(const Scene& nominal) : scene(nominal) {
 
   const ControllerSpec& c = nominal.controller;
   controller.feedback = c.mode == "feedback";
+  controller.law = control::parse_servo_law(c.law);
   controller.kp = c.kp;
   controller.kd = c.kd;
   controller.dip_until = c.dip_until;

@@ -543,13 +543,14 @@ void read_joint(const MapReader& root, Scene& scene) {
 
 void read_controller(const MapReader& root, Scene& scene) {
   const auto c = root.optional_section(
-      "controller", {"mode", "plan", "kp", "kd", "dip_until", "finish_after", "lost_timeout",
+      "controller", {"mode", "plan", "law", "kp", "kd", "dip_until", "finish_after", "lost_timeout",
                      "innovation_gate", "innovation_strikes", "max_joint_jump",
                      "stop_deceleration", "settle"});
   if (!c) return;
   ControllerSpec& cs = scene.controller;
   cs.mode = c->choice_or("mode", {"feedback", "open-loop"}, cs.mode.c_str());
   cs.plan = c->choice_or("plan", {"scene", "solve"}, cs.plan.c_str());
+  cs.law = c->choice_or("law", {"paper", "time-scaled"}, cs.law.c_str());
   cs.kp = c->positive_or("kp", cs.kp);
   cs.kd = non_negative(*c, "kd", cs.kd);
   cs.dip_until = number_in(*c, "dip_until", -1.0, 1.0, cs.dip_until);

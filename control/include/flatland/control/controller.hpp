@@ -36,6 +36,8 @@ class Plan {
   double time_at(double s_h) const;
   /// Planned s_h at time t.
   double s_h_at(double t) const;
+  /// Planned rate of s_h at time t.
+  double sdot_h_at(double t) const;
   double s_from() const { return s_.front(); }
   double s_to() const { return s_.back(); }
 
@@ -43,12 +45,26 @@ class Plan {
   std::shared_ptr<const sim::HandMotion> motion_;
   double duration_;
   std::vector<double> s_, t_;          ///< lookup table, s increasing
-  std::vector<double> plan_t_, plan_s_;  ///< s_h(t) at fine steps over the whole plan
+  std::vector<double> plan_t_, plan_s_, plan_sdot_;  ///< s_h(t) and its rate at fine steps
 };
+
+/// Stage 2's control law.
+enum class ServoLaw {
+  /// The paper's: theta'' = kp (theta_p(s) - theta) + kd (thetadot_p(s) - thetadot).
+  kPaper,
+  /// The plan indexed by s as a time scaling: plan time tau = t_p(s), rate r = sdot / sdot_p(tau);
+  /// theta'' = r^2 theta''_p(tau) + kp (theta_p(tau) - theta) + kd (r thetadot_p(tau) - thetadot).
+  /// The feedforward removes the lag a pure PD needs to accelerate the hand, and the rate scales
+  /// the hand with the disk (faster disk, faster hand) as the plan's geometry requires.
+  kTimeScaled,
+};
+std::string to_string(ServoLaw law);  ///< "paper", "time-scaled"
+ServoLaw parse_servo_law(const std::string& name);
 
 struct ControllerConfig {
   bool feedback = true;  ///< false: open-loop playback of the plan
-  double kp = 100.0, kd = 20.0;
+  ServoLaw law = ServoLaw::kPaper;
+  double kp = 900.0, kd = 120.0;
   double dip_until = -0.9, finish_after = 0.9;
   double stop_deceleration = 20.0;  ///< rad/s^2
   double dt = 1e-3;                 ///< s, the control period

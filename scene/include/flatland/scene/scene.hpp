@@ -92,7 +92,8 @@ struct ControllerSpec {
   /// Plan: the scene's motion as given ("scene") or with k solved for the scene's period ("solve").
   std::string plan = "scene";
   double kp = 900.0;              ///< 1/s^2, stage 2: theta'' = kp (theta_p(s) - theta) + ...
-  double kd = 60.0;               ///< 1/s (critically damped at 30 rad/s with kp)
+  double kd = 120.0;              ///< 1/s (over-damped with kp: see docs/CLOSED_LOOP.md)
+  std::string law = "paper";      ///< paper | time-scaled (stage 2's law, docs/CLOSED_LOOP.md)
   double dip_until = -0.9;        ///< stage 1 ends when the estimated s_h exceeds this
   double finish_after = 0.9;      ///< stage 3 starts when the estimated s_h exceeds this
   double lost_timeout = 0.25;     ///< s without a usable measurement -> safe stop
