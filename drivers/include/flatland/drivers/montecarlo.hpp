@@ -1,0 +1,95 @@
+// Monte Carlo robustness of the closed loop: many synthetic experiments in which the world differs
+// from what the controller assumes (initial position, table tilt, disk size, camera noise,
+// latency, dropped frames, motor friction), run with each controller on the same perturbed
+// worlds, so that the success rates of open-loop playback and vision feedback can be compared
+// (paper section 5: feedback makes the roll robust).
+#pragma once
+
+#include "flatland/scene/scene.hpp"
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace flatland::drivers {
+
+/// Half-widths of the uniform perturbations of one run (a value x is drawn from
+/// nominal + U(-h, +h)) and the fixed sensor settings every run gets.
+struct Perturbations {
+  double s_h = 0.02;              ///< initial s_h, absolute (the palm well is -1)
+  double tilt_deg = 0.25;         ///< table tilt, deg
+  double radius_rel = 0.02;       ///< disk radius, relative (0.02 = 2 %)
+  double noise_dn = 2;            ///< camera read noise sigma, DN (set, not drawn)
+  double latency = 0.033;         ///< s, camera latency (set)
+  double latency_jitter = 0.005;  ///< s, half-width of its uniform spread (set)
+  double drop = 0.02;             ///< probability of a dropped frame (set)
+  double friction_rel = 0.2;  ///< joint viscous and Coulomb friction, relative, one factor for both
+};
+
+/// std::invalid_argument naming the field ("perturbations.drop: ...") for negative or non-finite
+/// values, drop >= 1, radius_rel or friction_rel >= 1, latency_jitter > latency.
+void validate(const Perturbations& p);
+
+/// The values one run drew (the truth it was run against).
+struct DrawnPerturbation {
+  double s_h0 = 0;            ///< initial s_h
+  double tilt_deg = 0;        ///< table tilt, deg
+  double radius = 0;          ///< m
+  double friction_scale = 1;  ///< factor on joint.viscous and joint.coulomb
+  std::uint64_t effects_seed = 0;
+};
+
+/// The truth scene of run `run`: uniform draws from a std::mt19937_64 seeded from (seed, run)
+/// alone (std::seed_seq of their 32-bit halves, so the draws do not depend on anything else and
+/// are the same on every platform), applied to the nominal scene; the sensor settings (noise,
+/// latency, drops) are set; effects.seed is drawn too so that every run sees its own noise and
+/// drops. Throws std::invalid_argument for invalid perturbations or a scene without a camera.
+Scene perturb(const Scene& nominal, const Perturbations& p, std::uint64_t seed, int run,
+              DrawnPerturbation* drawn = nullptr);
+
+/// A two-sided confidence interval of a binomial proportion.
+struct Interval {
+  double lo = 0, hi = 0;
+};
+/// Wilson score interval for k successes in n trials (z = 1.96: 95 %); [0, 1] for n = 0.
+Interval wilson_interval(long k, long n, double z = 1.959963984540054);
+
+/// One experiment: one run (one perturbed world) under one controller.
+struct RunRecord {
+  int run = 0;
+  std::string controller;  ///< "open-loop" or "feedback"
+  bool success = false;
+  std::string failure;  ///< empty on success
+  double duration_s = 0, s_end = 0, fn_min_ratio = 0, mu_max = 0;
+  bool safe_stop = false;
+  long frames = 0, frames_lost = 0;
+  DrawnPerturbation drawn;
+};
+
+struct MonteCarloResult {
+  int runs = 0;
+  /// -1 when that controller was not run.
+  int success_open_loop = -1, success_feedback = -1;
+  Interval ci_open_loop, ci_feedback;  ///< Wilson 95 %
+  /// Ordered by run, then by the order of `controllers`: independent of the thread count.
+  std::vector<RunRecord> records;
+  double seconds = 0;  ///< wall clock
+};
+
+/// Called after each experiment with (experiments done, experiments in all); from the worker
+/// threads, one call at a time.
+using MonteCarloProgress = std::function<void(long done, long total)>;
+
+/// `n` runs of each of `controllers` ("open-loop", "feedback"; each at most once) on `threads`
+/// std::threads (0: std::thread::hardware_concurrency()). Run i's world obeys
+/// perturb(nominal, p, seed, i); the loop assumes `nominal` with controller.mode set to the
+/// controller. Experiments are handed out by index, and each result is stored at its index, so
+/// the records do not depend on the thread count. An exception in any experiment stops the others
+/// and is rethrown (a run that fails — contact lost, safe stop — is a result, not an exception).
+/// std::invalid_argument for n < 1, an unknown or repeated controller, invalid perturbations.
+MonteCarloResult run_montecarlo(const Scene& nominal, const Perturbations& p, int n,
+                                std::uint64_t seed, const std::vector<std::string>& controllers,
+                                unsigned threads = 0, const MonteCarloProgress& progress = {});
+
+}  // namespace flatland::drivers

@@ -1,0 +1,206 @@
+#include "flatland/drivers/montecarlo.hpp"
+
+#include "flatland/drivers/experiment.hpp"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <exception>
+#include <memory>
+#include <mutex>
+#include <numbers>
+#include <random>
+#include <stdexcept>
+#include <thread>
+
+namespace flatland::drivers {
+namespace {
+
+/// A uniform double in [0, 1) from the top 53 bits: unlike std::uniform_real_distribution, whose
+/// algorithm the standard leaves open, this gives the same draws with every standard library.
+double unit(std::mt19937_64& rng) { return static_cast<double>(rng() >> 11) * 0x1.0p-53; }
+
+/// nominal + U(-half, +half)
+double around(std::mt19937_64& rng, double nominal, double half) {
+  return nominal + half * (2.0 * unit(rng) - 1.0);
+}
+
+void require(bool ok, const std::string& field, const std::string& what, double v) {
+  if (!ok)
+    throw std::invalid_argument("perturbations." + field + ": " + what + ", got " +
+                                std::to_string(v));
+}
+
+}  // namespace
+
+void validate(const Perturbations& p) {
+  const auto non_negative = [](double v) { return std::isfinite(v) && v >= 0; };
+  require(non_negative(p.s_h), "s_h", "must be finite and >= 0", p.s_h);
+  require(non_negative(p.tilt_deg), "tilt_deg", "must be finite and >= 0", p.tilt_deg);
+  require(non_negative(p.radius_rel) && p.radius_rel < 1, "radius_rel", "must be in [0, 1)",
+          p.radius_rel);
+  require(non_negative(p.noise_dn), "noise_dn", "must be finite and >= 0", p.noise_dn);
+  require(non_negative(p.latency), "latency", "must be finite and >= 0 (s)", p.latency);
+  require(non_negative(p.latency_jitter) && p.latency_jitter <= p.latency, "latency_jitter",
+          "must be in [0, latency] (a frame cannot arrive before it is captured)",
+          p.latency_jitter);
+  require(non_negative(p.drop) && p.drop < 1, "drop", "must be in [0, 1)", p.drop);
+  require(non_negative(p.friction_rel) && p.friction_rel < 1, "friction_rel", "must be in [0, 1)",
+          p.friction_rel);
+}
+
+Scene perturb(const Scene& nominal, const Perturbations& p, std::uint64_t seed, int run,
+              DrawnPerturbation* drawn) {
+  validate(p);
+  if (!nominal.camera)
+    throw std::invalid_argument(nominal.origin +
+                                ": camera: a Monte Carlo run needs the scene's camera section");
+  if (run < 0) throw std::invalid_argument("perturb: run must be >= 0");
+  // The stream depends on (seed, run) only: run i draws the same world whatever else is run.
+  std::seed_seq seq{static_cast<std::uint32_t>(seed), static_cast<std::uint32_t>(seed >> 32),
+                    static_cast<std::uint32_t>(run)};
+  std::mt19937_64 rng(seq);
+  constexpr double kDeg = std::numbers::pi / 180.0;
+
+  Scene s = nominal;
+  DrawnPerturbation d;
+  // A fixed order of draws: adding a perturbation later must append, not reorder.
+  d.s_h0 = around(rng, nominal.sim.initial.s_h, p.s_h);
+  d.tilt_deg = around(rng, nominal.sim.tilt / kDeg, p.tilt_deg);
+  d.radius = nominal.sim.object.radius * around(rng, 1.0, p.radius_rel);
+  d.friction_scale = around(rng, 1.0, p.friction_rel);
+  d.effects_seed = rng();
+
+  s.sim.initial.s_h = d.s_h0;
+  s.sim.tilt = d.tilt_deg * kDeg;
+  s.sim.object.radius = d.radius;
+  s.joint.viscous *= d.friction_scale;
+  s.joint.coulomb *= d.friction_scale;
+  s.effects.noise_read_dn = p.noise_dn;
+  s.effects.drop_probability = p.drop;
+  s.effects.seed = d.effects_seed;
+  s.camera->latency = p.latency;
+  s.camera->latency_jitter = p.latency_jitter;
+  if (drawn) *drawn = d;
+  return s;
+}
+
+Interval wilson_interval(long k, long n, double z) {
+  if (n <= 0) return {0.0, 1.0};
+  if (k < 0 || k > n) throw std::invalid_argument("wilson_interval: need 0 <= k <= n");
+  const double nn = static_cast<double>(n);
+  const double phat = static_cast<double>(k) / nn;
+  const double z2 = z * z;
+  const double denom = 1.0 + z2 / nn;
+  const double centre = (phat + z2 / (2.0 * nn)) / denom;
+  const double half = z / denom * std::sqrt(phat * (1.0 - phat) / nn + z2 / (4.0 * nn * nn));
+  // Rounding can push the ends a hair outside [0, 1] at k = 0 or k = n.
+  return {std::max(0.0, centre - half), std::min(1.0, centre + half)};
+}
+
+MonteCarloResult run_montecarlo(const Scene& nominal, const Perturbations& p, int n,
+                                std::uint64_t seed, const std::vector<std::string>& controllers,
+                                unsigned threads, const MonteCarloProgress& progress) {
+  validate(p);
+  if (n < 1) throw std::invalid_argument("run_montecarlo: n must be >= 1");
+  if (controllers.empty()) throw std::invalid_argument("run_montecarlo: no controller given");
+  for (std::size_t i = 0; i < controllers.size(); ++i) {
+    if (controllers[i] != "open-loop" && controllers[i] != "feedback")
+      throw std::invalid_argument("controller: unknown controller '" + controllers[i] +
+                                  "' (open-loop or feedback)");
+    for (std::size_t j = 0; j < i; ++j)
+      if (controllers[j] == controllers[i])
+        throw std::invalid_argument("controller: '" + controllers[i] + "' given twice");
+  }
+  // Bad perturbations or scenes fail here, before any thread starts.
+  perturb(nominal, p, seed, 0);
+
+  // One setup per controller, shared read-only by the workers (the plan is simulated once).
+  std::vector<std::unique_ptr<const LoopSetup>> setups;
+  for (const std::string& c : controllers) {
+    Scene assumed = nominal;
+    assumed.controller.mode = c;
+    setups.push_back(std::make_unique<const LoopSetup>(assumed));
+  }
+
+  const std::size_t nc = controllers.size();
+  const long total = static_cast<long>(n) * static_cast<long>(nc);
+  MonteCarloResult out;
+  out.runs = n;
+  out.records.resize(static_cast<std::size_t>(total));
+
+  std::atomic<long> next{0}, done{0};
+  std::atomic<bool> stop{false};
+  std::mutex mutex;  // guards `error` and the progress callback
+  std::exception_ptr error;
+  const auto worker = [&] {
+    for (;;) {
+      if (stop.load()) return;
+      const long job = next.fetch_add(1);
+      if (job >= total) return;
+      // Experiment `job` is run job / nc under controller job % nc, whichever thread takes it.
+      const int run = static_cast<int>(job / static_cast<long>(nc));
+      const std::size_t ci = static_cast<std::size_t>(job % static_cast<long>(nc));
+      try {
+        RunRecord rec;
+        rec.run = run;
+        rec.controller = controllers[ci];
+        const Scene truth = perturb(nominal, p, seed, run, &rec.drawn);
+        const SyntheticResult r = run_synthetic(*setups[ci], truth);
+        rec.success = r.success;
+        rec.failure = r.failure;
+        rec.duration_s = r.loop.duration_s;
+        rec.s_end = r.s_end;
+        rec.fn_min_ratio = r.fn_min_ratio;
+        rec.mu_max = r.mu_max;
+        rec.safe_stop = r.loop.safe_stop;
+        rec.frames = r.loop.frames;
+        rec.frames_lost = r.loop.frames_lost;
+        out.records[static_cast<std::size_t>(job)] = std::move(rec);
+      } catch (...) {
+        std::lock_guard lock(mutex);
+        if (!error) error = std::current_exception();
+        stop = true;
+        return;
+      }
+      const long d = done.fetch_add(1) + 1;
+      if (progress) {
+        std::lock_guard lock(mutex);
+        progress(d, total);
+      }
+    }
+  };
+
+  const auto start = std::chrono::steady_clock::now();
+  unsigned nt = threads ? threads : std::max(1u, std::thread::hardware_concurrency());
+  nt = static_cast<unsigned>(std::min<long>(nt, total));
+  if (nt <= 1) {
+    worker();
+  } else {
+    std::vector<std::thread> pool;
+    pool.reserve(nt);
+    for (unsigned i = 0; i < nt; ++i) pool.emplace_back(worker);
+    for (std::thread& t : pool) t.join();
+  }
+  if (error) std::rethrow_exception(error);
+  out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+
+  int ok_open = 0, ok_feedback = 0;
+  for (const RunRecord& r : out.records) {
+    if (!r.success) continue;
+    (r.controller == "open-loop" ? ok_open : ok_feedback)++;
+  }
+  for (const std::string& c : controllers) {
+    if (c == "open-loop") {
+      out.success_open_loop = ok_open;
+      out.ci_open_loop = wilson_interval(ok_open, n);
+    } else {
+      out.success_feedback = ok_feedback;
+      out.ci_feedback = wilson_interval(ok_feedback, n);
+    }
+  }
+  return out;
+}
+
+}  // namespace flatland::drivers
