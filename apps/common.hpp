@@ -185,5 +185,7 @@ Command add_time_optimal_command(CLI::App& app);
 Command add_render_command(CLI::App& app);
 Command add_calibrate_command(CLI::App& app);
 Command add_track_command(CLI::App& app);
+Command add_experiment_command(CLI::App& app);
+Command add_montecarlo_command(CLI::App& app);
 
 }  // namespace flatland::app

@@ -38,6 +38,8 @@ int main(int argc, char** argv) {
                                    add_time_optimal_command(app), add_render_command(app)};
   commands.push_back(add_calibrate_command(app));
   commands.push_back(add_track_command(app));
+  commands.push_back(add_experiment_command(app));
+  commands.push_back(add_montecarlo_command(app));
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {

@@ -1,0 +1,232 @@
+// flatland montecarlo: the closed loop's robustness: N synthetic experiments per controller in
+// worlds perturbed from the nominal scene (initial position, tilt, disk radius, camera noise,
+// latency, drops, motor friction), with the success rates and their Wilson 95 % intervals.
+#include "common.hpp"
+
+#include "flatland/drivers/montecarlo.hpp"
+
+#include <cmath>
+#include <cstdint>
+#include <iostream>
+#include <memory>
+#include <sstream>
+#include <thread>
+
+namespace flatland::app {
+
+namespace {
+
+struct MonteCarloOptions {
+  CommonOptions common;
+  int n = 100;
+  std::uint64_t seed = 1;
+  std::vector<std::string> controllers = {"open-loop", "feedback"};
+  unsigned threads = 0;
+  drivers::Perturbations p;
+};
+
+std::string default_experiment_scene() {
+  return (fs::path(default_scene_path()).parent_path() / "airtable-feedback.yaml").string();
+}
+
+/// A CSV field: quoted (with doubled quotes) when it holds a comma, quote or line break.
+std::string csv_field(const std::string& s) {
+  if (s.find_first_of(",\"\n\r") == std::string::npos) return s;
+  std::string q = "\"";
+  for (char c : s) q += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return q + "\"";
+}
+
+std::string runs_csv(const drivers::MonteCarloResult& r) {
+  std::string s =
+      "run,controller,success,failure,duration_s,s_end,fn_min_ratio,mu_max,safe_stop,frames,"
+      "frames_lost,s_h0,tilt_deg,radius_m,friction_scale,effects_seed\n";
+  for (const drivers::RunRecord& x : r.records)
+    s += std::to_string(x.run) + "," + x.controller + "," + (x.success ? "1" : "0") + "," +
+         csv_field(x.failure) + "," + format_number(x.duration_s) + "," + format_number(x.s_end) +
+         "," + format_number(x.fn_min_ratio) + "," + format_number(x.mu_max) + "," +
+         (x.safe_stop ? "1" : "0") + "," + std::to_string(x.frames) + "," +
+         std::to_string(x.frames_lost) + "," + format_number(x.drawn.s_h0) + "," +
+         format_number(x.drawn.tilt_deg) + "," + format_number(x.drawn.radius) + "," +
+         format_number(x.drawn.friction_scale) + "," + std::to_string(x.drawn.effects_seed) + "\n";
+  return s;
+}
+
+Json perturbations_json(const drivers::Perturbations& p) {
+  Json j;
+  j["s_h"] = p.s_h;
+  j["tilt_deg"] = p.tilt_deg;
+  j["radius_rel"] = p.radius_rel;
+  j["noise_dn"] = p.noise_dn;
+  j["latency"] = p.latency;
+  j["latency_jitter"] = p.latency_jitter;
+  j["drop"] = p.drop;
+  j["friction_rel"] = p.friction_rel;
+  return j;
+}
+
+void run_montecarlo_command(const MonteCarloOptions& o) {
+  // ---- bad input first
+  CommonOptions common = o.common;
+  if (common.scene.empty()) common.scene = default_experiment_scene();
+  const Scene scene = load_scene_with_overrides(common);
+  if (o.n < 1) throw UsageError("--n: must be at least 1, got " + std::to_string(o.n));
+  const struct {
+    const char* option;
+    double value;
+  } values[] = {{"--s-h", o.p.s_h},
+                {"--tilt-deg", o.p.tilt_deg},
+                {"--radius-rel", o.p.radius_rel},
+                {"--noise-dn", o.p.noise_dn},
+                {"--latency", o.p.latency},
+                {"--latency-jitter", o.p.latency_jitter},
+                {"--drop", o.p.drop},
+                {"--friction-rel", o.p.friction_rel}};
+  for (const auto& v : values)
+    if (!std::isfinite(v.value) || v.value < 0)
+      throw UsageError(std::string(v.option) + ": must be finite and >= 0, got " +
+                       format_number(v.value));
+  if (o.p.radius_rel >= 1)
+    throw UsageError("--radius-rel: must be < 1, got " + format_number(o.p.radius_rel));
+  if (o.p.friction_rel >= 1)
+    throw UsageError("--friction-rel: must be < 1, got " + format_number(o.p.friction_rel));
+  if (o.p.drop >= 1) throw UsageError("--drop: must be < 1, got " + format_number(o.p.drop));
+  if (o.p.latency_jitter > o.p.latency)
+    throw UsageError("--latency-jitter: must not exceed --latency (" + format_number(o.p.latency) +
+                     " s), got " + format_number(o.p.latency_jitter));
+  for (std::size_t i = 0; i < o.controllers.size(); ++i)
+    for (std::size_t j = 0; j < i; ++j)
+      if (o.controllers[i] == o.controllers[j])
+        throw UsageError("--controller: " + o.controllers[i] + " given twice");
+  if (!scene.camera)
+    throw UsageError(scene.origin +
+                     ": camera: the scene has no camera section (needed by the "
+                     "closed loop)");
+  const fs::path dir = o.common.out;
+  if (!dir.empty() && fs::exists(dir) && (!fs::is_directory(dir) || !fs::is_empty(dir)))
+    throw UsageError("--out: " + o.common.out +
+                     " already exists and is not an empty directory; remove it or choose another");
+
+  const unsigned threads =
+      o.threads ? o.threads : std::max(1u, std::thread::hardware_concurrency());
+  const long experiments = static_cast<long>(o.n) * static_cast<long>(o.controllers.size());
+  std::cerr << "flatland: " << o.n << " runs x " << o.controllers.size() << " controllers on "
+            << threads << " threads, seed " << o.seed << ", " << scene.origin << "\n";
+  drivers::MonteCarloResult r;
+  {
+    ProgressBar bar("montecarlo");
+    r = drivers::run_montecarlo(scene, o.p, o.n, o.seed, o.controllers, threads, bar.callback());
+  }
+  const double per_second = r.seconds > 0 ? static_cast<double>(experiments) / r.seconds : 0;
+
+  const auto ci = [](int successes, const drivers::Interval& i) {
+    return successes < 0 ? Json(nullptr) : Json::array({i.lo, i.hi});
+  };
+  const auto count = [](int successes) { return successes < 0 ? Json(nullptr) : Json(successes); };
+  Json j;
+  j["runs"] = r.runs;
+  j["success_open_loop"] = count(r.success_open_loop);
+  j["success_feedback"] = count(r.success_feedback);
+  j["ci95"] = {{"open_loop", ci(r.success_open_loop, r.ci_open_loop)},
+               {"feedback", ci(r.success_feedback, r.ci_feedback)}};
+  j["perturbations"] = perturbations_json(o.p);
+  j["runs_per_second"] = number(per_second);
+  j["experiments"] = experiments;
+  j["seconds"] = number(r.seconds);
+  j["seed"] = o.seed;
+  j["threads"] = threads;
+  j["controllers"] = o.controllers;
+  j["scene"] = scene.origin;
+
+  OutputSet outputs;
+  if (!dir.empty()) {
+    outputs.ensure_directory(dir);
+    outputs.stage(dir / "runs.csv", runs_csv(r));
+    outputs.stage(dir / "result.json", j.dump(2) + "\n");
+    outputs.commit();
+  }
+
+  if (o.common.json) {
+    emit_json(j);
+    return;
+  }
+  std::ostringstream os;
+  os << "flatland montecarlo: " << scene.origin << ", " << r.runs << " runs, seed " << o.seed
+     << "\n";
+  const auto line = [&](const char* name, int k, const drivers::Interval& i) {
+    if (k < 0) return;
+    const double pct = 100.0 * k / r.runs;
+    os << "  " << name << k << " / " << r.runs << " succeeded (" << std::lround(pct)
+       << " %; 95 % interval " << std::lround(100 * i.lo) << " .. " << std::lround(100 * i.hi)
+       << " %)\n";
+  };
+  line("open loop          ", r.success_open_loop, r.ci_open_loop);
+  line("feedback           ", r.success_feedback, r.ci_feedback);
+  os << "  speed              " << format_number(std::round(per_second * 100) / 100)
+     << " experiments/s on " << threads << " threads (" << format_number(std::round(r.seconds))
+     << " s)\n";
+  for (const std::string& p : outputs.paths()) os << "  wrote              " << p << "\n";
+  std::cout << os.str();
+}
+
+}  // namespace
+
+Command add_montecarlo_command(CLI::App& app) {
+  auto o = std::make_shared<MonteCarloOptions>();
+  CLI::App* cmd = app.add_subcommand(
+      "montecarlo",
+      "Robustness of the closed loop: N synthetic experiments per controller, each in a world "
+      "perturbed from the scene (uniform draws seeded by --seed and the run number; the loop "
+      "assumes the nominal scene). Prints the success counts with Wilson 95 % intervals.");
+  add_common_options(*cmd, o->common,
+                     "Directory for runs.csv (one row per experiment) and result.json; created, "
+                     "and refused if it exists and is not empty. Default: no files",
+                     false);
+  cmd->get_option("--scene")->description(
+      "Scene file (YAML, SI units; schema in docs/SCENE.md). Default: the bundled closed-loop "
+      "scene, " +
+      default_experiment_scene());
+  cmd->add_option("--n", o->n, "Runs (perturbed worlds) per controller (>= 1). Default: 100");
+  cmd->add_option("--seed", o->seed,
+                  "Seed of the draws (with the run number: run i is the same world whatever N "
+                  "and --threads are). Default: 1");
+  cmd->add_option("--controller", o->controllers,
+                  "Controllers to compare, comma-separated: open-loop, feedback. Default: "
+                  "open-loop,feedback")
+      ->delimiter(',')
+      ->check(CLI::IsMember({"open-loop", "feedback"}));
+  cmd->add_option("--threads", o->threads,
+                  "Worker threads, each running whole experiments with its own GL context (0 = "
+                  "all cores). Results do not depend on it. Default: 0");
+  const std::string g = "Perturbations (uniform +-half-widths around the scene's values)";
+  const drivers::Perturbations d;
+  const auto def = [](double v) { return " Default: " + format_number(v); };
+  cmd->add_option("--s-h", o->p.s_h, "Initial s_h: +- this (dimensionless)." + def(d.s_h))
+      ->group(g);
+  cmd->add_option("--tilt-deg", o->p.tilt_deg, "Table tilt: +- this, deg." + def(d.tilt_deg))
+      ->group(g);
+  cmd->add_option("--radius-rel", o->p.radius_rel,
+                  "Disk radius: +- this fraction (< 1)." + def(d.radius_rel))
+      ->group(g);
+  cmd->add_option("--friction-rel", o->p.friction_rel,
+                  "Joint viscous and Coulomb friction: scaled by 1 +- this (< 1), one factor for "
+                  "both." +
+                      def(d.friction_rel))
+      ->group(g);
+  cmd->add_option("--noise-dn", o->p.noise_dn,
+                  "Camera read noise sigma, DN (set in every run)." + def(d.noise_dn))
+      ->group(g);
+  cmd->add_option("--latency", o->p.latency,
+                  "Camera latency, s (set in every run)." + def(d.latency))
+      ->group(g);
+  cmd->add_option(
+         "--latency-jitter", o->p.latency_jitter,
+         "Half-width of the latency's uniform spread, s (<= --latency)." + def(d.latency_jitter))
+      ->group(g);
+  cmd->add_option("--drop", o->p.drop,
+                  "Probability that a frame is dropped (< 1; set in every run)." + def(d.drop))
+      ->group(g);
+  return {cmd, [o] { run_montecarlo_command(*o); }};
+}
+
+}  // namespace flatland::app
