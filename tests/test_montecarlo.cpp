@@ -1,0 +1,239 @@
+// Monte Carlo of the closed loop (drivers/montecarlo.hpp): the perturbed worlds stay within the
+// stated bounds, are a function of (seed, run) alone, the Wilson interval matches values worked
+// out by hand, and the results do not depend on the number of threads.
+#include "flatland/drivers/montecarlo.hpp"
+#include "flatland/scene/scene.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <set>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+using namespace flatland;
+
+namespace {
+
+Scene nominal() { return load_scene(FLATLAND_ASSET_DIR "/scenes/airtable-feedback.yaml"); }
+
+constexpr double kDeg = std::numbers::pi / 180.0;
+constexpr double kZ = 1.959963984540054;  // the 97.5 % normal quantile
+
+}  // namespace
+
+TEST(MonteCarloPerturb, StaysWithinTheStatedBoundsAndCoversThem) {
+  const Scene s0 = nominal();
+  // The bundled scene is the nominal experiment; the bounds below are relative to it.
+  ASSERT_DOUBLE_EQ(s0.sim.initial.s_h, -1.0);
+  ASSERT_NEAR(s0.sim.tilt, 5 * kDeg, 1e-15);
+  const drivers::Perturbations p;  // the defaults
+  double lo[4] = {1e9, 1e9, 1e9, 1e9}, hi[4] = {-1e9, -1e9, -1e9, -1e9};
+  for (int run = 0; run < 400; ++run) {
+    drivers::DrawnPerturbation d;
+    const Scene s = drivers::perturb(s0, p, 42, run, &d);
+    const double rel[4] = {(s.sim.initial.s_h + 1.0) / 0.02, (s.sim.tilt / kDeg - 5.0) / 0.25,
+                           (s.sim.object.radius / 0.051 - 1.0) / 0.02,
+                           (s.joint.viscous / s0.joint.viscous - 1.0) / 0.2};
+    for (int i = 0; i < 4; ++i) {
+      EXPECT_LE(std::abs(rel[i]), 1.0 + 1e-12) << "quantity " << i << " run " << run;
+      lo[i] = std::min(lo[i], rel[i]);
+      hi[i] = std::max(hi[i], rel[i]);
+    }
+    // Viscous and Coulomb friction share one factor.
+    EXPECT_NEAR(s.joint.coulomb / s0.joint.coulomb, s.joint.viscous / s0.joint.viscous, 1e-12);
+    // The sensor settings are set, not drawn.
+    EXPECT_EQ(s.effects.noise_read_dn, 2.0);
+    EXPECT_EQ(s.effects.drop_probability, 0.02);
+    ASSERT_TRUE(s.camera);
+    EXPECT_EQ(s.camera->latency, 0.033);
+    EXPECT_EQ(s.camera->latency_jitter, 0.005);
+    // What perturb reports is what it did.
+    EXPECT_EQ(d.s_h0, s.sim.initial.s_h);
+    EXPECT_EQ(d.radius, s.sim.object.radius);
+    EXPECT_EQ(d.effects_seed, s.effects.seed);
+    // Nothing else moves: the hand, the motion, the camera's pose.
+    EXPECT_EQ(s.sim.hand.a, s0.sim.hand.a);
+    EXPECT_EQ(s.sim.hand.d, s0.sim.hand.d);
+    EXPECT_EQ(s.sim.motion.period, s0.sim.motion.period);
+    EXPECT_EQ(s.sim.motion.k, s0.sim.motion.k);
+    EXPECT_EQ(s.sim.object.mass, s0.sim.object.mass);
+    EXPECT_EQ(s.joint.inertia, s0.joint.inertia);
+    EXPECT_EQ(s.camera->fx, s0.camera->fx);
+    EXPECT_EQ(s.controller.mode, s0.controller.mode);
+  }
+  // 400 uniform draws reach within 5 % of both ends (a miss has probability 2 * 0.975^400).
+  for (int i = 0; i < 4; ++i) {
+    EXPECT_LT(lo[i], -0.95) << "quantity " << i << " never drawn near its lower bound";
+    EXPECT_GT(hi[i], 0.95) << "quantity " << i << " never drawn near its upper bound";
+  }
+}
+
+TEST(MonteCarloPerturb, DeterministicPerSeedAndRunAndDifferentBetweenRuns) {
+  const Scene s0 = nominal();
+  const drivers::Perturbations p;
+  const auto key = [&](std::uint64_t seed, int run) {
+    const Scene s = drivers::perturb(s0, p, seed, run);
+    return std::vector<double>{s.sim.initial.s_h,   s.sim.tilt,
+                               s.sim.object.radius, s.joint.viscous,
+                               s.joint.coulomb,     static_cast<double>(s.effects.seed)};
+  };
+  EXPECT_EQ(key(7, 3), key(7, 3));
+  // The same run does not depend on what was drawn before (no shared generator).
+  key(7, 2);
+  EXPECT_EQ(key(7, 3), key(7, 3));
+  std::set<std::vector<double>> distinct;
+  std::set<std::uint64_t> seeds;
+  for (int run = 0; run < 20; ++run) {
+    distinct.insert(key(7, run));
+    seeds.insert(drivers::perturb(s0, p, 7, run).effects.seed);
+  }
+  EXPECT_EQ(distinct.size(), 20u) << "runs share a world";
+  EXPECT_EQ(seeds.size(), 20u) << "runs share the camera's noise and drops";
+  EXPECT_NE(key(7, 3), key(8, 3)) << "the seed does not matter";
+  // Seeds that differ only in their upper 32 bits are different experiments too.
+  EXPECT_NE(key(1, 0), key(1 + (std::uint64_t{1} << 32), 0));
+}
+
+TEST(MonteCarloPerturb, ZeroHalfWidthsKeepTheNominalWorld) {
+  const Scene s0 = nominal();
+  drivers::Perturbations p;
+  p.s_h = p.tilt_deg = p.radius_rel = p.friction_rel = 0;
+  const Scene s = drivers::perturb(s0, p, 1, 5);
+  EXPECT_EQ(s.sim.initial.s_h, s0.sim.initial.s_h);
+  EXPECT_NEAR(s.sim.tilt, s0.sim.tilt, 1e-15);
+  EXPECT_EQ(s.sim.object.radius, s0.sim.object.radius);
+  EXPECT_EQ(s.joint.viscous, s0.joint.viscous);
+}
+
+TEST(MonteCarloPerturb, RejectsInvalidPerturbations) {
+  const Scene s0 = nominal();
+  const auto bad = [&](auto edit, const std::string& field) {
+    drivers::Perturbations p;
+    edit(p);
+    try {
+      drivers::perturb(s0, p, 1, 0);
+      ADD_FAILURE() << field << " accepted";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("perturbations." + field), std::string::npos)
+          << e.what();
+    }
+  };
+  bad([](auto& p) { p.s_h = -0.1; }, "s_h");
+  bad([](auto& p) { p.tilt_deg = std::nan(""); }, "tilt_deg");
+  bad([](auto& p) { p.radius_rel = 1.0; }, "radius_rel");
+  bad([](auto& p) { p.drop = 1.0; }, "drop");
+  bad([](auto& p) { p.latency_jitter = 0.05; }, "latency_jitter");  // > latency 0.033
+  bad([](auto& p) { p.friction_rel = 1.5; }, "friction_rel");
+  Scene no_camera = s0;
+  no_camera.camera.reset();
+  EXPECT_THROW(drivers::perturb(no_camera, {}, 1, 0), std::invalid_argument);
+}
+
+TEST(MonteCarloWilson, MatchesHandComputedIntervals) {
+  const double z2 = kZ * kZ;
+  // k = 0: the interval is [0, z^2 / (n + z^2)]; k = n mirrors it.
+  auto i = drivers::wilson_interval(0, 10);
+  EXPECT_NEAR(i.lo, 0.0, 1e-12);
+  EXPECT_NEAR(i.hi, z2 / (10 + z2), 1e-12);
+  EXPECT_NEAR(i.hi, 0.27753, 1e-5);
+  i = drivers::wilson_interval(10, 10);
+  EXPECT_NEAR(i.lo, 10 / (10 + z2), 1e-12);
+  EXPECT_NEAR(i.lo, 0.72247, 1e-5);
+  EXPECT_NEAR(i.hi, 1.0, 1e-12);
+  // k = 5 of 10: centred on 1/2, half-width z sqrt(1/40 + z^2/400) / (1 + z^2/10).
+  i = drivers::wilson_interval(5, 10);
+  const double half = kZ * std::sqrt(0.025 + z2 / 400) / (1 + z2 / 10);
+  EXPECT_NEAR(i.lo, 0.5 - half, 1e-12);
+  EXPECT_NEAR(i.hi, 0.5 + half, 1e-12);
+  EXPECT_NEAR(i.lo, 0.23659, 1e-5);
+  EXPECT_NEAR(i.hi, 0.76341, 1e-5);
+  // Asymmetric cases, worked out to 5 digits on paper from the same formula.
+  i = drivers::wilson_interval(1, 20);
+  EXPECT_NEAR(i.lo, 0.00888, 1e-5);
+  EXPECT_NEAR(i.hi, 0.23613, 1e-5);
+  i = drivers::wilson_interval(17, 20);
+  EXPECT_NEAR(i.lo, 0.63958, 1e-5);
+  EXPECT_NEAR(i.hi, 0.94763, 1e-5);
+  // No trials: no information.
+  i = drivers::wilson_interval(0, 0);
+  EXPECT_EQ(i.lo, 0.0);
+  EXPECT_EQ(i.hi, 1.0);
+  EXPECT_THROW(drivers::wilson_interval(3, 2), std::invalid_argument);
+}
+
+TEST(MonteCarloRun, RejectsBadArguments) {
+  const Scene s0 = nominal();
+  EXPECT_THROW(drivers::run_montecarlo(s0, {}, 0, 1, {"feedback"}), std::invalid_argument);
+  EXPECT_THROW(drivers::run_montecarlo(s0, {}, 1, 1, {"closed"}), std::invalid_argument);
+  EXPECT_THROW(drivers::run_montecarlo(s0, {}, 1, 1, {"feedback", "feedback"}),
+               std::invalid_argument);
+  EXPECT_THROW(drivers::run_montecarlo(s0, {}, 1, 1, {}), std::invalid_argument);
+}
+
+TEST(MonteCarloRun, ResultsDoNotDependOnTheThreadCount) {
+  const Scene s0 = nominal();
+  const drivers::Perturbations p;
+  const std::vector<std::string> controllers = {"open-loop", "feedback"};
+  long calls = 0, last_done = 0, last_total = 0;
+  const auto one =
+      drivers::run_montecarlo(s0, p, 4, 2024, controllers, 1, [&](long done, long total) {
+        ++calls;
+        EXPECT_EQ(done, last_done + 1);
+        last_done = done;
+        last_total = total;
+      });
+  EXPECT_EQ(calls, 8);
+  EXPECT_EQ(last_total, 8);
+  const auto two = drivers::run_montecarlo(s0, p, 4, 2024, controllers, 2);
+  ASSERT_EQ(one.records.size(), 8u);
+  ASSERT_EQ(two.records.size(), 8u);
+  EXPECT_EQ(one.runs, 4);
+  int ok_open = 0, ok_feedback = 0;
+  for (std::size_t i = 0; i < 8; ++i) {
+    const auto& a = one.records[i];
+    const auto& b = two.records[i];
+    SCOPED_TRACE("record " + std::to_string(i));
+    // Ordered by run, then controller, whoever ran it.
+    EXPECT_EQ(a.run, static_cast<int>(i / 2));
+    EXPECT_EQ(a.controller, controllers[i % 2]);
+    EXPECT_EQ(b.run, a.run);
+    EXPECT_EQ(b.controller, a.controller);
+    EXPECT_EQ(b.success, a.success);
+    EXPECT_EQ(b.failure, a.failure);
+    // Bit-identical: the same world, the same noise, the same loop.
+    EXPECT_TRUE(b.duration_s == a.duration_s ||
+                (std::isnan(a.duration_s) && std::isnan(b.duration_s)));
+    EXPECT_EQ(b.s_end, a.s_end);
+    EXPECT_EQ(b.fn_min_ratio, a.fn_min_ratio);
+    EXPECT_EQ(b.frames, a.frames);
+    EXPECT_EQ(b.drawn.effects_seed, a.drawn.effects_seed);
+    // Both controllers of a run face the same world.
+    if (i % 2) {
+      EXPECT_EQ(a.drawn.s_h0, one.records[i - 1].drawn.s_h0);
+      EXPECT_EQ(a.drawn.tilt_deg, one.records[i - 1].drawn.tilt_deg);
+    }
+    if (a.success) (a.controller == "open-loop" ? ok_open : ok_feedback)++;
+    EXPECT_EQ(a.success, a.failure.empty());
+  }
+  // The counts are the records' counts, the same for both thread counts.
+  EXPECT_EQ(one.success_open_loop, ok_open);
+  EXPECT_EQ(one.success_feedback, ok_feedback);
+  EXPECT_EQ(two.success_open_loop, ok_open);
+  EXPECT_EQ(two.success_feedback, ok_feedback);
+  const auto ci = drivers::wilson_interval(ok_feedback, 4);
+  EXPECT_EQ(one.ci_feedback.lo, ci.lo);
+  EXPECT_EQ(one.ci_feedback.hi, ci.hi);
+}
+
+TEST(MonteCarloRun, OneControllerLeavesTheOtherUncounted) {
+  const Scene s0 = nominal();
+  const auto r = drivers::run_montecarlo(s0, {}, 1, 3, {"feedback"}, 1);
+  EXPECT_EQ(r.success_open_loop, -1);
+  EXPECT_GE(r.success_feedback, 0);
+  ASSERT_EQ(r.records.size(), 1u);
+  EXPECT_EQ(r.records[0].controller, "feedback");
+}
