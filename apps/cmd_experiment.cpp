@@ -204,6 +204,10 @@ void run_experiment(const ExperimentOptions& o) {
   if (kind == CameraKind::kRecorded && !log_joint)
     throw UsageError("--joint: a recorded camera (--camera " + o.camera +
                      ") is replayed with its recorded joint: give --joint log:DIR");
+  // Checked before the device is opened: there is nothing to run it with.
+  if (kind == CameraKind::kLive && !log_joint)
+    throw UsageError("--joint: no live joint driver exists yet; a live camera (--camera " +
+                     o.camera + ") can only run against a recorded joint, --joint log:DIR");
 
   if (o.common.out.empty()) throw UsageError("--out: required (a directory)");
   const fs::path out = o.common.out;
@@ -237,9 +241,6 @@ void run_experiment(const ExperimentOptions& o) {
     } catch (const std::invalid_argument& e) {
       rethrow_for_option("--camera", e);
     }
-    if (kind == CameraKind::kLive && !log_joint)
-      throw UsageError("--joint: no live joint driver exists yet; a live camera (--camera " +
-                       o.camera + ") can only run against a recorded joint, --joint log:DIR");
     try {
       joint = drivers::open_joint(joint_spec);
     } catch (const std::invalid_argument& e) {
