@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 #include <numbers>
+#include <sstream>
 #include <stdexcept>
 
 namespace flatland::sim {
@@ -198,7 +199,25 @@ GeneralRolling::Assembled GeneralRolling::assemble_and_solve(double t, const Sta
   A(5, 1) = -w.ro.x();
   A(5, 2) = rho2;
   b(5) = -cross2(w.ro, pb.gravity_vector());
-  s.x = A.colPivHouseholderQr().solve(b);
+  Eigen::ColPivHouseholderQR<Eigen::Matrix<double, 6, 5>> qr(A);
+  // A loses rank when the contact is degenerate, e.g. conforming curvatures (kappa_h + kappa_o = 0:
+  // a disk lying in a well of its own radius), where s_o'' and s_h'' are not determined; the
+  // least-squares solve would then return one arbitrary split of them, so refuse instead. Pivots
+  // below 1e-10 of the largest are zero: a genuine contact (r kappa = -0.99) is at ~1e-2.
+  // Only inside the active piece: Runge-Kutta stages and event trials may evaluate a piece's
+  // polynomial extension past its junction, whose curvature means nothing physical.
+  qr.setThreshold(1e-10);
+  const PieceInterval iv = pb.hand->piece_interval(p.hand);
+  if (qr.rank() < 5 && y[4] >= iv.lo && y[4] <= iv.hi) {
+    std::ostringstream os;
+    os.precision(8);
+    os << "general formulation: A is rank-deficient (rank " << qr.rank() << " of 5) at t=" << t
+       << " s, s_h=" << y[4] << ", s_o=" << y[3] << ": degenerate contact (hand curvature "
+       << w.gh.curvature << " 1/m, object curvature " << w.go.curvature
+       << " 1/m; conforming when they cancel)";
+    throw std::runtime_error(os.str());
+  }
+  s.x = qr.solve(b);
   s.residual = (A * s.x - b).norm();
   return s;
 }
@@ -300,6 +319,20 @@ void ReducedDiskRolling::derivative(double t, const State& y, const Pieces& p, S
   const HandKinematics h = problem_->motion->at(t, p.motion);
   const CurveGeometry g = problem_->hand->geometry(y[0], p.hand);
   const double sigma = g.speed * (1.0 + r_ * g.curvature);
+  // sigma > 0 is the disk fitting the hand's concave parts (r kappa > -1); at sigma = 0 the
+  // equation divides by zero (the contact point is not determined), so say so instead of
+  // producing inf/NaN. validate_hand_for_disk rules this out for the paper's hands.
+  // Only inside the active piece (stages may overshoot a junction onto the piece's extension,
+  // where a non-finite value just makes the step fail and shrink).
+  const PieceInterval iv = problem_->hand->piece_interval(p.hand);
+  if (!(sigma > 0) && y[0] >= iv.lo && y[0] <= iv.hi) {
+    std::ostringstream os;
+    os.precision(8);
+    os << "reduced formulation: the disk does not fit the hand at t=" << t << " s, s_h=" << y[0]
+       << " (r*kappa = " << r_ * g.curvature << ", needs > -1: curvature radius "
+       << (g.curvature != 0 ? -1.0 / g.curvature : 0.0) << " m vs disk radius " << r_ << " m)";
+    throw std::runtime_error(os.str());
+  }
   dy[0] = y[2];
   dy[1] = h.angular_velocity - side_ * sigma * y[2] / r_;
   dy[2] = sddot(h, g, y[2]);

@@ -16,6 +16,9 @@ namespace flatland::sim {
 enum class Method {
   kDormandPrince54,  ///< adaptive embedded 5(4), FSAL, 4th-order dense output
   kRungeKutta4,      ///< classical fixed step, cubic Hermite dense output
+  /// adaptive Dormand-Prince 8(5,3) (Hairer's DOP853): 8th order, 5th-order error estimate with
+  /// a 3rd-order correction, FSAL, 7th-order dense output (3 extra stages per recorded step)
+  kDormandPrince853,
 };
 enum class Formulation {
   kAuto,     ///< reduced when the object is a disk, general otherwise
@@ -28,8 +31,8 @@ std::string to_string(Formulation f);
 
 struct IntegratorSettings {
   Method method = Method::kDormandPrince54;
-  double rtol = 1e-10;       ///< relative tolerance (Dormand-Prince)
-  double atol = 1e-12;       ///< absolute tolerance (Dormand-Prince)
+  double rtol = 1e-10;       ///< relative tolerance (Dormand-Prince 5(4) and 8(5,3))
+  double atol = 1e-12;       ///< absolute tolerance (Dormand-Prince 5(4) and 8(5,3))
   double fixed_step = 1e-3;  ///< s (RK4)
   double max_step = std::numeric_limits<double>::infinity();  ///< s (Dormand-Prince)
   long max_steps = 5'000'000;                                 ///< runtime error beyond this
@@ -83,7 +86,10 @@ class Trajectory {
   };
   using Sampler = std::function<Sample(double t, const double* y, const Pieces& p)>;
   Trajectory() = default;
-  Trajectory(int dimension, Sampler sampler) : n_(dimension), sampler_(std::move(sampler)) {}
+  /// `terms` coefficient vectors per step: 5 for the 4th-order (and Hermite) interpolants, 8 for
+  /// DOP853's 7th-order one; both evaluate c0 + th(c1 + th1(c2 + th(c3 + th1(c4 + ...)))).
+  Trajectory(int dimension, Sampler sampler, int terms = 5)
+      : n_(dimension), terms_(terms), sampler_(std::move(sampler)) {}
 
   bool empty() const { return steps_.empty(); }
   double t_begin() const { return steps_.front().t0; }
@@ -98,13 +104,14 @@ class Trajectory {
   std::vector<Sample> resample(double dt) const;
 
   // Used by the integrator.
-  void append(double t0, double h, const Pieces& p, const double* coeffs /* 5 n values */);
+  void append(double t0, double h, const Pieces& p, const double* coeffs /* terms * n values */);
   void set_s_h_index(int i) { s_h_index_ = i; }
 
  private:
   std::size_t find(double t) const;
   void interpolate(std::size_t i, double t, double* y) const;
   int n_ = 0;
+  int terms_ = 5;
   int s_h_index_ = 0;
   Sampler sampler_;
   std::vector<Step> steps_;
