@@ -32,18 +32,19 @@ void add_common_options(CLI::App& cmd, CommonOptions& o, const std::string& out_
                  "Default: off");
   const std::string group = "Integrator (defaults: the scene's simulator settings)";
   o.method_opt = cmd.add_option("--method", o.method,
-                                "Integrator: dopri5 (adaptive Dormand-Prince 5(4)) or rk4 (fixed "
-                                "step). Default: scene, else dopri5")
-                     ->check(CLI::IsMember({"dopri5", "rk4"}))
+                                "Integrator: dopri5 (adaptive Dormand-Prince 5(4)), dop853 "
+                                "(adaptive Dormand-Prince 8(5,3), for tolerances below ~1e-8) or "
+                                "rk4 (fixed step). Default: scene, else dopri5")
+                     ->check(CLI::IsMember({"dopri5", "dop853", "rk4"}))
                      ->group(group);
   o.rtol_opt = cmd.add_option("--rtol", o.rtol,
-                              "Relative tolerance of dopri5 (dimensionless, > 0). Default: scene, "
+                              "Relative tolerance of dopri5/dop853 (dimensionless, > 0). Default: scene, "
                               "else 1e-10")
                    ->group(group);
   o.atol_opt =
       cmd.add_option(
              "--atol", o.atol,
-             "Absolute tolerance of dopri5 (in the state's units: m, rad, s_h and their rates "
+             "Absolute tolerance of dopri5/dop853 (in the state's units: m, rad, s_h and their rates "
              "per s; > 0). "
              "Default: scene, else 1e-12")
           ->group(group);
@@ -62,7 +63,9 @@ Scene load_scene_with_overrides(const CommonOptions& o) {
   Scene scene = load_scene(o.scene.empty() ? default_scene_path() : o.scene);
   sim::IntegratorSettings& in = scene.sim.run.integrator;
   if (o.method_opt && o.method_opt->count())
-    in.method = o.method == "rk4" ? sim::Method::kRungeKutta4 : sim::Method::kDormandPrince54;
+    in.method = o.method == "rk4"      ? sim::Method::kRungeKutta4
+                : o.method == "dop853" ? sim::Method::kDormandPrince853
+                                       : sim::Method::kDormandPrince54;
   if (o.rtol_opt && o.rtol_opt->count()) {
     require_positive("--rtol", o.rtol, "");
     in.rtol = o.rtol;

@@ -386,7 +386,7 @@ TEST(SceneTest, NonFiniteNumbers) {
 
 TEST(SceneTest, UnknownEnumValues) {
   expect_field_error(with(kBase, "method: dopri5", "method: euler"), "integrator.method",
-                     "'euler' (allowed: dopri5, rk4)");
+                     "'euler' (allowed: dopri5, dop853, rk4)");
   expect_field_error(with(kBase, "formulation: auto", "formulation: magic"),
                      "integrator.formulation", "allowed: auto, general, reduced");
   expect_field_error(with(kBase, "type: disk", "type: square"), "object.type", "disk, ellipse");

@@ -371,9 +371,10 @@ void read_integrator(const MapReader& root, sim::SimulationSpec& spec) {
       "integrator", {"method", "rtol", "atol", "step", "max_step", "formulation"});
   if (!it) return;
   auto& s = spec.run.integrator;
-  s.method = it->choice_or("method", {"dopri5", "rk4"}, "dopri5") == "rk4"
-                 ? sim::Method::kRungeKutta4
-                 : sim::Method::kDormandPrince54;
+  const std::string m = it->choice_or("method", {"dopri5", "dop853", "rk4"}, "dopri5");
+  s.method = m == "rk4"      ? sim::Method::kRungeKutta4
+             : m == "dop853" ? sim::Method::kDormandPrince853
+                             : sim::Method::kDormandPrince54;
   s.rtol = it->positive_or("rtol", s.rtol);
   s.atol = it->positive_or("atol", s.atol);
   s.fixed_step = it->positive_or("step", s.fixed_step);
