@@ -187,5 +187,6 @@ Command add_calibrate_command(CLI::App& app);
 Command add_track_command(CLI::App& app);
 Command add_experiment_command(CLI::App& app);
 Command add_montecarlo_command(CLI::App& app);
+Command add_study_command(CLI::App& app);
 
 }  // namespace flatland::app

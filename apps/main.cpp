@@ -40,6 +40,7 @@ int main(int argc, char** argv) {
   commands.push_back(add_track_command(app));
   commands.push_back(add_experiment_command(app));
   commands.push_back(add_montecarlo_command(app));
+  commands.push_back(add_study_command(app));
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
