@@ -139,15 +139,15 @@ std::string plot_body(const std::string& title, const std::string& ylabel, int t
   std::string body = "set title '" + title +
                      "'\n"
                      "set logscale xy\n"
-                     "set format x '10^{%L}'\n"
-                     "set format y '10^{%L}'\n"
+                     "set format x '1e%L'\n"
+                     "set format y '1e%L'\n"
                      "set grid\n"
                      "set xlabel 'CPU time (s)'\n"
                      "set ylabel '" +
                      ylabel +
                      "'\n"
                      "set key outside right\n"
-                     "floor(e) = e < 1e-16 ? 1e-16 : e\n"
+                     "lift(e) = e < 1e-16 ? 1e-16 : e\n"
                      "sel(m, f, c) = (strcol(1) eq m && strcol(2) eq f) ? column(c) : NaN\n"
                      "plot ";
   const char* methods[] = {"rk4", "dopri5", "dop853"};
@@ -159,7 +159,7 @@ std::string plot_body(const std::string& title, const std::string& ylabel, int t
       if (!first) body += ", \\\n     ";
       first = false;
       body += "datafile skip 1 using (sel('" + std::string(methods[m]) + "','" + forms[f] + "'," +
-              std::to_string(tcol) + ")):(floor(sel('" + methods[m] + "','" + forms[f] + "'," +
+              std::to_string(tcol) + ")):(lift(sel('" + methods[m] + "','" + forms[f] + "'," +
               std::to_string(ecol) + "))) with linespoints lw 2 pt " +
               std::to_string(f == 0 ? 7 : 5) + " dt " + std::to_string(f == 0 ? 1 : 2) +
               " lc rgb '" + colors[m] + "' title '" + methods[m] + " " + forms[f] + "'";
@@ -228,7 +228,7 @@ void run_sim_study(const StudyOptions& o) {
     if (plots) {
       run_plot(outputs, dir,
                {"sim_s_h.gp", "sim.csv", "sim_s_h.png",
-                plot_body("Work-precision: s_h(T) of the scene's butterfly (2T = " +
+                plot_body("Work-precision: s_h(T) of the scene butterfly (2T = " +
                               format_number(spec.motion.period) + " s)",
                           "|s_h(T) - reference|", 10, 9)});
       run_plot(outputs, dir,
