@@ -291,8 +291,8 @@ GoalCheck SimWorld::goal_check() const {
   if (failure_) {
     out.reason = *failure_;
   } else if (!(out.well_bottom > 0.5 && out.well_bottom < 1.5)) {
-    out.reason = "disk in the well at s_h = " + fmt(out.well_bottom) +
-                 ", not the goal well (s_h near +1)";
+    out.reason = "disk at s_h = " + fmt(s_h_) + " settles in the well whose bottom is at s_h = " +
+                 fmt(out.well_bottom) + ", not the goal well (bottom near s_h = +1)";
   } else if (!(out.energy_margin > 0)) {
     out.reason = "disk can still leave the goal well (energy " + fmt(-out.energy_margin) +
                  " J above its lower rim)";
