@@ -28,6 +28,9 @@ cv::Mat downsample(const cv::Mat& image, int factor);
 void apply_vignetting(cv::Mat& image_f32, double strength, cv::Point2d principal_point);
 /// Sensor noise on a float image in DN: Gaussian with variance read^2 + gain * max(signal, 0).
 void apply_noise(cv::Mat& image_f32, double read_sigma_dn, double shot_gain, EffectsRng& rng);
+/// 65536 standard-normal quantiles at equal-probability midpoints: 16 uniform random bits index a
+/// normal variate (what apply_noise draws; public for its tests).
+const float* gaussian_quantiles();
 /// Round and saturate to 8 bits.
 cv::Mat quantize(const cv::Mat& image_f32);
 /// Capture time of frame i with timing jitter (sigma s), and whether it is dropped.
