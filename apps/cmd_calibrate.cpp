@@ -22,6 +22,7 @@ namespace {
 struct CalibrateOptions {
   std::vector<std::string> images;
   std::string board, out, camera_name = "flatland";
+  bool force = false;
   bool json = false;
 };
 
@@ -35,6 +36,7 @@ void run_calibrate(const CalibrateOptions& o) {
   const fs::path out = o.out;
   if (o.out.empty() || o.out.back() == '/' || fs::is_directory(out))
     throw UsageError("--out: must be a file (camera.yaml), got '" + o.out + "'");
+  check_output_file("--out", out, o.force);
   const std::vector<std::string> files = expand_file_patterns(o.images, "--images");
 
   // libpng/libjpeg complain on stderr about corrupt files; our own warning names the file.
@@ -91,7 +93,7 @@ void run_calibrate(const CalibrateOptions& o) {
   calibration::CalibrationReport report = r.report();
   report.views_rejected.insert(report.views_rejected.begin(), not_found.begin(), not_found.end());
   file.report = report;
-  OutputSet outputs;
+  OutputSet outputs(o.force);
   outputs.ensure_directory(out.parent_path().empty() ? fs::path(".") : out.parent_path());
   calibration::write_camera_file(outputs.reserve(out).string(), file);
   outputs.commit();
@@ -155,6 +157,7 @@ Command add_calibrate_command(CLI::App& app) {
       ->required()
       ->type_name("SPEC");
   cmd->add_option("--out", o->out, "Camera file to write (YAML)")->required()->type_name("FILE");
+  add_force_option(*cmd, o->force);
   cmd->add_option("--camera-name", o->camera_name, "camera_name in the file. Default: flatland");
   cmd->add_flag("--json", o->json,
                 "Print exactly one JSON object on stdout (rms_px, fx, fy, cx, cy, dist, std, "

@@ -211,15 +211,23 @@ void run_experiment(const ExperimentOptions& o) {
 
   if (o.common.out.empty()) throw UsageError("--out: required (a directory)");
   const fs::path out = o.common.out;
-  if (fs::exists(out) && (!fs::is_directory(out) || !fs::is_empty(out)))
-    throw UsageError("--out: " + o.common.out +
-                     " already exists and is not an empty directory; remove it or choose another");
+  check_output_directory("--out", out, o.common.force);
   if (!o.record.empty()) {
     const fs::path rec = fs::absolute(o.record).lexically_normal();
     const fs::path dir = fs::absolute(out).lexically_normal();
     if (std::mismatch(dir.begin(), dir.end(), rec.begin(), rec.end()).first == dir.end())
       throw UsageError("--record: " + o.record + " must not be --out or inside it (" +
                        o.common.out + ")");
+    check_output_directory("--record", o.record, o.common.force);
+    // --force would replace the recording being replayed while it is read.
+    for (const std::string& source : {o.camera, o.joint}) {
+      const auto colon = source.find(':');
+      if (colon == std::string::npos) continue;
+      const fs::path src = fs::absolute(source.substr(colon + 1)).lexically_normal();
+      if (std::mismatch(rec.begin(), rec.end(), src.begin(), src.end()).first == rec.end())
+        throw UsageError("--record: " + o.record + " is the recording being replayed (" + source +
+                         ")");
+    }
   }
 
   // The loop's own view of the experiment (plan, mapping, estimator, controller): bad scene
@@ -253,8 +261,8 @@ void run_experiment(const ExperimentOptions& o) {
   if (plots) require_gnuplot();
 
   // ---- outputs: the directory and the video writer first, so that a missing codec fails fast
-  OutputSet outputs;
-  outputs.ensure_directory(out);
+  OutputSet outputs(o.common.force);
+  outputs.begin_directory(out);
   const CameraSpec& cam = *scene.camera;
   const cv::Size size(cam.width, cam.height);
   cv::VideoWriter writer;  // after `outputs`: released before its files are removed
@@ -289,7 +297,10 @@ void run_experiment(const ExperimentOptions& o) {
     meta.joint = joint ? joint->describe() : "simulated";
     meta.scene = scene.origin;
     try {
-      recorder = std::make_unique<drivers::Recorder>(o.record, meta);
+      // The recorder builds its directory itself (with its own partial directory beside it):
+      // both live inside a registered staging root, so that an interruption removes them and
+      // commit() moves (or, with --force, swaps) the finished recording into place.
+      recorder = std::make_unique<drivers::Recorder>(outputs.begin_directory(o.record, true), meta);
     } catch (const std::invalid_argument& e) {
       rethrow_for_option("--record", e);
     }

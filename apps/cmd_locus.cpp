@@ -37,8 +37,7 @@ void run_locus(const LocusOptions& o) {
   spec.motion.period = o.from;
   sim::build_problem(spec);
   const fs::path dir = o.common.out;
-  if (!dir.empty() && fs::exists(dir) && !fs::is_directory(dir))
-    throw UsageError("--out: not a directory: " + o.common.out);
+  if (!dir.empty()) check_output_directory("--out", dir, o.common.force);
   const bool plots = !dir.empty() && !o.common.no_plot;
   if (plots) require_gnuplot();
 
@@ -55,10 +54,10 @@ void run_locus(const LocusOptions& o) {
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
-  OutputSet outputs;
+  OutputSet outputs(o.common.force);
   std::string csv_path, png_path;
   if (!dir.empty()) {
-    outputs.ensure_directory(dir);
+    outputs.begin_directory(dir);
     outputs.stage(dir / "locus.csv", locus_csv(points));
     csv_path = (dir / "locus.csv").string();
     if (plots) {

@@ -103,9 +103,7 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
                      ": camera: the scene has no camera section (needed by the "
                      "closed loop)");
   const fs::path dir = o.common.out;
-  if (!dir.empty() && fs::exists(dir) && (!fs::is_directory(dir) || !fs::is_empty(dir)))
-    throw UsageError("--out: " + o.common.out +
-                     " already exists and is not an empty directory; remove it or choose another");
+  if (!dir.empty()) check_output_directory("--out", dir, o.common.force);
 
   const unsigned threads =
       o.threads ? o.threads : std::max(1u, std::thread::hardware_concurrency());
@@ -138,9 +136,9 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
   j["controllers"] = o.controllers;
   j["scene"] = scene.origin;
 
-  OutputSet outputs;
+  OutputSet outputs(o.common.force);
   if (!dir.empty()) {
-    outputs.ensure_directory(dir);
+    outputs.begin_directory(dir);
     outputs.stage(dir / "runs.csv", runs_csv(r));
     outputs.stage(dir / "result.json", j.dump(2) + "\n");
     outputs.commit();

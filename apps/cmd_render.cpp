@@ -199,16 +199,15 @@ void run_render(const RenderOptions& o) {
           out_text);
   if (mp4 && fs::is_directory(out))
     throw UsageError("--out: " + out_text + " is a directory; give a FILE.mp4 or a directory");
-  if (!mp4 && fs::exists(out)) {
-    if (!fs::is_directory(out))
-      throw UsageError("--out: " + out_text + " exists and is not a directory");
-    // Frames of an earlier, longer render would silently mix with this one's.
-    for (const auto& e : fs::directory_iterator(out)) {
-      const std::string name = e.path().filename().string();
-      if (name.rfind("frame_", 0) == 0 || name == "truth.csv" || name == "meta.json")
-        throw UsageError("--out: " + out_text + " already holds a render (" + name +
-                         "); remove it or choose another directory");
-    }
+  // The MP4 comes with two files beside it; a PNG directory is replaced as a whole (with
+  // --force), so that frames of an earlier, longer render cannot mix with this one's.
+  if (mp4) {
+    check_output_file("--out", out, o.common.force);
+    check_output_file("--out", out.parent_path() / (out.stem().string() + ".truth.csv"),
+                      o.common.force);
+    check_output_file("--out", out.parent_path() / (out.stem().string() + ".json"), o.common.force);
+  } else {
+    check_output_directory("--out", out, o.common.force);
   }
 
   // The renderer validates the camera and effects (bad input) and makes the GL context (a
@@ -218,7 +217,7 @@ void run_render(const RenderOptions& o) {
   const std::string gl = renderer.gl_description();
 
   // ---- outputs: the video (or the frame directory) first, so that a missing codec fails fast
-  OutputSet outputs;
+  OutputSet outputs(o.common.force);
   const cv::Size size(model.width, model.height);
   const double fps = model.fps;
   fs::path truth_path, meta_path, video_tmp;
@@ -248,7 +247,7 @@ void run_render(const RenderOptions& o) {
     truth_path = dir / (out.stem().string() + ".truth.csv");
     meta_path = dir / (out.stem().string() + ".json");
   } else {
-    outputs.ensure_directory(out);
+    outputs.begin_directory(out);
     truth_path = out / "truth.csv";
     meta_path = out / "meta.json";
   }

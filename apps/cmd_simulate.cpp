@@ -47,10 +47,11 @@ void run_simulate(const SimulateOptions& o) {
   const auto problem = build_problem_checked(spec, given);
   sim::resolve_formulation(*problem, spec.run.formulation);  // e.g. reduced for an ellipse
 
-  OutputSet outputs;
+  OutputSet outputs(o.common.force);
   const fs::path out = o.common.out;
   if (!out.empty() && (o.common.out.back() == '/' || fs::is_directory(out)))
     throw UsageError("--out: must be a file name (FILE.csv), not a directory: " + o.common.out);
+  if (!out.empty()) check_output_file("--out", out, o.common.force);
 
   std::cerr << "flatland: simulating " << scene.origin << " for "
             << format_number(spec.end_time() - spec.initial.t0) << " s\n";

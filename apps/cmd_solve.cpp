@@ -36,8 +36,7 @@ void run_solve(const SolveOptions& o) {
   build_problem_checked(spec, given);  // the scene with the overrides must be valid
   const bool plots = !o.common.out.empty() && !o.common.no_plot;
   const fs::path dir = o.common.out;
-  if (!dir.empty() && fs::exists(dir) && !fs::is_directory(dir))
-    throw UsageError("--out: not a directory: " + o.common.out);
+  if (!dir.empty()) check_output_directory("--out", dir, o.common.force);
   if (plots) require_gnuplot();
 
   sim::SearchSettings settings;
@@ -48,7 +47,7 @@ void run_solve(const SolveOptions& o) {
   const sim::SolveReport r = for_d ? sim::solve_d(spec, spec.motion.period, spec.motion.k, settings)
                                    : sim::solve_k(spec, spec.motion.period, settings);
 
-  OutputSet outputs;
+  OutputSet outputs(o.common.force);
   if (!dir.empty()) {
     write_solution_outputs(outputs, dir, r.run, o.common.no_plot);
     outputs.commit();

@@ -18,6 +18,7 @@ struct StudyOptions {
   std::string name;
   std::string scene;
   std::string out;
+  bool force = false;
   bool json = false;
   bool no_plot = false;
   double min_cpu = 0.02;  // s: timing repeats until this much CPU time has been spent
@@ -176,8 +177,7 @@ void run_sim_study(const StudyOptions& o) {
     throw UsageError("study sim: the scene's motion must be the butterfly (motion.kind)");
   sim::build_problem(spec);
   const fs::path dir = o.out;
-  if (!dir.empty() && fs::exists(dir) && !fs::is_directory(dir))
-    throw UsageError("--out: not a directory: " + o.out);
+  if (!dir.empty()) check_output_directory("--out", dir, o.force);
   const bool plots = !dir.empty() && !o.no_plot;
   if (plots) require_gnuplot();
 
@@ -220,10 +220,10 @@ void run_sim_study(const StudyOptions& o) {
   }
   const double seconds = cpu_now() - start;
 
-  OutputSet outputs;
+  OutputSet outputs(o.force);
   std::vector<std::string> written;
   if (!dir.empty()) {
-    outputs.ensure_directory(dir);
+    outputs.begin_directory(dir);
     outputs.stage(dir / "sim.csv", study_csv(rows));
     if (plots) {
       run_plot(outputs, dir,
@@ -335,6 +335,7 @@ Command add_study_command(CLI::App& app) {
                   "scripts; created if missing. Default: no files")
       ->type_name("PATH");
   cmd->add_flag("--no-plot", o->no_plot, "Write the CSV but no plots (no gnuplot needed)");
+  add_force_option(*cmd, o->force);
   cmd->add_option("--min-cpu", o->min_cpu,
                   "CPU seconds each timing repeats for (> 0; longer is steadier). Default: 0.02")
       ->check(CLI::PositiveNumber);

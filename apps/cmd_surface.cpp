@@ -59,8 +59,7 @@ void run_surface(const SurfaceOptions& o) {
   spec.motion.k = o.k_from;
   sim::build_problem(spec);
   const fs::path dir = o.common.out;
-  if (!dir.empty() && fs::exists(dir) && !fs::is_directory(dir))
-    throw UsageError("--out: not a directory: " + o.common.out);
+  if (!dir.empty()) check_output_directory("--out", dir, o.common.force);
   const bool plots = !dir.empty() && !o.common.no_plot;
   if (plots) require_gnuplot();
 
@@ -75,10 +74,10 @@ void run_surface(const SurfaceOptions& o) {
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
-  OutputSet outputs;
+  OutputSet outputs(o.common.force);
   std::string csv_path, png_path;
   if (!dir.empty()) {
-    outputs.ensure_directory(dir);
+    outputs.begin_directory(dir);
     outputs.stage(dir / "surface.csv", surface_csv(s));
     csv_path = (dir / "surface.csv").string();
     if (plots) {

@@ -26,8 +26,7 @@ void run_time_optimal(const TimeOptimalOptions& o) {
   spec.motion.period = o.from;
   sim::build_problem(spec);
   const fs::path dir = o.common.out;
-  if (!dir.empty() && fs::exists(dir) && !fs::is_directory(dir))
-    throw UsageError("--out: not a directory: " + o.common.out);
+  if (!dir.empty()) check_output_directory("--out", dir, o.common.force);
   if (!dir.empty() && !o.common.no_plot) require_gnuplot();
 
   sim::SearchSettings settings;
@@ -37,7 +36,7 @@ void run_time_optimal(const TimeOptimalOptions& o) {
   const sim::TimeOptimalReport r =
       sim::time_optimal(spec, o.from, o.to, o.period_tolerance, settings);
 
-  OutputSet outputs;
+  OutputSet outputs(o.common.force);
   if (!dir.empty()) {
     write_solution_outputs(outputs, dir, r.solution.run, o.common.no_plot);
     outputs.commit();

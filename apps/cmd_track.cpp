@@ -25,6 +25,7 @@ namespace {
 
 struct TrackOptions {
   std::string scene, video, images, camera, out, method = "edge", encoder;
+  bool force = false;
   bool json = false;
   double fps = 0;
   CLI::Option* fps_opt = nullptr;
@@ -84,6 +85,7 @@ void run_track(const TrackOptions& o) {
   const fs::path out = o.out;
   if (o.out.back() == '/' || fs::is_directory(out))
     throw UsageError("--out: must be a file name (FILE.csv), not a directory: " + o.out);
+  check_output_file("--out", out, o.force);
   const vision::TrackMethod method = vision::parse_track_method(o.method);
   const calibration::CameraFile camfile = calibration::read_camera_file(o.camera);
   const render::CameraModel& camera = camfile.camera;
@@ -208,7 +210,7 @@ void run_track(const TrackOptions& o) {
     throw UsageError(std::string(files.empty() ? "--video: " + o.video : "--images: " + o.images) +
                      ": no readable frame");
 
-  OutputSet outputs;
+  OutputSet outputs(o.force);
   outputs.ensure_directory(out.parent_path());
   outputs.stage(out, csv);
   outputs.commit();
@@ -262,6 +264,7 @@ Command add_track_command(CLI::App& app) {
                   "Required")
       ->type_name("FILE")
       ->required();
+  add_force_option(*cmd, o->force);
   cmd->add_option("--out", o->out, "Output CSV (" + std::string(kTrackColumns) + "). Required")
       ->type_name("FILE.csv")
       ->required();

@@ -9,10 +9,17 @@
 #include <iostream>
 #include <sstream>
 #include <system_error>
+#include <thread>
 
+#include <fcntl.h>
 #include <glob.h>
+#include <signal.h>
+#include <spawn.h>
+#include <stdio.h>
 #include <sys/wait.h>
 #include <unistd.h>
+#include <cerrno>
+#include <cstring>
 
 namespace flatland::app {
 
@@ -26,6 +33,7 @@ void add_common_options(CLI::App& cmd, CommonOptions& o, const std::string& out_
                "Print exactly one JSON object on stdout (lengths in m, times in s; inf/NaN as "
                "null); logs go to stderr. Default: off (human-readable summary)");
   cmd.add_option("--out", o.out, out_help)->type_name("PATH");
+  add_force_option(cmd, o.force);
   if (plots)
     cmd.add_flag("--no-plot", o.no_plot,
                  "Write the CSV files but no gnuplot scripts or PNG plots (no gnuplot needed). "
@@ -37,17 +45,17 @@ void add_common_options(CLI::App& cmd, CommonOptions& o, const std::string& out_
                                 "rk4 (fixed step). Default: scene, else dopri5")
                      ->check(CLI::IsMember({"dopri5", "dop853", "rk4"}))
                      ->group(group);
-  o.rtol_opt = cmd.add_option("--rtol", o.rtol,
-                              "Relative tolerance of dopri5/dop853 (dimensionless, > 0). Default: scene, "
-                              "else 1e-10")
-                   ->group(group);
-  o.atol_opt =
-      cmd.add_option(
-             "--atol", o.atol,
-             "Absolute tolerance of dopri5/dop853 (in the state's units: m, rad, s_h and their rates "
-             "per s; > 0). "
-             "Default: scene, else 1e-12")
+  o.rtol_opt =
+      cmd.add_option("--rtol", o.rtol,
+                     "Relative tolerance of dopri5/dop853 (dimensionless, > 0). Default: scene, "
+                     "else 1e-10")
           ->group(group);
+  o.atol_opt = cmd.add_option("--atol", o.atol,
+                              "Absolute tolerance of dopri5/dop853 (in the state's units: m, rad, "
+                              "s_h and their rates "
+                              "per s; > 0). "
+                              "Default: scene, else 1e-12")
+                   ->group(group);
   o.step_opt =
       cmd.add_option("--step", o.step, "Fixed step of rk4, s (> 0). Default: scene, else 0.001 s")
           ->group(group);
@@ -205,46 +213,241 @@ std::string samples_csv(const std::vector<sim::Sample>& samples) {
   return out;
 }
 
-// ---- OutputSet --------------------------------------------------------------------------------
+// ---- outputs: refusal, staging, interruption ---------------------------------------------------
+
+namespace {
+
+/// What an interruption must remove: the staging directories of every live OutputSet and the
+/// directories they created, and the gnuplot child to stop. Never destroyed (the watcher thread
+/// may use it while the main thread runs static destructors).
+struct Registry {
+  std::mutex mutex;
+  std::vector<fs::path> staging;  // remove_all
+  std::vector<fs::path> created;  // rmdir if empty, last first
+  pid_t child = 0;
+};
+
+Registry& registry() {
+  static Registry* r = new Registry;
+  return *r;
+}
+
+void erase_value(std::vector<fs::path>& v, const fs::path& p) {
+  v.erase(std::remove(v.begin(), v.end(), p), v.end());
+}
+
+/// remove_all, retried: a writer thread (the recorder's PNG encoder) may add a file between the
+/// listing and the rmdir.
+void remove_tree(const fs::path& p) {
+  std::error_code ec;
+  for (int i = 0; i < 5; ++i) {
+    fs::remove_all(p, ec);
+    if (!ec && !fs::exists(p, ec)) return;
+  }
+}
+
+fs::path normal_absolute(const fs::path& p) {
+  fs::path a = fs::absolute(p).lexically_normal();
+  if (a.filename().empty() && a.has_parent_path() && a != a.root_path()) a = a.parent_path();
+  return a;
+}
+
+/// True (and `rel` set) if `p` is `base` or inside it; both absolute and normal.
+bool inside(const fs::path& p, const fs::path& base, fs::path& rel) {
+  auto pi = p.begin();
+  for (auto bi = base.begin(); bi != base.end(); ++bi, ++pi)
+    if (pi == p.end() || *pi != *bi) return false;
+  rel.clear();
+  for (; pi != p.end(); ++pi) rel /= *pi;
+  return true;
+}
+
+/// renameat2 with `flags`; falls back to the plain-rename equivalent where the file system does
+/// not support the flag. Returns 0 or an errno value.
+int rename_with(const fs::path& from, const fs::path& to, unsigned flags) {
+  if (::renameat2(AT_FDCWD, from.c_str(), AT_FDCWD, to.c_str(), flags) == 0) return 0;
+  const int err = errno;
+  if (err != EINVAL && err != ENOSYS) return err;
+  if (flags & RENAME_NOREPLACE) {
+    std::error_code ec;
+    if (fs::exists(to, ec)) return EEXIST;
+  }
+  if (flags & RENAME_EXCHANGE) return err;  // the caller falls back to two renames
+  return ::rename(from.c_str(), to.c_str()) == 0 ? 0 : errno;
+}
+
+int g_signal_pipe[2] = {-1, -1};
+
+extern "C" void on_interrupt(int sig) {
+  const int saved = errno;
+  const unsigned char c = static_cast<unsigned char>(sig);
+  [[maybe_unused]] const auto n = ::write(g_signal_pipe[1], &c, 1);
+  errno = saved;
+}
+
+[[noreturn]] void interrupted(int sig) {
+  Registry& r = registry();
+  // Taken while commit() runs: the outputs are then all in place and nothing is removed.
+  std::lock_guard lock(r.mutex);
+  if (r.child > 0) ::kill(r.child, SIGTERM);
+  for (const fs::path& p : r.staging) remove_tree(p);
+  std::error_code ec;
+  for (auto it = r.created.rbegin(); it != r.created.rend(); ++it) fs::remove(*it, ec);
+  const bool any = !r.staging.empty();
+  std::fprintf(stderr, "\nflatland: error: interrupted by %s%s\n",
+               sig == SIGINT ? "SIGINT" : "SIGTERM", any ? "; partial outputs removed" : "");
+  std::fflush(stderr);
+  ::_exit(128 + sig);
+}
+
+}  // namespace
+
+void install_interrupt_handler() {
+  if (g_signal_pipe[0] >= 0) return;
+  if (::pipe2(g_signal_pipe, O_CLOEXEC) != 0) return;  // no handler: the default (die) remains
+  std::thread([] {
+    unsigned char c = 0;
+    for (;;) {
+      const auto n = ::read(g_signal_pipe[0], &c, 1);
+      if (n == 1) interrupted(c);
+      if (n < 0 && errno == EINTR) continue;
+      return;
+    }
+  }).detach();
+  struct sigaction sa {};
+  sa.sa_handler = on_interrupt;
+  sigemptyset(&sa.sa_mask);
+  sa.sa_flags = SA_RESTART;
+  ::sigaction(SIGINT, &sa, nullptr);
+  ::sigaction(SIGTERM, &sa, nullptr);
+}
+
+void add_force_option(CLI::App& cmd, bool& force) {
+  cmd.add_flag("--force", force,
+               "Replace existing outputs (an existing file, or a non-empty output directory, "
+               "which is replaced as a whole). Default: off (refused, exit 2, nothing written)");
+}
+
+void check_output_file(const std::string& option, const fs::path& path, bool force) {
+  std::error_code ec;
+  const auto st = fs::symlink_status(path, ec);
+  if (ec || !fs::exists(st)) return;
+  if (fs::is_directory(fs::status(path, ec)))
+    throw UsageError(option + ": " + path.string() + " is a directory; give a file name");
+  if (!force)
+    throw UsageError(option + ": " + path.string() + " already exists; pass --force to replace it");
+}
+
+void check_output_directory(const std::string& option, const fs::path& path, bool force) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) return;
+  if (!fs::is_directory(path, ec))
+    throw UsageError(option + ": " + path.string() + " exists and is not a directory");
+  if (!force && !fs::is_empty(path, ec))
+    throw UsageError(option + ": " + path.string() +
+                     " already exists and is not empty; pass --force to replace it, or choose "
+                     "another directory");
+}
 
 OutputSet::~OutputSet() {
   if (committed_) return;
+  Registry& r = registry();
+  std::lock_guard lock(r.mutex);
   std::error_code ec;
-  for (const auto& [tmp, final_path] : files_) fs::remove(tmp, ec);
+  for (const Dir& d : dirs_) {
+    remove_tree(d.staging);
+    erase_value(r.staging, d.staging);
+  }
   // Innermost first; remove() refuses non-empty directories, which is what we want.
-  for (auto it = created_dirs_.rbegin(); it != created_dirs_.rend(); ++it) fs::remove(*it, ec);
+  for (auto it = created_dirs_.rbegin(); it != created_dirs_.rend(); ++it) {
+    fs::remove(*it, ec);
+    erase_value(r.created, *it);
+  }
 }
 
 void OutputSet::ensure_directory(const fs::path& dir) {
   if (dir.empty()) return;
+  const fs::path abs = normal_absolute(dir);
+  fs::path rel;
+  for (const Dir& d : dirs_)
+    if (d.is_output && inside(abs, d.final_path, rel)) {
+      std::error_code ec;
+      fs::create_directories(d.content / rel, ec);
+      if (ec)
+        throw std::runtime_error("cannot create " + (d.content / rel).string() + ": " +
+                                 ec.message());
+      return;
+    }
   // Record the missing ancestors (outermost first) before creating them.
   std::vector<fs::path> missing;
-  for (fs::path p = fs::absolute(dir).lexically_normal(); !p.empty() && !fs::exists(p);
-       p = p.parent_path()) {
+  for (fs::path p = abs; !p.empty() && !fs::exists(p); p = p.parent_path()) {
     missing.insert(missing.begin(), p);
     if (p == p.parent_path()) break;
   }
+  Registry& r = registry();
+  std::lock_guard lock(r.mutex);
   std::error_code ec;
-  fs::create_directories(dir, ec);
-  if (ec || !fs::is_directory(dir))
+  fs::create_directories(abs, ec);
+  created_dirs_.insert(created_dirs_.end(), missing.begin(), missing.end());
+  r.created.insert(r.created.end(), missing.begin(), missing.end());
+  if (ec || !fs::is_directory(abs))
     throw std::runtime_error("cannot create output directory " + dir.string() + ": " +
                              (ec ? ec.message() : "not a directory"));
-  created_dirs_.insert(created_dirs_.end(), missing.begin(), missing.end());
+}
+
+fs::path OutputSet::begin_directory(const fs::path& dir, bool nested) {
+  const fs::path abs = normal_absolute(dir);
+  ensure_directory(abs.parent_path());
+  const fs::path staging =
+      abs.parent_path() / ("." + abs.filename().string() + ".tmp-" + std::to_string(::getpid()));
+  Registry& r = registry();
+  std::lock_guard lock(r.mutex);
+  remove_tree(staging);  // a leftover of a killed run that had our pid
+  std::error_code ec;
+  if (!fs::create_directory(staging, ec))
+    throw std::runtime_error("cannot create the staging directory " + staging.string() + ": " +
+                             (ec ? ec.message() : "exists"));
+  const fs::path content = nested ? staging / "content" : staging;
+  dirs_.push_back({staging, content, abs, true});
+  r.staging.push_back(staging);
+  return content;
+}
+
+fs::path OutputSet::file_staging_dir(const fs::path& parent) {
+  for (const Dir& d : dirs_)
+    if (!d.is_output && d.final_path == parent) return d.staging;
+  ensure_directory(parent);
+  const fs::path staging = parent / (".flatland.tmp-" + std::to_string(::getpid()));
+  Registry& r = registry();
+  std::lock_guard lock(r.mutex);
+  remove_tree(staging);
+  std::error_code ec;
+  if (!fs::create_directory(staging, ec))
+    throw std::runtime_error("cannot create the staging directory " + staging.string() + ": " +
+                             (ec ? ec.message() : "exists"));
+  dirs_.push_back({staging, staging, parent, false});
+  r.staging.push_back(staging);
+  return staging;
+}
+
+fs::path OutputSet::map_path(const fs::path& final_path) {
+  const fs::path abs = normal_absolute(final_path);
+  fs::path rel;
+  for (const Dir& d : dirs_)
+    if (d.is_output && inside(abs, d.final_path, rel)) return d.content / rel;
+  return file_staging_dir(abs.parent_path()) / abs.filename();
 }
 
 fs::path OutputSet::reserve(const fs::path& final_path) {
-  fs::path tmp = final_path;
-  tmp += ".tmp-" + std::to_string(::getpid());
+  const fs::path tmp = map_path(final_path);
   files_.emplace_back(tmp, final_path);
   return tmp;
 }
 
-fs::path OutputSet::reserve_keep_extension(const fs::path& final_path) {
-  fs::path tmp = final_path;
-  tmp.replace_filename(final_path.stem().string() + ".tmp-" + std::to_string(::getpid()) +
-                       final_path.extension().string());
-  files_.emplace_back(tmp, final_path);
-  return tmp;
+fs::path OutputSet::temp_path(const fs::path& final_path) const {
+  for (const auto& [tmp, fin] : files_)
+    if (fin == final_path) return tmp;
+  return {};
 }
 
 fs::path OutputSet::stage(const fs::path& final_path, const std::string& content) {
@@ -258,13 +461,63 @@ fs::path OutputSet::stage(const fs::path& final_path, const std::string& content
 }
 
 void OutputSet::commit() {
+  Registry& r = registry();
+  std::lock_guard lock(r.mutex);
+  const unsigned no_replace = force_ ? 0u : RENAME_NOREPLACE;
+  // Files first (each rename(2) is atomic), then the directory outputs.
   for (const auto& [tmp, final_path] : files_) {
-    std::error_code ec;
-    fs::rename(tmp, final_path, ec);
-    if (ec)
+    bool in_output_dir = false;
+    fs::path rel;
+    for (const Dir& d : dirs_)
+      in_output_dir = in_output_dir || (d.is_output && inside(tmp, d.content, rel));
+    if (in_output_dir) continue;  // moves with its directory
+    const int err = rename_with(tmp, final_path, no_replace);
+    if (err == EEXIST)
+      throw UsageError(final_path.string() +
+                       " appeared while flatland ran; pass --force to replace it");
+    if (err)
       throw std::runtime_error("cannot rename " + tmp.string() + " to " + final_path.string() +
-                               ": " + ec.message());
+                               ": " + std::strerror(err));
   }
+  for (const Dir& d : dirs_) {
+    if (!d.is_output) continue;
+    std::error_code ec;
+    int err = 0;
+    if (!fs::exists(d.final_path, ec)) {
+      err = rename_with(d.content, d.final_path, RENAME_NOREPLACE);
+    } else if (fs::is_directory(d.final_path, ec) && fs::is_empty(d.final_path, ec)) {
+      err = ::rename(d.content.c_str(), d.final_path.c_str()) == 0 ? 0 : errno;  // replaces it
+    } else if (!force_) {
+      err = EEXIST;
+    } else {
+      // Swap in one step; the old tree ends up at the content path and goes with the staging.
+      err = rename_with(d.content, d.final_path, RENAME_EXCHANGE);
+      if (err == EINVAL || err == ENOSYS) {
+        fs::path old = d.staging;
+        old += ".old";
+        err = ::rename(d.final_path.c_str(), old.c_str()) == 0 ? 0 : errno;
+        if (!err) err = ::rename(d.content.c_str(), d.final_path.c_str()) == 0 ? 0 : errno;
+        if (!err) remove_tree(old);
+      }
+    }
+    if (err == EEXIST || err == ENOTEMPTY)
+      throw UsageError(d.final_path.string() +
+                       " appeared while flatland ran; pass --force to replace it");
+    if (err)
+      throw std::runtime_error("cannot move " + d.content.string() + " to " +
+                               d.final_path.string() + ": " + std::strerror(err));
+  }
+  std::error_code ec;
+  for (const Dir& d : dirs_) {
+    // File staging directories are empty now; a directory output's staging is gone (moved) or
+    // holds the replaced tree or the nested staging root.
+    if (d.is_output && fs::exists(d.staging, ec))
+      remove_tree(d.staging);
+    else
+      fs::remove(d.staging, ec);
+    erase_value(r.staging, d.staging);
+  }
+  for (const fs::path& p : created_dirs_) erase_value(r.created, p);
   committed_ = true;
 }
 
@@ -356,22 +609,46 @@ void run_plot(OutputSet& outputs, const fs::path& dir, const PlotJob& job) {
                        "\n" + "set datafile separator comma\n" + gnuplot_terminal(1000, 700) +
                        "set output outfile\n" + job.body + "unset output\n";
   const fs::path script_tmp = outputs.stage(dir / job.script_name, script);
-  fs::path data_tmp = dir / job.data_name;
-  data_tmp += ".tmp-" + std::to_string(::getpid());  // the staged CSV
+  const fs::path data_tmp = outputs.temp_path(dir / job.data_name);
+  if (data_tmp.empty()) throw std::logic_error("run_plot: " + job.data_name + " is not staged");
   const fs::path png_tmp = outputs.reserve(dir / job.png_name);
   const std::string vars = "datafile=" + gnuplot_quote(data_tmp.filename().string()) +
                            "; outfile=" + gnuplot_quote(png_tmp.filename().string());
-  // gnuplot's own output goes to stderr: stdout is reserved for the result (--json).
-  const std::string cmd = "cd " + shell_quote(fs::absolute(dir).string()) + " && gnuplot -e " +
-                          shell_quote(vars) + " " + shell_quote(script_tmp.filename().string()) +
-                          " 1>&2";
+  // Run in the staging directory, which holds the script, the data and the PNG. Spawned rather
+  // than std::system: system() ignores SIGINT while the child runs, and the interrupt watcher
+  // must be able to stop gnuplot (it is registered as the child to kill).
   std::cout.flush();
-  const int status = std::system(cmd.c_str());
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addchdir_np(&actions, script_tmp.parent_path().c_str());
+  // gnuplot's own output goes to stderr: stdout is reserved for the result (--json).
+  posix_spawn_file_actions_adddup2(&actions, STDERR_FILENO, STDOUT_FILENO);
+  std::string a0 = "gnuplot", a1 = "-e", a3 = script_tmp.filename().string();
+  std::string a2 = vars;
+  char* argv[] = {a0.data(), a1.data(), a2.data(), a3.data(), nullptr};
+  pid_t pid = 0;
+  int status = -1;
+  {
+    Registry& r = registry();
+    std::lock_guard lock(r.mutex);
+    if (::posix_spawnp(&pid, "gnuplot", &actions, nullptr, argv, environ) == 0)
+      r.child = pid;
+    else
+      pid = 0;
+  }
+  posix_spawn_file_actions_destroy(&actions);
+  if (pid > 0) {
+    while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+    }
+    Registry& r = registry();
+    std::lock_guard lock(r.mutex);
+    r.child = 0;
+  }
   std::error_code ec;
-  if (status == -1 || !WIFEXITED(status) || WEXITSTATUS(status) != 0 || !fs::exists(png_tmp, ec) ||
+  if (pid <= 0 || !WIFEXITED(status) || WEXITSTATUS(status) != 0 || !fs::exists(png_tmp, ec) ||
       fs::file_size(png_tmp, ec) == 0)
     throw std::runtime_error("gnuplot failed on " + (dir / job.script_name).string() +
-                             (status != -1 && WIFEXITED(status)
+                             (pid > 0 && WIFEXITED(status)
                                   ? " (exit status " + std::to_string(WEXITSTATUS(status)) + ")"
                                   : " (did not run or was killed)"));
 }
@@ -421,7 +698,7 @@ std::string solve_report_text(const sim::SolveReport& r) {
 void write_solution_outputs(OutputSet& outputs, const fs::path& dir, const sim::RunResult& run,
                             bool no_plot) {
   if (run.trajectory.empty()) throw std::runtime_error("the solution run recorded no trajectory");
-  outputs.ensure_directory(dir);
+  outputs.begin_directory(dir);
   outputs.stage(dir / "trajectory.csv", samples_csv(run.trajectory.resample(1e-3)));
   if (no_plot) return;
   const std::string t = std::to_string(sample_column("t"));

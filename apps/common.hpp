@@ -39,6 +39,7 @@ struct CommonOptions {
   bool json = false;
   std::string out;  ///< empty: no files
   bool no_plot = false;
+  bool force = false;  ///< --force: replace an existing --out
   double rtol = 0, atol = 0, step = 0;
   std::string method, formulation;
   // Set by add_common_options; count() tells whether the user gave the option.
@@ -82,36 +83,80 @@ int sample_column(const std::string& name);
 /// The whole CSV (header + one row per sample).
 std::string samples_csv(const std::vector<sim::Sample>& samples);
 
-/// Files a command writes, staged so that a failure leaves nothing behind: each file is first
-/// written as "<file>.tmp-<pid>", and commit() renames them all into place. Until then the
-/// destructor removes the temporaries and any directory this set created (if left empty), so an
-/// exception anywhere removes every output of the command.
+/// --force on `cmd`: replace existing outputs (each command's help names which).
+void add_force_option(CLI::App& cmd, bool& force);
+
+/// Refusal of existing outputs, checked with the other bad input before any work: a UsageError
+/// naming `option` and the path if `path` exists (a file output) or is a non-empty directory (a
+/// directory output), unless `force`. A path of the wrong kind (a directory where a file is
+/// written, or the reverse) is refused even with --force: that is a mistake, not a re-run.
+void check_output_file(const std::string& option, const fs::path& path, bool force);
+void check_output_directory(const std::string& option, const fs::path& path, bool force);
+
+/// Files a command writes, staged so that a failure or an interruption leaves nothing behind and
+/// an existing output is replaced in one rename:
+///  - a file output P/name is written as P/.flatland.tmp-<pid>/name and renamed over P/name by
+///    commit() (rename(2) replaces atomically; without --force RENAME_NOREPLACE also refuses a
+///    file that appeared while the command ran);
+///  - a directory output D (begin_directory) is built as the sibling D's-parent/.D.tmp-<pid>, and
+///    every file staged under D goes there under its final name; commit() renames it to D, or
+///    with --force swaps it with the existing D (renameat2 RENAME_EXCHANGE) and removes the old
+///    tree.
+/// Until commit() the destructor removes the staging directories and any directory this set
+/// created (if left empty), so an exception anywhere removes every output of the command. The
+/// staging directories are also registered process-wide, so that SIGINT/SIGTERM (see
+/// install_interrupt_handler) removes them before the process exits.
 class OutputSet {
  public:
-  OutputSet() = default;
+  explicit OutputSet(bool force = false) : force_(force) {}
   OutputSet(const OutputSet&) = delete;
   OutputSet& operator=(const OutputSet&) = delete;
   ~OutputSet();
 
-  /// Create `dir` (and missing parents), remembering which directories were new.
+  /// Start the directory output `dir` (created at commit; its parents now). Returns the staging
+  /// directory that stands for it until then. `nested`: the returned path does not exist yet and
+  /// lies inside a registered staging root, for a writer that creates the directory itself and
+  /// keeps its own temporaries beside it (the recorder).
+  fs::path begin_directory(const fs::path& dir, bool nested = false);
+  /// Create `dir` (and missing parents), remembering which directories were new. Inside a
+  /// directory output, creates the staged counterpart instead.
   void ensure_directory(const fs::path& dir);
   /// Stage `content` for `final_path` (its directory must exist). Returns the temporary path.
   fs::path stage(const fs::path& final_path, const std::string& content);
-  /// Reserve a temporary path for a file another program writes (gnuplot's PNGs).
+  /// Reserve a temporary path for a file another program or library writes (gnuplot's PNGs, the
+  /// camera file, the MP4 writer). The temporary keeps the file's name and extension.
   fs::path reserve(const fs::path& final_path);
-  /// The same, with the extension kept last ("run.tmp-<pid>.mp4"), for writers that choose the
-  /// format by the file name (OpenCV's VideoWriter).
-  fs::path reserve_keep_extension(const fs::path& final_path);
-  /// Rename every staged file into place.
+  fs::path reserve_keep_extension(const fs::path& final_path) { return reserve(final_path); }
+  /// The temporary path of an already staged or reserved final path (empty if none).
+  fs::path temp_path(const fs::path& final_path) const;
+  /// Move every staged file and directory into place.
   void commit();
   /// The final paths, in staging order.
   std::vector<std::string> paths() const;
 
  private:
+  fs::path map_path(const fs::path& final_path);
+  fs::path file_staging_dir(const fs::path& parent);
+
+  struct Dir {
+    fs::path staging;  // registered; removed on failure
+    fs::path content;  // what becomes final_path (staging itself unless nested)
+    fs::path final_path;
+    bool is_output;  // a directory output (else the staging directory of file outputs)
+  };
+  bool force_;
   std::vector<std::pair<fs::path, fs::path>> files_;  // (temporary, final)
-  std::vector<fs::path> created_dirs_;                // outermost first
+  std::vector<Dir> dirs_;
+  std::vector<fs::path> created_dirs_;  // outermost first
   bool committed_ = false;
 };
+
+/// SIGINT and SIGTERM: the handler only writes the signal number to a pipe (async-signal-safe);
+/// a watcher thread reads it, kills a running gnuplot, removes every registered staging
+/// directory and created parent (under the lock that commit() holds, so outputs are either all
+/// in place or none), prints one line and exits 130 (SIGINT) or 143 (SIGTERM). Called once by
+/// main before any thread starts.
+void install_interrupt_handler();
 
 /// A progress bar on stderr, drawn only when stderr is a terminal. Safe to call from threads.
 class ProgressBar {

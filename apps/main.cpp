@@ -22,6 +22,8 @@ int fail(int code, const std::string& message) {
 
 int main(int argc, char** argv) {
   using namespace flatland::app;
+  // Before any thread exists, so that every thread inherits the dispositions.
+  install_interrupt_handler();
   CLI::App app{
       "flatland: a disk rolling on a one-joint robot hand (the butterfly of Lynch, Shiroma, Arai "
       "and Tanie). All inputs and outputs are SI: lengths in m, times in s, angles in rad, forces "
