@@ -1,13 +1,21 @@
 // flatland study: speed-accuracy studies (issue #6), one per knob, regenerating docs/ACCURACY.md.
 // `sim` is the work-precision diagram of the simulator: for every integrator setting and both
 // formulations, the error in s_h(T) and in the solved k* against the CPU time they cost.
+// `calibration`: the intrinsics' parameter error and time against views and corner noise.
 #include "common.hpp"
 
+#include "flatland/calibration/intrinsics.hpp"
+
+#include <opencv2/calib3d.hpp>
+
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <ctime>
 #include <iostream>
 #include <memory>
+#include <numbers>
+#include <random>
 #include <sstream>
 
 namespace flatland::app {
@@ -19,13 +27,14 @@ struct StudyOptions {
   std::string scene;
   std::string out;
   bool force = false;
+  bool quick = false;
   bool json = false;
   bool no_plot = false;
   double min_cpu = 0.02;  // s: timing repeats until this much CPU time has been spent
 };
 
 // Studies other issues will add; asking for one is an error that says so (exit 2), not silence.
-const std::vector<std::string> kPlanned = {"render", "tracker", "calibration", "closed-loop"};
+const std::vector<std::string> kPlanned = {"render", "tracker", "closed-loop"};
 
 double cpu_now() {
   timespec ts{};
@@ -299,14 +308,189 @@ void run_sim_study(const StudyOptions& o) {
   std::cout << os.str();
 }
 
+// ---- study calibration ------------------------------------------------------------------------
+
+// The camera of tests/test_calibration_intrinsics.cpp: VGA, f = 800 px, an off-centre principal
+// point and barrel distortion, so that every parameter has something to recover.
+struct CalibTruth {
+  cv::Matx33d K{800, 0, 322.5, 0, 800, 237.5, 0, 0, 1};
+  cv::Vec<double, 5> dist{-0.2, 0.08, 0.001, -0.0005, 0.0};
+  cv::Size size{640, 480};
+};
+
+/// `n` views of a 9 x 6 chessboard (25 mm squares) at random poses (0.35-0.8 m away, tilted
+/// 15-45 deg), every corner at least 10 px inside the image, projected through the truth with
+/// cv::projectPoints and perturbed by Gaussian noise of `sigma` px per coordinate.
+std::vector<calibration::BoardView> synthetic_views(const CalibTruth& truth, int n, double sigma,
+                                                    std::mt19937_64& rng) {
+  std::vector<cv::Point3f> board;
+  for (int r = 0; r < 6; ++r)
+    for (int c = 0; c < 9; ++c) board.emplace_back(0.025f * c, 0.025f * r, 0.f);
+  std::uniform_real_distribution<double> U(0, 1);
+  std::normal_distribution<double> N(0, 1);
+  std::vector<calibration::BoardView> views;
+  while (static_cast<int>(views.size()) < n) {
+    const double tilt = (15 + 30 * U(rng)) * std::numbers::pi / 180,
+                 phi = 2 * std::numbers::pi * U(rng);
+    const cv::Vec3d rvec(tilt * std::cos(phi), tilt * std::sin(phi), U(rng) - 0.5);
+    const double z = 0.35 + 0.45 * U(rng);
+    const cv::Vec3d tvec((U(rng) - 0.5) * 0.6 * z - 0.1, (U(rng) - 0.5) * 0.45 * z - 0.06, z);
+    std::vector<cv::Point2f> px;
+    cv::projectPoints(board, rvec, tvec, truth.K, truth.dist, px);
+    bool inside = true;
+    for (const auto& p : px)
+      inside = inside && p.x >= 10 && p.y >= 10 && p.x <= truth.size.width - 11 &&
+               p.y <= truth.size.height - 11;
+    if (!inside) continue;
+    for (auto& p : px) {
+      p.x += static_cast<float>(sigma * N(rng));
+      p.y += static_cast<float>(sigma * N(rng));
+    }
+    calibration::BoardView v;
+    v.name = "view" + std::to_string(views.size());
+    v.image_size = truth.size;
+    v.image_points = std::move(px);
+    v.object_points = board;
+    views.push_back(std::move(v));
+  }
+  return views;
+}
+
+void run_calibration_study(const StudyOptions& o) {
+  const fs::path dir = o.out;
+  if (!dir.empty()) check_output_directory("--out", dir, o.force);
+  const bool plots = !dir.empty() && !o.no_plot;
+  if (plots) require_gnuplot();
+  const CalibTruth truth;
+  const std::vector<int> view_counts = {5, 10, 20, 40};
+  const std::vector<double> noises = {0, 0.1, 0.3, 1};
+  const int trials = o.quick ? 2 : 8;
+  const char* names[] = {"fx", "fy", "cx", "cy", "k1", "k2"};
+  const double truth_p[] = {truth.K(0, 0), truth.K(1, 1), truth.K(0, 2),
+                            truth.K(1, 2), truth.dist[0], truth.dist[1]};
+  std::string csv = "views,noise_px,trials,failures";
+  for (const char* nm : names) csv += std::string(",rms_err_") + nm + ",max_err_" + nm;
+  csv += ",rms_px,time_s\n";
+  Json rows = Json::array();
+  std::cerr << "flatland: study calibration: " << view_counts.size() * noises.size() << " cells x "
+            << trials << " trials (synthetic corners, cv::projectPoints + Gaussian noise)\n";
+  ProgressBar bar("study calibration");
+  long done = 0;
+  const long total = static_cast<long>(view_counts.size() * noises.size());
+  for (int nv : view_counts)
+    for (double sigma : noises) {
+      std::mt19937_64 rng(1000 * nv + static_cast<int>(sigma * 100));
+      double sq[6] = {}, mx[6] = {}, rms = 0, time = 0;
+      int ok = 0, failed = 0;
+      for (int t = 0; t < trials; ++t) {
+        const auto views = synthetic_views(truth, nv, sigma, rng);
+        calibration::IntrinsicsOptions opt;
+        opt.compute_covariance = false;  // timed: the estimate, not its uncertainty
+        const auto t0 = std::chrono::steady_clock::now();
+        try {
+          const calibration::IntrinsicsResult r = calibration::calibrate_intrinsics(views, opt);
+          time += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+          const auto p = r.params();
+          for (int i = 0; i < 6; ++i) {
+            const double e = std::abs(p[static_cast<std::size_t>(i)] - truth_p[i]);
+            sq[i] += e * e;
+            mx[i] = std::max(mx[i], e);
+          }
+          rms += r.rms_px;
+          ++ok;
+        } catch (const std::exception&) {
+          ++failed;
+        }
+      }
+      std::string line = std::to_string(nv) + "," + format_number(sigma) + "," +
+                         std::to_string(trials) + "," + std::to_string(failed);
+      Json q;
+      q["views"] = nv;
+      q["noise_px"] = sigma;
+      q["failures"] = failed;
+      for (int i = 0; i < 6; ++i) {
+        const double r = ok ? std::sqrt(sq[i] / ok) : std::nan("");
+        // Appended piecewise: GCC 12 warns (-Wrestrict, a false positive) on "," + string here.
+        line += ',';
+        line += format_number(r);
+        line += ',';
+        line += format_number(ok ? mx[i] : std::nan(""));
+        q[std::string("rms_err_") + names[i]] = number(r);
+      }
+      const double rms_px = ok ? rms / ok : std::nan(""), t_s = ok ? time / ok : std::nan("");
+      line += "," + format_number(rms_px) + "," + format_number(t_s) + "\n";
+      q["rms_px"] = number(rms_px);
+      q["time_s"] = number(t_s);
+      csv += line;
+      rows.push_back(q);
+      bar.update(++done, total);
+    }
+
+  OutputSet outputs(o.force);
+  std::vector<std::string> written;
+  if (!dir.empty()) {
+    outputs.begin_directory(dir);
+    outputs.stage(dir / "calibration.csv", csv);
+    if (plots) {
+      // One panel per quantity: error against the number of views, one curve per noise level.
+      auto panel = [](const std::string& title, const std::string& ylabel, int col) {
+        std::string b = "set title '" + title + "'\nset ylabel '" + ylabel + "'\nplot ";
+        const char* noise[] = {"0", "0.1", "0.3", "1"};
+        for (int i = 0; i < 4; ++i)
+          b += std::string(i ? ", \\\n     " : "") +
+               "datafile skip 1 using 1:(column(2) == " + noise[i] + " ? lift(column(" +
+               std::to_string(col) + ")) : NaN) with linespoints lw 2 pt 7 title 'noise " +
+               noise[i] + " px'";
+        return b + "\n";
+      };
+      const std::string head =
+          "set logscale xy\nset format y '1e%L'\nset grid\nset xtics (5, 10, 20, 40)\n"
+          "set xlabel 'views'\nset key top right\nlift(e) = e < 1e-12 ? 1e-12 : e\n"
+          "set multiplot layout 2,2 title 'Calibration: RMS parameter error against views'\n";
+      run_plot(outputs, dir,
+               {"calibration.gp", "calibration.csv", "calibration.png",
+                head + panel("fx", "RMS error fx (px)", 5) + panel("cx", "RMS error cx (px)", 9) +
+                    panel("k1", "RMS error k1", 13) +
+                    "set title 'time'\nset ylabel 'calibration time (s)'\nplot "
+                    "datafile skip 1 using 1:(column(2) == 0.3 ? column(18) : NaN) with "
+                    "linespoints lw 2 pt 7 title 'noise 0.3 px'\n"
+                    "unset multiplot\n"});
+    }
+    Json summary;
+    summary["study"] = "calibration";
+    summary["trials"] = trials;
+    summary["rows"] = rows;
+    outputs.stage(dir / "calibration.json", summary.dump(2) + "\n");
+    outputs.commit();
+    written = outputs.paths();
+  }
+  if (o.json) {
+    Json j;
+    j["study"] = "calibration";
+    j["trials"] = trials;
+    j["truth"] = {{"fx", truth_p[0]}, {"fy", truth_p[1]}, {"cx", truth_p[2]},
+                  {"cy", truth_p[3]}, {"k1", truth_p[4]}, {"k2", truth_p[5]}};
+    j["rows"] = rows;
+    j["files"] = written;
+    emit_json(j);
+    return;
+  }
+  std::cout << "flatland study calibration: RMS error over " << trials
+            << " trials (synthetic corners)\n"
+            << csv;
+  for (const auto& p : written) std::cout << "  wrote " << p << "\n";
+}
+
 void run_study(const StudyOptions& o) {
   if (o.name == "sim") return run_sim_study(o);
+  if (o.name == "calibration") return run_calibration_study(o);
   std::string planned;
   for (const auto& p : kPlanned) planned += (planned.empty() ? "" : ", ") + p;
   if (std::find(kPlanned.begin(), kPlanned.end(), o.name) != kPlanned.end())
-    throw UsageError("study: '" + o.name + "' is not implemented yet (available: sim)");
-  throw UsageError("study: unknown study '" + o.name + "' (available: sim; planned: " + planned +
-                   ")");
+    throw UsageError("study: '" + o.name +
+                     "' is not implemented yet (available: sim, calibration)");
+  throw UsageError("study: unknown study '" + o.name +
+                   "' (available: sim, calibration; planned: " + planned + ")");
 }
 
 }  // namespace
@@ -319,7 +503,7 @@ Command add_study_command(CLI::App& app) {
       "(RK4 at several steps, dopri5 and dop853 at rtol 1e-3 ... 1e-13, general and reduced "
       "formulations): error in s_h(T) and in the solved k against CPU time.");
   cmd->add_option("name", o->name,
-                  "Which study: sim (render, tracker, calibration, closed-loop: planned)")
+                  "Which study: sim, calibration (render, tracker, closed-loop: planned)")
       ->required();
   cmd->add_option("--scene", o->scene,
                   "Scene file (YAML; its motion must be the butterfly). Default: the bundled "
@@ -336,6 +520,8 @@ Command add_study_command(CLI::App& app) {
       ->type_name("PATH");
   cmd->add_flag("--no-plot", o->no_plot, "Write the CSV but no plots (no gnuplot needed)");
   add_force_option(*cmd, o->force);
+  cmd->add_flag("--quick", o->quick,
+                "calibration: 2 trials per cell instead of 8 (a few seconds). Default: off");
   cmd->add_option("--min-cpu", o->min_cpu,
                   "CPU seconds each timing repeats for (> 0; longer is steadier). Default: 0.02")
       ->check(CLI::PositiveNumber);
