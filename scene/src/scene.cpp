@@ -5,6 +5,7 @@
 // echoes what the file said, on one line, so it can be read in a terminal or a log.
 #include "flatland/scene/scene.hpp"
 
+#include <yaml-cpp/eventhandler.h>
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
@@ -19,6 +20,7 @@
 #include <numbers>
 #include <optional>
 #include <set>
+#include <sstream>
 #include <string>
 #include <string_view>
 #include <utility>
@@ -652,12 +654,46 @@ void read_targets(const MapReader& root, Scene& scene) {
   }
 }
 
+/// Counts documents without building them. yaml-cpp 0.7's YAML::LoadAll loops forever, allocating
+/// a null document per turn, on some malformed streams (a directive line such as "%}", found by
+/// fuzzing: tests/fuzz/regressions/scene/; upstream jbeder/yaml-cpp#1319): its parser reports
+/// document after document without consuming input. A scene is one document, so counting stops at
+/// two, and YAML::Load, which parses only the first, builds it.
+class DocumentCounter : public YAML::EventHandler {
+ public:
+  void OnDocumentStart(const YAML::Mark&) override {}
+  void OnDocumentEnd() override {}
+  void OnNull(const YAML::Mark&, YAML::anchor_t) override {}
+  void OnAlias(const YAML::Mark&, YAML::anchor_t) override {}
+  void OnScalar(const YAML::Mark&, const std::string&, YAML::anchor_t,
+                const std::string&) override {}
+  void OnSequenceStart(const YAML::Mark&, const std::string&, YAML::anchor_t,
+                       YAML::EmitterStyle::value) override {}
+  void OnSequenceEnd() override {}
+  void OnMapStart(const YAML::Mark&, const std::string&, YAML::anchor_t,
+                  YAML::EmitterStyle::value) override {}
+  void OnMapEnd() override {}
+};
+
+int count_documents_up_to_two(const std::string& text) {
+  std::istringstream in(text);
+  YAML::Parser parser(in);
+  DocumentCounter counter;
+  int n = 0;
+  while (n < 2 && parser.HandleNextDocument(counter)) ++n;
+  return n;
+}
+
 }  // namespace
 
 Scene parse_scene(const std::string& yaml_text, const std::string& origin) {
   std::vector<YAML::Node> docs;
   try {
-    docs = YAML::LoadAll(yaml_text);
+    const int count = count_documents_up_to_two(yaml_text);
+    if (count > 1)
+      fail(origin, "(document)",
+           "contains more than one YAML document (a '---' line?); a scene is exactly one");
+    if (count == 1) docs.push_back(YAML::Load(yaml_text));
   } catch (const YAML::Exception& e) {
     // yaml-cpp marks are 0-based; editors count from 1.
     std::string where = e.mark.is_null() ? std::string("(document)")
@@ -666,9 +702,6 @@ Scene parse_scene(const std::string& yaml_text, const std::string& origin) {
     fail(origin, where, "invalid YAML: " + e.msg);
   }
   if (docs.empty()) fail(origin, "(document)", "empty scene (expected a mapping of sections)");
-  if (docs.size() > 1)
-    fail(origin, "(document)",
-         "contains " + std::to_string(docs.size()) + " YAML documents; a scene is exactly one");
 
   Scene scene;
   scene.origin = origin;
