@@ -42,8 +42,19 @@ class Reader {
  public:
   Reader(std::string path) : path_(std::move(path)) {}
 
+  /// One line whatever the file holds (a quoted YAML string may contain "\n"): the CLI prints
+  /// what() as its single error line.
   [[noreturn]] void fail(const std::string& field, const std::string& reason) const {
-    throw std::invalid_argument(path_ + ": " + field + ": " + reason);
+    std::string msg;
+    for (const char c : path_ + ": " + field + ": " + reason) {
+      if (c == '\n')
+        msg += "\\n";
+      else if (c == '\r')
+        msg += "\\r";
+      else
+        msg += c;
+    }
+    throw std::invalid_argument(msg);
   }
 
   cv::FileNode require(const cv::FileNode& parent, const std::string& key,
@@ -168,29 +179,39 @@ void write_camera_file(const std::string& path, const CameraFile& file) {
 }
 
 CameraFile read_camera_file(const std::string& path) {
-  const Reader rd(path);
   std::string text;
   {
     std::ifstream in(path, std::ios::binary);
     if (!in.is_open() || std::filesystem::is_directory(path))
-      rd.fail("(file)", "cannot read camera file");
+      Reader(path).fail("(file)", "cannot read camera file");
     std::ostringstream ss;
     ss << in.rdbuf();
     text = ss.str();
   }
+  return parse_camera_file(text, path);
+}
+
+CameraFile parse_camera_file(const std::string& file_text, const std::string& origin) {
+  const Reader rd(origin);
+  std::string text = file_text;
   // OpenCV's YAML reader insists on its "%YAML:1.0" header, which ROS's files do not have.
   if (text.rfind("%YAML", 0) != 0) text = "%YAML:1.0\n---\n" + text;
   cv::FileStorage fs;
+  bool opened = false;
   try {
-    if (!fs.open(text,
-                 cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML))
-      rd.fail("(document)", "invalid YAML");
+    opened = fs.open(
+        text, cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
   } catch (const cv::Exception& e) {
     std::string msg = e.err.empty() ? e.msg : e.err;
     for (char& c : msg)
       if (c == '\n' || c == '\r') c = ' ';
     rd.fail("(document)", "invalid YAML: " + msg);
+  } catch (const std::exception& e) {
+    // OpenCV 4.6's YAML parser lets std::length_error out for some malformed keys (a negative
+    // key length; found by fuzzing: tests/fuzz/regressions/camera_file/opencv-length-error.yaml).
+    rd.fail("(document)", std::string("invalid YAML (OpenCV's parser failed: ") + e.what() + ")");
   }
+  if (!opened) rd.fail("(document)", "invalid YAML");
   const cv::FileNode root = fs.root();
   if (!root.isMap()) rd.fail("(document)", "not a mapping");
 

@@ -41,5 +41,8 @@ void write_camera_file(const std::string& path, const CameraFile& file);
 /// Read and validate; throws std::invalid_argument "<path>: <field>: <reason>" on bad content
 /// (missing keys, wrong sizes, non-positive focal lengths, unknown distortion model).
 CameraFile read_camera_file(const std::string& path);
+/// The same from the file's text; `origin` (a path, or "<string>") starts every error message.
+/// Throws only std::invalid_argument, whatever the bytes (fuzzed: fuzz/camera_file_fuzzer.cpp).
+CameraFile parse_camera_file(const std::string& text, const std::string& origin = "<string>");
 
 }  // namespace flatland::calibration
