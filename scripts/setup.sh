@@ -26,6 +26,7 @@ packages=(
   gnuplot-nox
   libopencv-dev libosmesa6-dev mesa-common-dev libegl-dev libegl-mesa0 ffmpeg
   libceres-dev
+  clang libclang-rt-14-dev
 )
 
 missing=()

@@ -1,0 +1,63 @@
+#!/usr/bin/env bash
+# The tests, after scripts/setup.sh has built build/:
+#   1. the GoogleTest suite on the Release build (build/);
+#   2. the same suite built with AddressSanitizer + UndefinedBehaviorSanitizer (build-asan/,
+#      -O1, no benchmarks): any memory error, leak or undefined behaviour fails the test;
+#   3. when clang with libFuzzer is installed, each libFuzzer target (fuzz/) over its seed corpus
+#      and the kept crash reproducers (tests/fuzz/), a smoke run of seconds (build-fuzz/).
+# docs/DEVELOPING.md explains each stage and how to run it alone.
+#
+# Usage: scripts/test.sh [--no-sanitizers]
+set -euo pipefail
+
+usage() { echo "usage: scripts/test.sh [--no-sanitizers]" >&2; }
+sanitizers=1
+for arg in "$@"; do
+  case "$arg" in
+    --no-sanitizers) sanitizers=0 ;;
+    -h|--help) usage; exit 0 ;;
+    *) echo "test: unknown argument: $arg" >&2; usage; exit 2 ;;
+  esac
+done
+
+log() { echo "test: $*" >&2; }
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+root=$(pwd)
+jobs=$(nproc)
+
+log "stage 1: ctest --test-dir build"
+ctest --test-dir build --output-on-failure
+
+[ "$sanitizers" -eq 1 ] || { log "--no-sanitizers: done"; exit 0; }
+
+# Leaks are checked; the suppressions name third-party libraries only (see the file).
+export ASAN_OPTIONS="detect_leaks=1:detect_stack_use_after_return=1"
+export LSAN_OPTIONS="suppressions=$root/tests/sanitizers/lsan.supp:print_suppressions=0"
+export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
+
+log "stage 2: AddressSanitizer + UndefinedBehaviorSanitizer build in build-asan/"
+cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+  -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g" -DFLATLAND_SANITIZE=address,undefined \
+  -DFLATLAND_BUILD_BENCHMARKS=OFF >&2
+cmake --build build-asan -j"$jobs" >&2
+# Sanitized code is several times slower; the tests are independent (each has its own temporary
+# directory), so they run in parallel.
+ctest --test-dir build-asan --output-on-failure -j"$jobs"
+
+if ! command -v clang++ >/dev/null 2>&1 ||
+  ! echo 'extern "C" int LLVMFuzzerTestOneInput(const char*, long) { return 0; }' |
+  clang++ -x c++ -fsanitize=fuzzer - -o /dev/null 2>/dev/null; then
+  log "stage 3 skipped: no clang++ with libFuzzer (apt-get install clang libclang-rt-14-dev)"
+  exit 0
+fi
+log "stage 3: libFuzzer targets over their seed corpora in build-fuzz/"
+CC=clang CXX=clang++ cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+  -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g" -DFLATLAND_FUZZ=ON -DFLATLAND_BUILD_TESTS=OFF \
+  -DFLATLAND_BUILD_BENCHMARKS=OFF >&2
+cmake --build build-fuzz -j"$jobs" --target scene_fuzzer camera_file_fuzzer >&2
+for target in scene camera_file; do
+  # -runs=0: every seed and reproducer once, nothing new written into the repository.
+  build-fuzz/bin/${target}_fuzzer -runs=0 "tests/fuzz/$target" "tests/fuzz/regressions/$target" \
+    2>&1 | tail -n 3 >&2
+done
+log "done"
