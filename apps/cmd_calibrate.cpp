@@ -4,6 +4,7 @@
 
 #include "flatland/calibration/camera_file.hpp"
 #include "flatland/calibration/intrinsics.hpp"
+#include "flatland/vision/image_file.hpp"
 
 #include <opencv2/core/utils/logger.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -47,14 +48,10 @@ void run_calibrate(const CalibrateOptions& o) {
   cv::Size size;
   int readable = 0;
   for (const std::string& f : files) {
-    cv::Mat image;
-    try {
-      image = cv::imread(f, cv::IMREAD_GRAYSCALE);
-    } catch (const cv::Exception&) {
-      image.release();
-    }
+    std::string why;
+    const cv::Mat image = vision::read_image_file(f, cv::IMREAD_GRAYSCALE, why);
     if (image.empty()) {
-      warn("skipping " + f + ": unreadable or not an image");
+      warn("skipping " + f + ": " + why);
       continue;
     }
     ++readable;

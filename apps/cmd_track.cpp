@@ -4,6 +4,7 @@
 #include "common.hpp"
 
 #include "flatland/calibration/camera_file.hpp"
+#include "flatland/vision/image_file.hpp"
 #include "flatland/vision/mapping.hpp"
 #include "flatland/vision/tracker.hpp"
 
@@ -19,6 +20,8 @@
 #include <optional>
 #include <sstream>
 
+#include <stdlib.h>
+
 namespace flatland::app {
 
 namespace {
@@ -32,6 +35,8 @@ struct TrackOptions {
 };
 
 const char* kTrackColumns = "frame,t,u,v,sigma_px,quality,state,s_h";
+/// A truncated video fails every read after the cut: one warning per frame up to this many.
+constexpr long kMaxSkipWarnings = 10;
 
 /// Encoder log: rows "t,theta" (s, rad), strictly increasing t; a header line is skipped.
 struct EncoderLog {
@@ -130,7 +135,20 @@ void run_track(const TrackOptions& o) {
     total = static_cast<long>(files.size());
   } else {
     if (!fs::is_regular_file(o.video)) throw UsageError("--video: no such file: " + o.video);
-    video.open(o.video);
+    std::error_code ec;
+    if (fs::file_size(o.video, ec) == 0 && !ec)
+      throw UsageError("--video: " + o.video + ": zero-length file");
+    // FFmpeg logs decoder errors itself ("[mjpeg @ 0x...] overread 8"), lines that break the
+    // one-line error contract and say less than flatland's warnings naming the frame. Quiet
+    // (AV_LOG_QUIET) unless the user asks for FFmpeg's view with OPENCV_FFMPEG_LOGLEVEL.
+    ::setenv("OPENCV_FFMPEG_LOGLEVEL", "-8", 0);
+    // FFmpeg only: CAP_ANY would also try GStreamer, the image-sequence and the built-in MJPEG
+    // readers, which print multi-line errors of their own for a file they cannot read.
+    try {
+      video.open(o.video, cv::CAP_FFMPEG);
+    } catch (const cv::Exception&) {
+      video.release();
+    }
     if (!video.isOpened()) throw UsageError("--video: cannot open " + o.video + " as a video");
     total = std::max(0L, static_cast<long>(video.get(cv::CAP_PROP_FRAME_COUNT)));
     const double vfps = video.get(cv::CAP_PROP_FPS);
@@ -151,19 +169,36 @@ void run_track(const TrackOptions& o) {
       cv::Mat image;
       if (!files.empty()) {
         if (i >= total) break;
-        try {
-          image = cv::imread(files[static_cast<std::size_t>(i)], cv::IMREAD_COLOR);
-        } catch (const cv::Exception&) {
-          image.release();
-        }
+        std::string why;
+        image = vision::read_image_file(files[static_cast<std::size_t>(i)], cv::IMREAD_COLOR, why);
         if (image.empty()) {
-          std::cerr << "flatland: warning: skipping unreadable image " << files[i] << "\n";
+          std::cerr << "flatland: warning: skipping unreadable image " << files[i] << " (" << why
+                    << ")\n";
           ++skipped;
           bar.update(i + 1, total);
           continue;
         }
-      } else if (!video.read(image) || image.empty()) {
-        break;
+      } else {
+        bool got = false;
+        try {
+          got = video.read(image);
+        } catch (const cv::Exception&) {
+          got = false;
+        }
+        if (!got || image.empty()) {
+          // FFmpeg reads on past a damaged frame, so within the announced frame count a failed
+          // read skips one frame instead of silently dropping the rest of the video.
+          if (i >= total) break;
+          ++skipped;
+          if (skipped <= kMaxSkipWarnings)
+            std::cerr << "flatland: warning: --video: " << o.video << ": skipping frame " << i
+                      << " (cannot decode it)\n";
+          if (skipped == kMaxSkipWarnings)
+            std::cerr << "flatland: warning: --video: " << o.video
+                      << ": further skipped frames not reported\n";
+          bar.update(i + 1, total);
+          continue;
+        }
       }
       if (!size_checked && (mapping || cfg.camera) &&
           (image.cols != camera.width || image.rows != camera.height))
