@@ -196,8 +196,9 @@ TEST_F(BadMedia, TrackSkipsDamagedVideoFramesAndReportsATruncatedVideo) {
   ASSERT_EQ(rows.size(), 10u);
   EXPECT_EQ(rows[5].rfind("5,", 0), 0u) << rows[5];
 
-  // Cut in the middle: the frames before the cut are tracked, each lost one is reported.
-  write_text(dir_ / "cut.avi", data.substr(0, data.size() / 2));
+  // Cut at three quarters (AVI's index is at the end): the frames before the cut are tracked,
+  // each lost one is reported.
+  write_text(dir_ / "cut.avi", data.substr(0, data.size() * 3 / 4));
   j = track_json("--video cut.avi", r);
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_GE(j["frames"].get<int>(), 1);
@@ -223,7 +224,7 @@ TEST_F(BadMedia, CalibrateSkipsDamagedImagesAndReadsOtherDepthsAndChannelCounts)
   cv::imwrite((dir_ / "imgs/f-blank.png").string(),
               cv::Mat(board.size(), CV_8UC3, cv::Scalar::all(128)));
   const flatland_test::Result r =
-      run("calibrate --images 'imgs/*' --board chessboard:10x7:0.02 --out camera.yaml");
+      run("calibrate --images 'imgs/*' --board chessboard:10x7:0.02 --out out.yaml");
   // Both boards are found (16-bit and RGBA read as 8-bit grey), the blank image is searched,
   // the damaged files are skipped: two views are too few, which is bad input.
   EXPECT_EQ(r.code, 2) << r.err;
@@ -235,18 +236,18 @@ TEST_F(BadMedia, CalibrateSkipsDamagedImagesAndReadsOtherDepthsAndChannelCounts)
         "flatland: error: fewer than 3 usable views: the board was found in 2 of 3 images"})
     EXPECT_NE(r.err.find(s), std::string::npos) << s << "\n" << r.err;
   expect_only_flatland_lines(r.err);
-  EXPECT_FALSE(fs::exists(dir_ / "camera.yaml"));
+  EXPECT_FALSE(fs::exists(dir_ / "out.yaml"));
 
   // Nothing readable at all.
   fs::remove(dir_ / "imgs/a-16bit.png");
   fs::remove(dir_ / "imgs/b-rgba.png");
   fs::remove(dir_ / "imgs/f-blank.png");
   const flatland_test::Result none =
-      run("calibrate --images 'imgs/*' --board chessboard:10x7:0.02 --out camera.yaml");
+      run("calibrate --images 'imgs/*' --board chessboard:10x7:0.02 --out out.yaml");
   EXPECT_EQ(none.code, 2) << none.err;
   EXPECT_EQ(lines_of(none.err).back(),
             "flatland: error: --images: none of the 3 files is a readable image");
-  EXPECT_FALSE(fs::exists(dir_ / "camera.yaml"));
+  EXPECT_FALSE(fs::exists(dir_ / "out.yaml"));
 }
 
 // The recorded camera's frames are 8-bit (CameraFrame: 8UC1 or 8UC3) whatever the files hold.
