@@ -692,7 +692,7 @@ Scene parse_scene(const std::string& yaml_text, const std::string& origin) {
     const int count = count_documents_up_to_two(yaml_text);
     if (count > 1)
       fail(origin, "(document)",
-           "contains more than one YAML document (a '---' line?); a scene is exactly one");
+           "contains several YAML documents (a '---' line?); a scene is exactly one");
     if (count == 1) docs.push_back(YAML::Load(yaml_text));
   } catch (const YAML::Exception& e) {
     // yaml-cpp marks are 0-based; editors count from 1.
