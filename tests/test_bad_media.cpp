@@ -79,7 +79,8 @@ class BadMedia : public flatland_test::CliTestBase {
   }
 
   nlohmann::json track_json(const std::string& input, flatland_test::Result& r) const {
-    r = run("track " + input + " --camera camera.yaml --out out.csv --json");
+    // --force: a test may track several inputs in turn into the same out.csv.
+    r = run("track " + input + " --camera camera.yaml --out out.csv --force --json");
     if (r.code != 0) return {};
     return nlohmann::json::parse(r.out);
   }

@@ -21,7 +21,7 @@ namespace fs = std::filesystem;
 
 std::vector<fs::path> inputs(const std::string& target) {
   std::vector<fs::path> files;
-  for (const fs::path dir :
+  for (const fs::path& dir :
        {fs::path(FLATLAND_FUZZ_DIR) / target, fs::path(FLATLAND_FUZZ_DIR) / "regressions" / target})
     if (fs::is_directory(dir))
       for (const auto& e : fs::directory_iterator(dir))
