@@ -134,7 +134,6 @@ void SimWorld::step_disk(double alpha) {
     failure_time_ = r.final.t;
     fn_min_ = std::min(fn_min_, r.final.fn_ratio);
   }
-
 }
 
 void SimWorld::servo_step() {
@@ -203,14 +202,6 @@ control::JointReading SimWorld::read_encoder() const {
 }
 
 WorldSample SimWorld::state_at(double t) const {
-  if (history_.empty()) {
-    WorldSample w;
-    w.t = t_;
-    w.theta = theta_;
-    w.s_h = s_h_;
-    w.disk_angle = disk_angle_;
-    return w;
-  }
   if (t <= history_.front().t) return history_.front();
   if (t >= history_.back().t) return history_.back();
   std::size_t i = static_cast<std::size_t>((t - history_.front().t) / dt_);
@@ -325,14 +316,16 @@ SyntheticCamera::SyntheticCamera(const Scene& scene, const SimWorld& world, doub
       faults_(scene.faults),
       renderer_(scene),
       t_start_(t_start),
+      capture_jitter_(scene.effects.jitter_s),
       latency_rng_(scene.effects.seed ^ 0x9e3779b97f4a7c15ULL) {}
 
 std::optional<CameraFrame> SyntheticCamera::poll(double now) {
-  const double jitter = world_.servo_period() * 2 + 4.0 * 0.0;
+  // A frame is rendered once the world has been simulated past its exposure, allowing for the
+  // capture-time jitter (4 sigma) and the last servo period.
+  const double margin = 2.0 * world_.servo_period() + 4.0 * capture_jitter_;
   for (;;) {
     const double tn = t_start_ + static_cast<double>(next_) / camera_.fps;
-    // Render once the world has been simulated past the whole exposure (and timing jitter).
-    if (tn + 0.5 * camera_.exposure + jitter > now) break;
+    if (tn + 0.5 * camera_.exposure + margin > now) break;
     if (faults_.camera_stop && tn >= *faults_.camera_stop) break;
     if (faults_.camera_stall && tn >= *faults_.camera_stall) {
       // A stalled camera keeps delivering its last image with its old stamp.

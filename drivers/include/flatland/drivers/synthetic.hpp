@@ -144,6 +144,7 @@ class SyntheticCamera final : public Camera {
   FaultSpec faults_;
   render::Renderer renderer_;
   double t_start_;
+  double capture_jitter_;  ///< s, effects.jitter_s
   long next_ = 0;  ///< next nominal frame number
   std::deque<CameraFrame> queue_;
   std::optional<CameraFrame> last_;
