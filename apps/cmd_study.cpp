@@ -2,7 +2,7 @@
 // `sim` is the work-precision diagram of the simulator: for every integrator setting and both
 // formulations, the error in s_h(T) and in the solved k* against the CPU time they cost.
 // `calibration`: the intrinsics' parameter error and time against views and corner noise.
-#include "common.hpp"
+#include "study.hpp"
 
 #include "flatland/calibration/intrinsics.hpp"
 
@@ -21,39 +21,6 @@
 namespace flatland::app {
 
 namespace {
-
-struct StudyOptions {
-  std::string name;
-  std::string scene;
-  std::string out;
-  bool force = false;
-  bool quick = false;
-  bool json = false;
-  bool no_plot = false;
-  double min_cpu = 0.02;  // s: timing repeats until this much CPU time has been spent
-};
-
-// Studies other issues will add; asking for one is an error that says so (exit 2), not silence.
-const std::vector<std::string> kPlanned = {"render", "tracker", "closed-loop"};
-
-double cpu_now() {
-  timespec ts{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
-}
-
-// CPU seconds per call of f, repeated until min_cpu has passed (single runs at loose tolerances
-// take microseconds, below the clock's useful resolution).
-template <class F>
-double cpu_per_call(F&& f, double min_cpu) {
-  const double start = cpu_now();
-  long n = 0;
-  do {
-    f();
-    ++n;
-  } while (cpu_now() - start < min_cpu && n < 1000);
-  return (cpu_now() - start) / static_cast<double>(n);
-}
 
 struct Setting {
   sim::Method method;
@@ -175,6 +142,14 @@ std::string plot_body(const std::string& title, const std::string& ylabel, int t
               " lc rgb '" + colors[m] + "' title '" + methods[m] + " " + forms[f] + "'";
     }
   return body + "\n";
+}
+
+}  // namespace
+
+double cpu_now() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
 }
 
 void run_sim_study(const StudyOptions& o) {
@@ -312,6 +287,8 @@ void run_sim_study(const StudyOptions& o) {
 
 // The camera of tests/test_calibration_intrinsics.cpp: VGA, f = 800 px, an off-centre principal
 // point and barrel distortion, so that every parameter has something to recover.
+namespace {
+
 struct CalibTruth {
   cv::Matx33d K{800, 0, 322.5, 0, 800, 237.5, 0, 0, 1};
   cv::Vec<double, 5> dist{-0.2, 0.08, 0.001, -0.0005, 0.0};
@@ -355,6 +332,8 @@ std::vector<calibration::BoardView> synthetic_views(const CalibTruth& truth, int
   }
   return views;
 }
+
+}  // namespace
 
 void run_calibration_study(const StudyOptions& o) {
   const fs::path dir = o.out;
@@ -481,16 +460,16 @@ void run_calibration_study(const StudyOptions& o) {
   for (const auto& p : written) std::cout << "  wrote " << p << "\n";
 }
 
+namespace {
+
 void run_study(const StudyOptions& o) {
   if (o.name == "sim") return run_sim_study(o);
   if (o.name == "calibration") return run_calibration_study(o);
-  std::string planned;
-  for (const auto& p : kPlanned) planned += (planned.empty() ? "" : ", ") + p;
-  if (std::find(kPlanned.begin(), kPlanned.end(), o.name) != kPlanned.end())
-    throw UsageError("study: '" + o.name +
-                     "' is not implemented yet (available: sim, calibration)");
+  if (o.name == "render") return run_render_study(o);
+  if (o.name == "tracker") return run_tracker_study(o);
+  if (o.name == "closed-loop") return run_closed_loop_study(o);
   throw UsageError("study: unknown study '" + o.name +
-                   "' (available: sim, calibration; planned: " + planned + ")");
+                   "' (available: sim, render, tracker, calibration, closed-loop)");
 }
 
 }  // namespace
@@ -502,8 +481,7 @@ Command add_study_command(CLI::App& app) {
       "Speed-accuracy studies (docs/ACCURACY.md). 'sim': the simulator's work-precision diagram "
       "(RK4 at several steps, dopri5 and dop853 at rtol 1e-3 ... 1e-13, general and reduced "
       "formulations): error in s_h(T) and in the solved k against CPU time.");
-  cmd->add_option("name", o->name,
-                  "Which study: sim, calibration (render, tracker, closed-loop: planned)")
+  cmd->add_option("name", o->name, "Which study: sim, render, tracker, calibration, closed-loop")
       ->required();
   cmd->add_option("--scene", o->scene,
                   "Scene file (YAML; its motion must be the butterfly). Default: the bundled "
