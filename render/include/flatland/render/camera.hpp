@@ -44,6 +44,8 @@ struct DistortionMaps {
   cv::Matx33d ideal_K;
   cv::Mat map_x, map_y;  ///< CV_32FC1, size (height*s) x (width*s)
 };
+/// Built once per (intrinsics, distortion, size, supersample) and shared: the maps of a returned
+/// value are the cached ones, so treat them as read-only.
 DistortionMaps make_distortion_maps(const CameraModel& camera, int supersample);
 
 }  // namespace flatland::render
