@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <string>
 
 using namespace flatland::sim;
 
@@ -100,4 +101,26 @@ TEST(Paper, BadSearchInputIsRejected) {
   EXPECT_THROW(locus(paper_spec(), 1.2, 2.0, 0), std::invalid_argument);
   EXPECT_THROW(surface(paper_spec(), -2.5, -1.0, 3, 1.0, 2.0, 3), std::invalid_argument);
   EXPECT_THROW(time_optimal(paper_spec(), 1.3, 1.5), std::runtime_error);  // does not bracket
+}
+
+// For slow motions s_h(T) is so sensitive to k that, from the paper's starting k, the bracket
+// ends on a jump (the disk still on the palm on one side, fallen past the tip on the other)
+// rather than a root. That must be an error, not a "solution" with |s_h(T)| ~ 3; started near a
+// real root at the same period, the solve still succeeds with a small residual.
+TEST(Paper, JumpInSlowMotionIsNotReportedAsASolution) {
+  SimulationSpec s = paper_spec();
+  s.motion.k = -1.1393;
+  for (double period : {12.0, 20.0}) {
+    try {
+      const SolveReport r = solve_k(s, period);
+      // Either a genuine root (small residual) or an error; never a jump.
+      EXPECT_LT(std::abs(r.s_T), 1e-6) << "2T = " << period << ", k = " << r.k;
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find("jumps"), std::string::npos) << e.what();
+    }
+  }
+  s.motion.k = -1.5;
+  const SolveReport r = solve_k(s, 5.0);
+  EXPECT_LT(std::abs(r.s_T), 1e-6);
+  EXPECT_GT(r.k, -2.0);
 }

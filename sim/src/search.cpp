@@ -5,10 +5,12 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <mutex>
 #include <sstream>
 #include <stdexcept>
+#include <string>
 #include <thread>
 
 namespace flatland::sim {
@@ -106,6 +108,38 @@ std::optional<Bracket> find_bracket(const std::function<double(double)>& f, doub
   return walk(-first);
 }
 
+// Brent's method converges to a sign change, and a sign change is not always a root: for slow
+// motions s_h(T) is so sensitive to k (or d) that, in double precision, it jumps between "still
+// on the palm" and "fallen off the tip" (|s_h(T)| ~ 3) across the final bracket. Such a point is
+// no solution, so it is reported as an error instead of returned. A true root has a residual of
+// about slope x bracket width; the slope is probed on either side when the residual is not
+// already negligible (the probes cost two runs to T).
+void check_root_is_continuous(const std::function<double(double)>& f, const RootResult& root,
+                              double tolerance, double lo, double hi, const std::string& what) {
+  constexpr double kNegligible = 1e-6;  // of s_h, whose range is [-1, 1] over the hand
+  if (std::abs(root.fx) <= kNegligible) return;
+  const double h = std::max(1e3 * tolerance, 1e-6 * std::max(1.0, std::abs(root.x)));
+  // A probe outside the parameter's domain (an invalid shape) falls back to the root itself.
+  auto probe = [&](double x, double& fx_out) {
+    try {
+      fx_out = f(x);
+      return std::isfinite(fx_out);
+    } catch (const std::invalid_argument&) {
+      return false;
+    }
+  };
+  double a = std::max(lo, root.x - h), b = std::min(hi, root.x + h), fa = 0, fb = 0;
+  if (!probe(a, fa)) a = root.x, fa = root.fx;
+  if (!probe(b, fb)) b = root.x, fb = root.fx;
+  const double slope = b > a ? std::abs(fb - fa) / (b - a) : 0.0;
+  if (std::abs(root.fx) <= 10 * slope * tolerance) return;
+  throw std::runtime_error("solve: s_h(T) changes sign at " + what + " = " + num(root.x) +
+                           " but jumps there (it stays at " + num(root.fx) +
+                           "), so this is no solution: the motion is too sensitive near it; try "
+                           "another starting " +
+                           what);
+}
+
 }  // namespace
 
 double half_period_s_h(const SimulationSpec& spec, double period, double k, long* rhs_evals) {
@@ -170,6 +204,7 @@ SolveReport solve_k_from(const SimulationSpec& spec,
                                                       set.tolerance, set.max_evaluations);
   if (!root.converged)
     throw std::runtime_error("solve: root finder did not converge for 2T = " + num(period) + " s");
+  check_root_is_continuous(f, root, set.tolerance, lo, hi, "k");
   SolveReport rep = evaluate(spec, period, root.x);
   rep.simulations += sims;
   rep.rhs_evals += rhs;
@@ -212,6 +247,8 @@ SolveReport solve_d(const SimulationSpec& spec, double period, double k,
                                          : brent_root(f, br->a, br->b, br->fa, br->fb,
                                                       set.tolerance * scale, set.max_evaluations);
   if (!root.converged) throw std::runtime_error("solve: root finder did not converge for d");
+  check_root_is_continuous(f, root, set.tolerance * scale, s.hand.d - 10 * scale,
+                           s.hand.d + 10 * scale, "d");
   s.hand.d = root.x;
   SolveReport rep = evaluate(s, period, k);
   rep.simulations += sims;
