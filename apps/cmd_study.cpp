@@ -411,27 +411,29 @@ void run_calibration_study(const StudyOptions& o) {
     outputs.begin_directory(dir);
     outputs.stage(dir / "calibration.csv", csv);
     if (plots) {
-      // One panel per quantity: error against the number of views, one curve per noise level.
+      // One panel per quantity: error against the number of views, one curve per noise level
+      // (rows are views-major with 4 noise levels each: `every 4::i` picks noise level i, so
+      // that gnuplot draws each curve as one line).
       auto panel = [](const std::string& title, const std::string& ylabel, int col) {
         std::string b = "set title '" + title + "'\nset ylabel '" + ylabel + "'\nplot ";
         const char* noise[] = {"0", "0.1", "0.3", "1"};
         for (int i = 0; i < 4; ++i)
           b += std::string(i ? ", \\\n     " : "") +
-               "datafile skip 1 using 1:(column(2) == " + noise[i] + " ? lift(column(" +
-               std::to_string(col) + ")) : NaN) with linespoints lw 2 pt 7 title 'noise " +
-               noise[i] + " px'";
+               "datafile skip 1 every 4::" + std::to_string(i) + " using 1:(lift(column(" +
+               std::to_string(col) + "))) with linespoints lw 2 pt 7 title 'noise " + noise[i] +
+               " px'";
         return b + "\n";
       };
       const std::string head =
           "set logscale xy\nset format y '1e%L'\nset grid\nset xtics (5, 10, 20, 40)\n"
-          "set xlabel 'views'\nset key top right\nlift(e) = e < 1e-12 ? 1e-12 : e\n"
+          "set xlabel 'views'\nset key bottom left\nlift(e) = e < 1e-12 ? 1e-12 : e\n"
           "set multiplot layout 2,2 title 'Calibration: RMS parameter error against views'\n";
       run_plot(outputs, dir,
                {"calibration.gp", "calibration.csv", "calibration.png",
                 head + panel("fx", "RMS error fx (px)", 5) + panel("cx", "RMS error cx (px)", 9) +
                     panel("k1", "RMS error k1", 13) +
                     "set title 'time'\nset ylabel 'calibration time (s)'\nplot "
-                    "datafile skip 1 using 1:(column(2) == 0.3 ? column(18) : NaN) with "
+                    "datafile skip 1 every 4::2 using 1:18 with "
                     "linespoints lw 2 pt 7 title 'noise 0.3 px'\n"
                     "unset multiplot\n"});
     }
