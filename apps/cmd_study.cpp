@@ -488,7 +488,8 @@ Command add_study_command(CLI::App& app) {
   cmd->add_option("--scene", o->scene,
                   "Scene file (YAML; its motion must be the butterfly). Default: the bundled "
                   "paper butterfly, " +
-                      default_scene_path())
+                      default_scene_path() +
+                      " (closed-loop: the bundled closed-loop scene, airtable-feedback.yaml)")
       ->type_name("FILE");
   cmd->add_flag("--json", o->json,
                 "Print exactly one JSON object on stdout (errors, CPU seconds, the references)");
@@ -501,7 +502,9 @@ Command add_study_command(CLI::App& app) {
   cmd->add_flag("--no-plot", o->no_plot, "Write the CSV but no plots (no gnuplot needed)");
   add_force_option(*cmd, o->force);
   cmd->add_flag("--quick", o->quick,
-                "calibration: 2 trials per cell instead of 8 (a few seconds). Default: off");
+                "calibration: 2 trials per cell instead of 8 (a few seconds); closed-loop: 2 "
+                "worlds per cell on a 2 x 2 grid (15 Hz and the scene's rate; the scene's "
+                "latency and 0.3 s) instead of 30 on 4 x 6. Default: off");
   cmd->add_option("--min-cpu", o->min_cpu,
                   "CPU seconds each timing repeats for (> 0; longer is steadier). Default: 0.02")
       ->check(CLI::PositiveNumber);
