@@ -36,15 +36,32 @@ export LSAN_OPTIONS="suppressions=$root/tests/sanitizers/lsan.supp:print_suppres
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
 
 log "stage 2: AddressSanitizer + UndefinedBehaviorSanitizer build in build-asan/"
+# -g1: line tables are all the sanitizers' stack traces need, and full debug information would
+# make this build (the longest step of CI) markedly slower.
 cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-  -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g" -DFLATLAND_SANITIZE=address,undefined \
+  -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1" -DFLATLAND_SANITIZE=address,undefined \
   -DFLATLAND_BUILD_BENCHMARKS=OFF >&2
 cmake --build build-asan -j"$jobs" >&2
 # Sanitized code is several times slower; the tests are independent (each has its own temporary
-# directory), so they run in parallel. The Monte Carlo acceptance test (400 whole experiments in
-# stage 1) checks its rates on 20 perturbed worlds here: the code paths are the same, and ASan
-# would make the full count the longest part of CI.
-FLATLAND_MC_RUNS=20 ctest --test-dir build-asan --output-on-failure -j"$jobs"
+# directory), so they run in parallel. The longest tests run the same code paths for less long
+# here (tests/test_scale.hpp: FLATLAND_TEST_SHORT): the hour-long hold for 6 minutes, the Monte
+# Carlo acceptance (400 whole experiments in stage 1) on 10 perturbed worlds, the thread-count
+# test on 2. The full lengths ran in stage 1.
+export FLATLAND_TEST_SHORT=1 FLATLAND_MC_RUNS=10
+asan_log=$(mktemp)
+trap 'rm -f "$asan_log"' EXIT
+if ! ctest --test-dir build-asan --output-on-failure -j"$jobs" 2>&1 | tee "$asan_log" >&2; then
+  # LeakSanitizer's leak check at exit stops all threads with a ptrace-based tracer, which on some
+  # kernels intermittently crashes ("Tracer caught signal 11 ... LeakSanitizer has encountered a
+  # fatal error"; google/sanitizers#1353) after the test itself has passed. When the log shows
+  # that crash, the failed tests get one rerun; a reproducible error fails again.
+  if grep -q "LeakSanitizer has encountered a fatal error" "$asan_log"; then
+    log "stage 2: LeakSanitizer's tracer crashed (google/sanitizers#1353); rerunning the failed tests once"
+    ctest --test-dir build-asan --output-on-failure --rerun-failed >&2
+  else
+    exit 1
+  fi
+fi
 
 if ! command -v clang++ >/dev/null 2>&1 ||
   ! echo 'extern "C" int LLVMFuzzerTestOneInput(const char*, long) { return 0; }' |

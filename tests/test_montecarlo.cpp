@@ -3,6 +3,7 @@
 // out by hand, and the results do not depend on the number of threads.
 #include "flatland/drivers/montecarlo.hpp"
 #include "flatland/scene/scene.hpp"
+#include "test_scale.hpp"
 
 #include <gtest/gtest.h>
 
@@ -178,22 +179,25 @@ TEST(MonteCarloRun, ResultsDoNotDependOnTheThreadCount) {
   const Scene s0 = nominal();
   const drivers::Perturbations p;
   const std::vector<std::string> controllers = {"open-loop", "feedback"};
+  // Four worlds (two in the sanitizer stage), each run by both controllers.
+  const int runs = flatland::test::short_tests() ? 2 : 4;
+  const long records = 2L * runs;
   long calls = 0, last_done = 0, last_total = 0;
   const auto one =
-      drivers::run_montecarlo(s0, p, 4, 2024, controllers, 1, [&](long done, long total) {
+      drivers::run_montecarlo(s0, p, runs, 2024, controllers, 1, [&](long done, long total) {
         ++calls;
         EXPECT_EQ(done, last_done + 1);
         last_done = done;
         last_total = total;
       });
-  EXPECT_EQ(calls, 8);
-  EXPECT_EQ(last_total, 8);
-  const auto two = drivers::run_montecarlo(s0, p, 4, 2024, controllers, 2);
-  ASSERT_EQ(one.records.size(), 8u);
-  ASSERT_EQ(two.records.size(), 8u);
-  EXPECT_EQ(one.runs, 4);
+  EXPECT_EQ(calls, records);
+  EXPECT_EQ(last_total, records);
+  const auto two = drivers::run_montecarlo(s0, p, runs, 2024, controllers, 2);
+  ASSERT_EQ(one.records.size(), static_cast<std::size_t>(records));
+  ASSERT_EQ(two.records.size(), static_cast<std::size_t>(records));
+  EXPECT_EQ(one.runs, runs);
   int ok_open = 0, ok_feedback = 0;
-  for (std::size_t i = 0; i < 8; ++i) {
+  for (std::size_t i = 0; i < static_cast<std::size_t>(records); ++i) {
     const auto& a = one.records[i];
     const auto& b = two.records[i];
     SCOPED_TRACE("record " + std::to_string(i));
@@ -224,7 +228,7 @@ TEST(MonteCarloRun, ResultsDoNotDependOnTheThreadCount) {
   EXPECT_EQ(one.success_feedback, ok_feedback);
   EXPECT_EQ(two.success_open_loop, ok_open);
   EXPECT_EQ(two.success_feedback, ok_feedback);
-  const auto ci = drivers::wilson_interval(ok_feedback, 4);
+  const auto ci = drivers::wilson_interval(ok_feedback, runs);
   EXPECT_EQ(one.ci_feedback.lo, ci.lo);
   EXPECT_EQ(one.ci_feedback.hi, ci.hi);
 }
