@@ -483,7 +483,12 @@ Command add_study_command(CLI::App& app) {
       "Speed-accuracy studies (docs/ACCURACY.md). 'sim': the simulator's work-precision diagram "
       "(RK4 at several steps, dopri5 and dop853 at rtol 1e-3 ... 1e-13, general and reduced "
       "formulations): error in s_h(T) and in the solved k against CPU time.");
-  cmd->add_option("name", o->name, "Which study: sim, render, tracker, calibration, closed-loop")
+  cmd->add_option("name", o->name,
+                  "Which study: sim, render, tracker, calibration, closed-loop. 'render': the "
+                  "renderer's centroid error against cv::projectPoints and its frames/s against "
+                  "supersampling and resolution; 'tracker': centre error, latency and lost frames "
+                  "of each tracking method against read noise and exposure blur. Both film the "
+                  "scene's camera (default scene: assets/scenes/butterfly-camera.yaml)")
       ->required();
   cmd->add_option("--scene", o->scene,
                   "Scene file (YAML; its motion must be the butterfly). Default: the bundled "
@@ -497,14 +502,18 @@ Command add_study_command(CLI::App& app) {
                   "Directory for sim.csv (one row per setting: method, formulation, rtol, atol, "
                   "step in s, steps, rhs_evals, s_T, err_s_T, cpu_s_T in s, k, err_k, cpu_k in "
                   "s, simulations) and sim_s_h.png, sim_k.png (log-log) with their gnuplot "
-                  "scripts; created if missing. Default: no files")
+                  "scripts; render: render.csv, render_error.png, render_fps.png, render.json; "
+                  "tracker: tracker.csv, tracker_error.png, tracker_latency.png, tracker.json; "
+                  "created if missing. Default: no files")
       ->type_name("PATH");
   cmd->add_flag("--no-plot", o->no_plot, "Write the CSV but no plots (no gnuplot needed)");
   add_force_option(*cmd, o->force);
   cmd->add_flag("--quick", o->quick,
                 "calibration: 2 trials per cell instead of 8 (a few seconds); closed-loop: 2 "
                 "worlds per cell on a 2 x 2 grid (15 Hz and the scene's rate; the scene's "
-                "latency and 0.3 s) instead of 30 on 4 x 6. Default: off");
+                "latency and 0.3 s) instead of 30 on 4 x 6; render: supersampling 1, 2, 4 at 2 "
+                "resolutions, 4 disk positions (about a second); tracker: every third frame, "
+                "exposures 0 and 1/fps, noise 0, 2, 8, 32 DN (a few seconds). Default: off");
   cmd->add_option("--min-cpu", o->min_cpu,
                   "CPU seconds each timing repeats for (> 0; longer is steadier). Default: 0.02")
       ->check(CLI::PositiveNumber);
