@@ -181,19 +181,22 @@ Scene cell_scene(const Scene& scene, double scale, int factor) {
 }
 
 /// `n` seeded random disk positions on the free table: a pixel drawn uniformly in the image is
-/// back-projected onto the disk's top-face plane; it is kept when the centroid window lies in the
-/// image at every scale (with a margin) and the window of an image without the disk is uniform
-/// (nothing but table: the hand, the table's edge or a target would bias the centroid).
+/// back-projected onto the disk's top-face plane; it is kept when, at every scale, the centroid
+/// window (grown by 3 px) lies in the image and is uniform in an image without the disk (nothing
+/// but table: the hand, the table's edge or a target in the window would bias the centroid).
 std::vector<Position> free_positions(const Scene& scene, const std::vector<double>& scales, int n,
                                      std::uint64_t seed) {
   const double radius = scene.sim.object.radius, z = scene.render.disk_thickness;
-  render::Renderer base(cell_scene(scene, 1.0, 1));
-  const render::CameraModel& cam = base.camera();
-  cv::Mat background;
-  cv::cvtColor(base.render_8u(disk_at({1e3, 1e3}, 0)), background, cv::COLOR_BGR2GRAY);
   std::vector<render::CameraModel> cams;
-  for (double s : scales)
-    cams.push_back(render::CameraModel::from_spec(scaled_camera(*scene.camera, s)));
+  std::vector<cv::Mat> backgrounds;
+  for (double s : scales) {
+    render::Renderer r(cell_scene(scene, s, 1));
+    cams.push_back(r.camera());
+    cv::Mat gray;
+    cv::cvtColor(r.render_8u(disk_at({1e3, 1e3}, 0)), gray, cv::COLOR_BGR2GRAY);
+    backgrounds.push_back(gray);
+  }
+  const render::CameraModel& cam = cams.front();
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> U(0, 1);
   std::vector<Position> out;
@@ -203,18 +206,18 @@ std::vector<Position> free_positions(const Scene& scene, const std::vector<doubl
     const auto p = vision::pixel_to_table(cam, px, z);
     if (!p) continue;
     bool ok = true;
-    for (const auto& c : cams) {
-      const cv::Point2d centre = c.project(cv::Point3d(p->x, p->y, z));
-      ok = ok &&
-           inside(centroid_window(centre, disk_radius_px(c, *p, radius, z)), c.width, c.height, 2);
+    for (std::size_t i = 0; i < cams.size() && ok; ++i) {
+      const render::CameraModel& c = cams[i];
+      cv::Rect roi =
+          centroid_window(c.project(cv::Point3d(p->x, p->y, z)), disk_radius_px(c, *p, radius, z));
+      roi = cv::Rect(roi.x - 3, roi.y - 3, roi.width + 6, roi.height + 6);
+      ok = inside(roi, c.width, c.height, 0);
+      if (!ok) break;
+      double lo = 0, hi = 0;
+      cv::minMaxLoc(backgrounds[i](roi), &lo, &hi);
+      ok = hi - lo <= 1;
     }
-    if (!ok) continue;
-    const cv::Rect roi = centroid_window(cam.project(cv::Point3d(p->x, p->y, z)),
-                                         disk_radius_px(cam, *p, radius, z));
-    double lo = 0, hi = 0;
-    cv::minMaxLoc(background(roi), &lo, &hi);
-    if (hi - lo > 2) continue;
-    out.push_back({*p, angle});
+    if (ok) out.push_back({*p, angle});
   }
   if (static_cast<int>(out.size()) < n)
     throw UsageError(scene.origin +

@@ -110,7 +110,7 @@ void run_tracker_study(const StudyOptions& o) {
                                            {"moments", vision::TrackMethod::kMoments, false},
                                            {"hough", vision::TrackMethod::kHough, false}};
   const std::vector<double> noises =
-      o.quick ? std::vector<double>{0, 2, 8, 32} : std::vector<double>{0, 1, 2, 4, 8, 16, 32};
+      o.quick ? std::vector<double>{0, 2, 8, 32} : std::vector<double>{0, 1, 2, 4, 8, 16, 32, 64};
   const std::vector<double> fractions =
       o.quick ? std::vector<double>{0, 1} : std::vector<double>{0, 0.25, 0.5, 1};
   const int stride = o.quick ? 3 : 1;  // every stride-th frame of the camera's rate
