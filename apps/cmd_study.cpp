@@ -499,12 +499,14 @@ Command add_study_command(CLI::App& app) {
   cmd->add_flag("--json", o->json,
                 "Print exactly one JSON object on stdout (errors, CPU seconds, the references)");
   cmd->add_option("--out", o->out,
-                  "Directory for sim.csv (one row per setting: method, formulation, rtol, atol, "
-                  "step in s, steps, rhs_evals, s_T, err_s_T, cpu_s_T in s, k, err_k, cpu_k in "
-                  "s, simulations) and sim_s_h.png, sim_k.png (log-log) with their gnuplot "
-                  "scripts; render: render.csv, render_error.png, render_fps.png, render.json; "
-                  "tracker: tracker.csv, tracker_error.png, tracker_latency.png, tracker.json; "
-                  "created if missing. Default: no files")
+                  "Directory for the study's files, created if missing. sim: sim.csv (one row "
+                  "per setting: method, formulation, rtol, atol, step in s, steps, rhs_evals, "
+                  "s_T, err_s_T, cpu_s_T in s, k, err_k, cpu_k in s, simulations) and sim_s_h.png, "
+                  "sim_k.png (log-log) with their gnuplot scripts; calibration: calibration.csv, "
+                  "calibration.png, calibration.json; render: render.csv (one row per "
+                  "supersampling and resolution), render_error.png, render_fps.png, render.json; "
+                  "tracker: tracker.csv (one row per method, exposure and noise level), "
+                  "tracker_error.png, tracker_latency.png, tracker.json. Default: no files")
       ->type_name("PATH");
   cmd->add_flag("--no-plot", o->no_plot, "Write the CSV but no plots (no gnuplot needed)");
   add_force_option(*cmd, o->force);
