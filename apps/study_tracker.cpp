@@ -36,6 +36,10 @@ struct BlurLevel {
   double exposure = 0;  // s
   int subframes = 1;
   double px_mean = 0, px_max = 0;  // streak of the disk centre over the exposure
+  // The mean of the sub-frames' projected centres minus the projected centre at mid-exposure
+  // (the truth): what a perfect tracker of the smeared disk is off by, from the motion's
+  // acceleration and curvature over the exposure. RMS and max over the frames.
+  double shift_rms = 0, shift_max = 0;
 };
 
 struct Cell {
@@ -72,6 +76,20 @@ double streak_px(const render::CameraModel& cam, const sim::Trajectory& tr, doub
     last = p;
   }
   return len;
+}
+
+/// |mean of the projected centres at the renderer's sub-frame times - projected centre at t| (px).
+double subframe_shift_px(const render::CameraModel& cam, const sim::Trajectory& tr, double z,
+                         double t, double exposure, int subframes) {
+  auto at = [&](double ts) {
+    const auto c = tr.sample(std::clamp(ts, tr.t_begin(), tr.t_end())).object_position;
+    return cam.project(cv::Point3d(c.x(), c.y(), z));
+  };
+  if (exposure <= 0 || subframes <= 1) return 0;
+  cv::Point2d mean(0, 0);
+  for (int i = 0; i < subframes; ++i)  // as Renderer::capture spaces them
+    mean += at(t - 0.5 * exposure + (i + 0.5) * exposure / subframes) * (1.0 / subframes);
+  return cv::norm(mean - at(t));
 }
 
 Json tracker_defaults_json() {
@@ -148,6 +166,12 @@ void run_tracker_study(const StudyOptions& o) {
     // Sub-frames at most ~1 px of motion apart, so that the blur is a smear and not a row of
     // ghosts (the renderer's limit is 64; 16 keeps the study's cost bounded).
     b.subframes = b.exposure > 0 ? std::clamp(static_cast<int>(std::ceil(b.px_max)) + 1, 2, 16) : 1;
+    for (double t : times) {
+      const double d = subframe_shift_px(cam0, tr, z, t, b.exposure, b.subframes);
+      b.shift_rms += d * d / static_cast<double>(times.size());
+      b.shift_max = std::max(b.shift_max, d);
+    }
+    b.shift_rms = std::sqrt(b.shift_rms);
     blurs.push_back(b);
   }
   std::cerr << "flatland: study tracker: " << methods.size() << " methods x " << blurs.size()
@@ -304,7 +328,9 @@ void run_tracker_study(const StudyOptions& o) {
                   {"fraction_of_frame", b.fraction},
                   {"subframes", b.subframes},
                   {"blur_px_mean", b.px_mean},
-                  {"blur_px_max", b.px_max}});
+                  {"blur_px_max", b.px_max},
+                  {"truth_shift_px_rms", b.shift_rms},
+                  {"truth_shift_px_max", b.shift_max}});
   j["exposures"] = bl;
   j["rows"] = rows;
   j["load_average_1min"] = {number(load_start), number(load_end)};

@@ -131,7 +131,8 @@ TEST_F(StudyVision, RenderQuick) {
     EXPECT_TRUE(cell.emplace(key, i).second) << "cell listed twice";
     EXPECT_GE(csv.num(i, "centroid_max_px"), csv.num(i, "centroid_rms_px"));
     EXPECT_EQ(csv.num(i, "positions"), static_cast<double>(j["positions"].size()));
-    EXPECT_EQ(csv.num(i, "frames"), 2 * csv.num(i, "positions"));  // each disk and it turned
+    // Timed: every rendered state (each disk and it turned by pi) at least once.
+    EXPECT_GE(csv.num(i, "frames"), 2 * csv.num(i, "positions"));
     EXPECT_GT(csv.num(i, "fps_median"), 0.0);
   }
   int w_min = 1 << 30, w_max = 0;
