@@ -506,7 +506,8 @@ Command add_study_command(CLI::App& app) {
                   "calibration.png, calibration.json; render: render.csv (one row per "
                   "supersampling and resolution), render_error.png, render_fps.png, render.json; "
                   "tracker: tracker.csv (one row per method, exposure and noise level), "
-                  "tracker_error.png, tracker_latency.png, tracker.json. Default: no files")
+                  "tracker_error.png, tracker_latency.png, tracker.json; closed-loop: "
+                  "closed_loop.csv, closed_loop.png, closed_loop.json. Default: no files")
       ->type_name("PATH");
   cmd->add_flag("--no-plot", o->no_plot, "Write the CSV but no plots (no gnuplot needed)");
   add_force_option(*cmd, o->force);
