@@ -491,10 +491,11 @@ Command add_study_command(CLI::App& app) {
                   "scene's camera (default scene: assets/scenes/butterfly-camera.yaml)")
       ->required();
   cmd->add_option("--scene", o->scene,
-                  "Scene file (YAML; its motion must be the butterfly). Default: the bundled "
-                  "paper butterfly, " +
+                  "Scene file (YAML). Default: sim, the bundled paper butterfly " +
                       default_scene_path() +
-                      " (closed-loop: the bundled closed-loop scene, airtable-feedback.yaml)")
+                      " (its motion must be the butterfly); render and tracker, the bundled "
+                      "butterfly-camera.yaml (the scene needs a camera); closed-loop, the bundled "
+                      "airtable-feedback.yaml; calibration uses no scene")
       ->type_name("FILE");
   cmd->add_flag("--json", o->json,
                 "Print exactly one JSON object on stdout (errors, CPU seconds, the references)");
