@@ -189,3 +189,30 @@ TEST_F(CameraFileTest, ValidationErrorsNameTheField) {
 TEST_F(CameraFileTest, WriteFailureIsARuntimeError) {
   EXPECT_THROW(write_camera_file(path("no/such/dir/camera.yaml"), full_file()), std::runtime_error);
 }
+
+// OpenCV 4.6's YAML reader loops forever or reads out of bounds on an empty mapping key and
+// recurses without limit on deep nesting (calibration/src/camera_file.cpp): the reader rejects
+// both before OpenCV sees the text, and still reads colons inside scalars and comments.
+TEST_F(CameraFileTest, RejectsTextThatBreaksOpenCvsYamlReader) {
+  const std::string p = path("bad.yaml");
+  // The fuzzer's reproducer reduced: an indented key, then an empty key at column 0.
+  EXPECT_EQ(error_of("%YAML:1.0\n s:1\n: [-\n "),
+            p + ": (document): invalid YAML: empty mapping key on line 3");
+  EXPECT_EQ(error_of(replace(kMinimal, "camera_name: cam", ": cam")),
+            p + ": (document): invalid YAML: empty mapping key on line 3");
+  EXPECT_EQ(error_of(replace(kMinimal, "  rows: 3", "  - : 3")),
+            p + ": (document): invalid YAML: empty mapping key on line 5");
+  EXPECT_EQ(error_of(replace(kMinimal, "camera_name: cam", "camera_name: {a: 1, : 2}")),
+            p + ": (document): invalid YAML: empty mapping key on line 3");
+  EXPECT_EQ(error_of("image_width: " + std::string(40, '[') + "1" + std::string(40, ']') + "\n"),
+            p + ": (document): invalid YAML: collections nested deeper than 32 levels on line 1");
+  const std::string big = std::string(kMinimal) + "# " + std::string(1 << 20, 'x') + "\n";
+  EXPECT_EQ(error_of(big), p + ": (document): larger than 1 MiB (" + std::to_string(big.size()) +
+                               " bytes); a camera file is a few kB");
+  // Colons that are not mapping indicators, inside quotes, comments and plain scalars.
+  const CameraFile f = read_camera_file(
+      write("ok.yaml", replace(kMinimal, "camera_name: cam",
+                               "camera_name: \": odd, name: \"  # note: a comment, : too\n"
+                               "frame_id: 'a: b'\nurl: http://x/y")));
+  EXPECT_EQ(f.camera_name, ": odd, name: ");
+}

@@ -5,6 +5,7 @@
 
 #include <opencv2/calib3d.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -105,6 +106,71 @@ class Reader {
   std::string path_;
 };
 
+// OpenCV 4.6's YAML reader (cv::FileStorage) is not safe on arbitrary text, and a camera file may
+// come from anywhere. Two of its defects are reachable from a few bytes, so they are ruled out
+// here before the text reaches it:
+// - an empty mapping key (": 1" with nothing before the colon) makes parseKey scan backwards
+//   past the key's start (opencv/opencv#28619); depending on the bytes there it reads garbage,
+//   throws std::length_error, or loops forever ("%YAML:1.0\n s:1\n: [-\n " hangs; found by
+//   fuzzing: tests/fuzz/regressions/camera_file/opencv-empty-key-hang.yaml);
+// - its parser recurses once per nesting level without a limit (opencv/opencv#29939), so a
+//   deep "[[[[..." overflows the stack.
+// A camera file holds a few dozen keys nested two levels deep, so neither rule excludes one.
+constexpr std::size_t kMaxCameraFileBytes = 1 << 20;
+constexpr int kMaxFlowDepth = 32;
+
+void check_for_opencv_yaml(const std::string& text, const Reader& rd) {
+  if (text.size() > kMaxCameraFileBytes)
+    rd.fail("(document)", "larger than 1 MiB (" + std::to_string(text.size()) +
+                              " bytes); a camera file is a few kB");
+  int line = 1, depth = 0;
+  char quote = 0;        // inside a '...' or "..." scalar
+  bool comment = false;  // after a '#' that starts a comment
+  std::size_t line_start = 0;
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (c == '\n') {
+      ++line;
+      line_start = i + 1;
+      comment = false;
+      continue;
+    }
+    if (comment) continue;
+    if (quote) {
+      if (c == quote)
+        quote = 0;
+      else if (c == '\\' && quote == '"')
+        ++i;
+      continue;
+    }
+    const bool after_blank = i == line_start || text[i - 1] == ' ' || text[i - 1] == '\t';
+    const bool starts_scalar =
+        after_blank || text[i - 1] == '[' || text[i - 1] == '{' || text[i - 1] == ',';
+    if (c == '#' && after_blank) {
+      comment = true;
+    } else if ((c == '"' || c == '\'') && starts_scalar) {
+      quote = c;
+    } else if (c == '[' || c == '{') {
+      if (++depth > kMaxFlowDepth)
+        rd.fail("(document)", "invalid YAML: collections nested deeper than " +
+                                  std::to_string(kMaxFlowDepth) + " levels on line " +
+                                  std::to_string(line));
+    } else if (c == ']' || c == '}') {
+      depth = std::max(depth - 1, 0);
+    } else if (c == ':' && (i + 1 == text.size() || text[i + 1] == ' ' || text[i + 1] == '\t' ||
+                            text[i + 1] == '\n' || text[i + 1] == '\r')) {
+      // A mapping indicator: its key is what stands before it on the line, back to a flow
+      // collection's '{' or ',' or a block sequence's "- ".
+      std::size_t k = i;
+      while (k > line_start && (text[k - 1] == ' ' || text[k - 1] == '\t')) --k;
+      const bool dash_entry = k > line_start && text[k - 1] == '-' &&
+                              text.find_first_not_of(" \t", line_start) == k - 1;
+      if (k == line_start || text[k - 1] == '{' || text[k - 1] == ',' || dash_entry)
+        rd.fail("(document)", "invalid YAML: empty mapping key on line " + std::to_string(line));
+    }
+  }
+}
+
 }  // namespace
 
 void write_camera_file(const std::string& path, const CameraFile& file) {
@@ -195,6 +261,7 @@ CameraFile parse_camera_file(const std::string& file_text, const std::string& or
   const Reader rd(origin);
   std::string text = file_text;
   // OpenCV's YAML reader insists on its "%YAML:1.0" header, which ROS's files do not have.
+  check_for_opencv_yaml(text, rd);
   if (text.rfind("%YAML", 0) != 0) text = "%YAML:1.0\n---\n" + text;
   cv::FileStorage fs;
   bool opened = false;
