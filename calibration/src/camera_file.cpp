@@ -3,12 +3,16 @@
 // so that ROS tools ignore it.
 #include "flatland/calibration/camera_file.hpp"
 
+#include <yaml-cpp/yaml.h>
 #include <opencv2/calib3d.hpp>
 
-#include <algorithm>
+#include <cctype>
+#include <charconv>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -39,6 +43,23 @@ void write_vector(cv::FileStorage& fs, const std::string& key, const std::vector
   fs << "]";
 }
 
+// A number as YAML writes it: a plain scalar holding a decimal number, or one of YAML's special
+// values in any capitalisation (OpenCV writes ".Nan" and ".Inf", YAML 1.2 ".nan" and ".inf").
+std::optional<double> parse_number(const std::string& s) {
+  std::string lower;
+  for (const char c : s) lower += static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  if (lower == ".nan") return std::numeric_limits<double>::quiet_NaN();
+  if (lower == ".inf" || lower == "+.inf") return std::numeric_limits<double>::infinity();
+  if (lower == "-.inf") return -std::numeric_limits<double>::infinity();
+  const char* first = s.data();
+  const char* last = s.data() + s.size();
+  if (first != last && *first == '+') ++first;  // from_chars takes no '+'
+  double v = 0;
+  const auto [end, ec] = std::from_chars(first, last, v);
+  if (ec != std::errc() || end != last || first == last) return std::nullopt;
+  return v;
+}
+
 class Reader {
  public:
   Reader(std::string path) : path_(std::move(path)) {}
@@ -58,41 +79,60 @@ class Reader {
     throw std::invalid_argument(msg);
   }
 
-  cv::FileNode require(const cv::FileNode& parent, const std::string& key,
-                       const std::string& field) const {
-    const cv::FileNode n = parent[key];
-    if (n.empty() || n.isNone()) fail(field, "missing");
+  static bool present(const YAML::Node& n) { return n.IsDefined() && !n.IsNull(); }
+
+  YAML::Node require(const YAML::Node& parent, const std::string& key,
+                     const std::string& field) const {
+    const YAML::Node n = parent[key];
+    if (!present(n)) fail(field, "missing");
     return n;
   }
 
-  double number(const cv::FileNode& n, const std::string& field) const {
-    if (!n.isReal() && !n.isInt()) fail(field, "must be a number");
-    const double v = static_cast<double>(n);
-    if (!std::isfinite(v)) fail(field, "must be finite");
+  /// A plain (unquoted) scalar: a quoted "800" is a string, as in OpenCV's reader.
+  static bool plain_scalar(const YAML::Node& n) { return n.IsScalar() && n.Tag() != "!"; }
+
+  double number(const YAML::Node& n, const std::string& field, bool finite = true) const {
+    const std::optional<double> v =
+        plain_scalar(n) ? parse_number(n.Scalar()) : std::optional<double>();
+    if (!v) fail(field, "must be a number");
+    if (finite && !std::isfinite(*v)) fail(field, "must be finite");
+    return *v;
+  }
+
+  int integer(const YAML::Node& n, const std::string& field) const {
+    int v = 0;
+    bool ok = plain_scalar(n);
+    if (ok) {
+      const std::string& s = n.Scalar();
+      const char* first = s.data() + (!s.empty() && s[0] == '+' ? 1 : 0);
+      const auto [end, ec] = std::from_chars(first, s.data() + s.size(), v);
+      ok = ec == std::errc() && end == s.data() + s.size() && first != end;
+    }
+    if (!ok) fail(field, "must be an integer");
     return v;
   }
 
-  int integer(const cv::FileNode& n, const std::string& field) const {
-    if (!n.isInt()) fail(field, "must be an integer");
-    return static_cast<int>(n);
+  std::string text(const YAML::Node& n, const std::string& field) const {
+    if (!n.IsScalar()) fail(field, "must be a string");
+    return n.Scalar();
   }
 
-  std::vector<double> numbers(const cv::FileNode& n, const std::string& field,
+  std::vector<double> numbers(const YAML::Node& n, const std::string& field,
                               std::size_t expected) const {
-    if (!n.isSeq()) fail(field, "must be a list of " + std::to_string(expected) + " numbers");
+    if (!n.IsSequence()) fail(field, "must be a list of " + std::to_string(expected) + " numbers");
     if (n.size() != expected)
       fail(field,
            "must hold " + std::to_string(expected) + " numbers, got " + std::to_string(n.size()));
     std::vector<double> out;
     for (std::size_t i = 0; i < n.size(); ++i)
-      out.push_back(number(n[static_cast<int>(i)], field + "[" + std::to_string(i) + "]"));
+      out.push_back(number(n[i], field + "[" + std::to_string(i) + "]"));
     return out;
   }
 
-  std::vector<double> matrix(const cv::FileNode& root, const std::string& key, int rows,
+  std::vector<double> matrix(const YAML::Node& root, const std::string& key, int rows,
                              int cols) const {
-    const cv::FileNode m = require(root, key, key);
-    if (!m.isMap()) fail(key, "must be a mapping with rows, cols and data");
+    const YAML::Node m = require(root, key, key);
+    if (!m.IsMap()) fail(key, "must be a mapping with rows, cols and data");
     const int r = integer(require(m, "rows", key + ".rows"), key + ".rows");
     const int c = integer(require(m, "cols", key + ".cols"), key + ".cols");
     if (r != rows || c != cols)
@@ -106,69 +146,98 @@ class Reader {
   std::string path_;
 };
 
-// OpenCV 4.6's YAML reader (cv::FileStorage) is not safe on arbitrary text, and a camera file may
-// come from anywhere. Two of its defects are reachable from a few bytes, so they are ruled out
-// here before the text reaches it:
-// - an empty mapping key (": 1" with nothing before the colon) makes parseKey scan backwards
-//   past the key's start (opencv/opencv#28619); depending on the bytes there it reads garbage,
-//   throws std::length_error, or loops forever ("%YAML:1.0\n s:1\n: [-\n " hangs; found by
-//   fuzzing: tests/fuzz/regressions/camera_file/opencv-empty-key-hang.yaml);
-// - its parser recurses once per nesting level without a limit (opencv/opencv#29939), so a
-//   deep "[[[[..." overflows the stack.
-// A camera file holds a few dozen keys nested two levels deep, so neither rule excludes one.
+// A camera file is a few kB; anything far larger is not one.
 constexpr std::size_t kMaxCameraFileBytes = 1 << 20;
-constexpr int kMaxFlowDepth = 32;
 
-void check_for_opencv_yaml(const std::string& text, const Reader& rd) {
-  if (text.size() > kMaxCameraFileBytes)
-    rd.fail("(document)", "larger than 1 MiB (" + std::to_string(text.size()) +
-                              " bytes); a camera file is a few kB");
-  int line = 1, depth = 0;
-  char quote = 0;        // inside a '...' or "..." scalar
-  bool comment = false;  // after a '#' that starts a comment
-  std::size_t line_start = 0;
-  for (std::size_t i = 0; i < text.size(); ++i) {
-    const char c = text[i];
-    if (c == '\n') {
-      ++line;
-      line_start = i + 1;
-      comment = false;
-      continue;
-    }
-    if (comment) continue;
-    if (quote) {
-      if (c == quote)
-        quote = 0;
-      else if (c == '\\' && quote == '"')
-        ++i;
-      continue;
-    }
-    const bool after_blank = i == line_start || text[i - 1] == ' ' || text[i - 1] == '\t';
-    const bool starts_scalar =
-        after_blank || text[i - 1] == '[' || text[i - 1] == '{' || text[i - 1] == ',';
-    if (c == '#' && after_blank) {
-      comment = true;
-    } else if ((c == '"' || c == '\'') && starts_scalar) {
-      quote = c;
-    } else if (c == '[' || c == '{') {
-      if (++depth > kMaxFlowDepth)
-        rd.fail("(document)", "invalid YAML: collections nested deeper than " +
-                                  std::to_string(kMaxFlowDepth) + " levels on line " +
-                                  std::to_string(line));
-    } else if (c == ']' || c == '}') {
-      depth = std::max(depth - 1, 0);
-    } else if (c == ':' && (i + 1 == text.size() || text[i + 1] == ' ' || text[i + 1] == '\t' ||
-                            text[i + 1] == '\n' || text[i + 1] == '\r')) {
-      // A mapping indicator: its key is what stands before it on the line, back to a flow
-      // collection's '{' or ',' or a block sequence's "- ".
-      std::size_t k = i;
-      while (k > line_start && (text[k - 1] == ' ' || text[k - 1] == '\t')) --k;
-      const bool dash_entry = k > line_start && text[k - 1] == '-' &&
-                              text.find_first_not_of(" \t", line_start) == k - 1;
-      if (k == line_start || text[k - 1] == '{' || text[k - 1] == ',' || dash_entry)
-        rd.fail("(document)", "invalid YAML: empty mapping key on line " + std::to_string(line));
-    }
+// The fields of a parsed camera file (the ROS keys, then flatland's extras).
+CameraFile read_fields(const YAML::Node& root, const Reader& rd) {
+  if (!root.IsMap()) rd.fail("(document)", "not a mapping");
+
+  CameraFile file;
+  render::CameraModel& m = file.camera;
+  m.width = rd.integer(rd.require(root, "image_width", "image_width"), "image_width");
+  m.height = rd.integer(rd.require(root, "image_height", "image_height"), "image_height");
+  if (m.width <= 0) rd.fail("image_width", "must be positive, got " + std::to_string(m.width));
+  if (m.height <= 0) rd.fail("image_height", "must be positive, got " + std::to_string(m.height));
+  file.camera_name = rd.text(rd.require(root, "camera_name", "camera_name"), "camera_name");
+
+  const std::vector<double> k = rd.matrix(root, "camera_matrix", 3, 3);
+  m.K = cv::Matx33d(k.data());
+  if (!(m.K(0, 0) > 0)) rd.fail("camera_matrix", "fx must be positive");
+  if (!(m.K(1, 1) > 0)) rd.fail("camera_matrix", "fy must be positive");
+  if (m.K(1, 0) != 0 || m.K(2, 0) != 0 || m.K(2, 1) != 0 || m.K(2, 2) != 1)
+    rd.fail("camera_matrix", "must be upper triangular with a 1 in the corner");
+
+  const std::string model_name =
+      rd.text(rd.require(root, "distortion_model", "distortion_model"), "distortion_model");
+  if (model_name != "plumb_bob")
+    rd.fail("distortion_model",
+            "unknown model '" + model_name + "' (flatland uses OpenCV's 5-coefficient plumb_bob)");
+  const std::vector<double> d = rd.matrix(root, "distortion_coefficients", 1, 5);
+  for (int i = 0; i < 5; ++i) m.dist[i] = d[static_cast<std::size_t>(i)];
+
+  const YAML::Node fl = root["flatland"];
+  if (!Reader::present(fl)) return file;
+  if (!fl.IsMap()) rd.fail("flatland", "must be a mapping");
+  if (Reader::present(fl["fps"])) {
+    m.fps = rd.number(fl["fps"], "flatland.fps");
+    if (!(m.fps > 0)) rd.fail("flatland.fps", "must be positive");
   }
+  if (Reader::present(fl["exposure_s"])) {
+    m.exposure = rd.number(fl["exposure_s"], "flatland.exposure_s");
+    if (m.exposure < 0) rd.fail("flatland.exposure_s", "must not be negative");
+  }
+  const bool has_r = Reader::present(fl["table_rvec"]), has_t = Reader::present(fl["table_tvec"]);
+  if (has_r != has_t)
+    rd.fail(has_r ? "flatland.table_tvec" : "flatland.table_rvec",
+            "missing (the table pose needs both table_rvec and table_tvec)");
+  if (has_r) {
+    const std::vector<double> r = rd.numbers(fl["table_rvec"], "flatland.table_rvec", 3);
+    const std::vector<double> t = rd.numbers(fl["table_tvec"], "flatland.table_tvec", 3);
+    cv::Rodrigues(cv::Vec3d(r[0], r[1], r[2]), m.R);
+    m.t = cv::Vec3d(t[0], t[1], t[2]);
+    file.has_table_pose = true;
+  }
+  const bool has_axis = Reader::present(fl["joint_axis"]),
+             has_off = Reader::present(fl["encoder_offset_rad"]);
+  if (has_axis != has_off)
+    rd.fail(has_axis ? "flatland.encoder_offset_rad" : "flatland.joint_axis",
+            "missing (the joint needs both joint_axis and encoder_offset_rad)");
+  if (has_axis) {
+    const std::vector<double> a = rd.numbers(fl["joint_axis"], "flatland.joint_axis", 2);
+    JointCalibration j;
+    j.axis_table = cv::Point2d(a[0], a[1]);
+    j.encoder_offset = rd.number(fl["encoder_offset_rad"], "flatland.encoder_offset_rad");
+    file.joint = j;
+  }
+  if (Reader::present(fl["rms_px"])) {
+    CalibrationReport rep;
+    rep.rms_px = rd.number(fl["rms_px"], "flatland.rms_px");
+    const YAML::Node v = fl["view_rms_px"];
+    if (Reader::present(v)) rep.view_rms_px = rd.numbers(v, "flatland.view_rms_px", v.size());
+    if (Reader::present(fl["views_used"]))
+      rep.views_used = rd.integer(fl["views_used"], "flatland.views_used");
+    const YAML::Node rej = fl["views_rejected"];
+    if (Reader::present(rej)) {
+      if (!rej.IsSequence()) rd.fail("flatland.views_rejected", "must be a list of strings");
+      for (std::size_t i = 0; i < rej.size(); ++i)
+        rep.views_rejected.push_back(rd.text(rej[i], "flatland.views_rejected"));
+    }
+    const YAML::Node sd = fl["std"];
+    rep.std.fill(std::nan(""));
+    if (Reader::present(sd)) {
+      if (!sd.IsMap()) rd.fail("flatland.std", "must be a mapping fx, fy, cx, cy, k1, ..., k3");
+      for (int k = 0; k < 9; ++k) {
+        const YAML::Node e = sd[kStdNames[k]];
+        // Standard deviations may be .nan (rank-deficient covariance), so no finiteness check.
+        if (Reader::present(e))
+          rep.std[static_cast<std::size_t>(k)] =
+              rd.number(e, std::string("flatland.std.") + kStdNames[k], false);
+      }
+    }
+    file.report = rep;
+  }
+  return file;
 }
 
 }  // namespace
@@ -257,123 +326,26 @@ CameraFile read_camera_file(const std::string& path) {
   return parse_camera_file(text, path);
 }
 
-CameraFile parse_camera_file(const std::string& file_text, const std::string& origin) {
+CameraFile parse_camera_file(const std::string& text, const std::string& origin) {
   const Reader rd(origin);
-  std::string text = file_text;
-  // OpenCV's YAML reader insists on its "%YAML:1.0" header, which ROS's files do not have.
-  check_for_opencv_yaml(text, rd);
-  if (text.rfind("%YAML", 0) != 0) text = "%YAML:1.0\n---\n" + text;
-  cv::FileStorage fs;
-  bool opened = false;
+  if (text.size() > kMaxCameraFileBytes)
+    rd.fail("(document)", "larger than 1 MiB (" + std::to_string(text.size()) +
+                              " bytes); a camera file is a few kB");
+  // yaml-cpp, not OpenCV's FileStorage, reads the file: OpenCV 4.6's YAML reader loops forever on
+  // some malformed text (" s:1\n: [-\n " and " -g\nar -\n ", found by fuzzing: tests/fuzz/
+  // regressions/camera_file/opencv-*-hang.yaml), reads out of bounds on an empty key
+  // (opencv/opencv#28619) and recurses without limit on deep nesting (opencv/opencv#29939).
+  // yaml-cpp skips OpenCV's "%YAML:1.0" header line as an unknown directive.
   try {
-    opened = fs.open(
-        text, cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
-  } catch (const cv::Exception& e) {
-    std::string msg = e.err.empty() ? e.msg : e.err;
-    for (char& c : msg)
-      if (c == '\n' || c == '\r') c = ' ';
-    rd.fail("(document)", "invalid YAML: " + msg);
-  } catch (const std::exception& e) {
-    // OpenCV 4.6's YAML parser lets std::length_error out for some malformed keys (a negative
-    // key length; found by fuzzing: tests/fuzz/regressions/camera_file/opencv-length-error.yaml).
-    rd.fail("(document)", std::string("invalid YAML (OpenCV's parser failed: ") + e.what() + ")");
+    return read_fields(YAML::Load(text), rd);
+  } catch (const YAML::Exception& e) {
+    // yaml-cpp marks are 0-based; editors count from 1.
+    const std::string where = e.mark.is_null()
+                                  ? std::string()
+                                  : " (line " + std::to_string(e.mark.line + 1) + ", column " +
+                                        std::to_string(e.mark.column + 1) + ")";
+    rd.fail("(document)", "invalid YAML: " + e.msg + where);
   }
-  if (!opened) rd.fail("(document)", "invalid YAML");
-  const cv::FileNode root = fs.root();
-  if (!root.isMap()) rd.fail("(document)", "not a mapping");
-
-  CameraFile file;
-  render::CameraModel& m = file.camera;
-  m.width = rd.integer(rd.require(root, "image_width", "image_width"), "image_width");
-  m.height = rd.integer(rd.require(root, "image_height", "image_height"), "image_height");
-  if (m.width <= 0) rd.fail("image_width", "must be positive, got " + std::to_string(m.width));
-  if (m.height <= 0) rd.fail("image_height", "must be positive, got " + std::to_string(m.height));
-  const cv::FileNode name = rd.require(root, "camera_name", "camera_name");
-  if (!name.isString()) rd.fail("camera_name", "must be a string");
-  file.camera_name = static_cast<std::string>(name);
-
-  const std::vector<double> k = rd.matrix(root, "camera_matrix", 3, 3);
-  m.K = cv::Matx33d(k.data());
-  if (!(m.K(0, 0) > 0)) rd.fail("camera_matrix", "fx must be positive");
-  if (!(m.K(1, 1) > 0)) rd.fail("camera_matrix", "fy must be positive");
-  if (m.K(1, 0) != 0 || m.K(2, 0) != 0 || m.K(2, 1) != 0 || m.K(2, 2) != 1)
-    rd.fail("camera_matrix", "must be upper triangular with a 1 in the corner");
-
-  const cv::FileNode model = rd.require(root, "distortion_model", "distortion_model");
-  if (!model.isString()) rd.fail("distortion_model", "must be a string");
-  const std::string model_name = static_cast<std::string>(model);
-  if (model_name != "plumb_bob")
-    rd.fail("distortion_model",
-            "unknown model '" + model_name + "' (flatland uses OpenCV's 5-coefficient plumb_bob)");
-  const std::vector<double> d = rd.matrix(root, "distortion_coefficients", 1, 5);
-  for (int i = 0; i < 5; ++i) m.dist[i] = d[static_cast<std::size_t>(i)];
-
-  const cv::FileNode fl = root["flatland"];
-  if (fl.empty() || fl.isNone()) return file;
-  if (!fl.isMap()) rd.fail("flatland", "must be a mapping");
-  if (!fl["fps"].empty()) {
-    m.fps = rd.number(fl["fps"], "flatland.fps");
-    if (!(m.fps > 0)) rd.fail("flatland.fps", "must be positive");
-  }
-  if (!fl["exposure_s"].empty()) {
-    m.exposure = rd.number(fl["exposure_s"], "flatland.exposure_s");
-    if (m.exposure < 0) rd.fail("flatland.exposure_s", "must not be negative");
-  }
-  const bool has_r = !fl["table_rvec"].empty(), has_t = !fl["table_tvec"].empty();
-  if (has_r != has_t)
-    rd.fail(has_r ? "flatland.table_tvec" : "flatland.table_rvec",
-            "missing (the table pose needs both table_rvec and table_tvec)");
-  if (has_r) {
-    const std::vector<double> r = rd.numbers(fl["table_rvec"], "flatland.table_rvec", 3);
-    const std::vector<double> t = rd.numbers(fl["table_tvec"], "flatland.table_tvec", 3);
-    cv::Rodrigues(cv::Vec3d(r[0], r[1], r[2]), m.R);
-    m.t = cv::Vec3d(t[0], t[1], t[2]);
-    file.has_table_pose = true;
-  }
-  const bool has_axis = !fl["joint_axis"].empty(), has_off = !fl["encoder_offset_rad"].empty();
-  if (has_axis != has_off)
-    rd.fail(has_axis ? "flatland.encoder_offset_rad" : "flatland.joint_axis",
-            "missing (the joint needs both joint_axis and encoder_offset_rad)");
-  if (has_axis) {
-    const std::vector<double> a = rd.numbers(fl["joint_axis"], "flatland.joint_axis", 2);
-    JointCalibration j;
-    j.axis_table = cv::Point2d(a[0], a[1]);
-    j.encoder_offset = rd.number(fl["encoder_offset_rad"], "flatland.encoder_offset_rad");
-    file.joint = j;
-  }
-  if (!fl["rms_px"].empty()) {
-    CalibrationReport rep;
-    rep.rms_px = rd.number(fl["rms_px"], "flatland.rms_px");
-    const cv::FileNode v = fl["view_rms_px"];
-    if (!v.empty()) rep.view_rms_px = rd.numbers(v, "flatland.view_rms_px", v.size());
-    if (!fl["views_used"].empty())
-      rep.views_used = rd.integer(fl["views_used"], "flatland.views_used");
-    const cv::FileNode rej = fl["views_rejected"];
-    if (!rej.empty()) {
-      if (!rej.isSeq()) rd.fail("flatland.views_rejected", "must be a list of strings");
-      for (std::size_t i = 0; i < rej.size(); ++i) {
-        const cv::FileNode s = rej[static_cast<int>(i)];
-        if (!s.isString()) rd.fail("flatland.views_rejected", "must be a list of strings");
-        rep.views_rejected.push_back(static_cast<std::string>(s));
-      }
-    }
-    const cv::FileNode sd = fl["std"];
-    rep.std.fill(std::nan(""));
-    if (!sd.empty()) {
-      if (!sd.isMap()) rd.fail("flatland.std", "must be a mapping fx, fy, cx, cy, k1, ..., k3");
-      for (int k = 0; k < 9; ++k) {
-        const cv::FileNode e = sd[kStdNames[k]];
-        // Standard deviations may be .nan (rank-deficient covariance), so no finiteness check.
-        if (!e.empty()) {
-          if (!e.isReal() && !e.isInt())
-            rd.fail(std::string("flatland.std.") + kStdNames[k], "must be a number");
-          rep.std[static_cast<std::size_t>(k)] = static_cast<double>(e);
-        }
-      }
-    }
-    file.report = rep;
-  }
-  return file;
 }
 
 }  // namespace flatland::calibration

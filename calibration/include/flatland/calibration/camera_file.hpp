@@ -1,6 +1,7 @@
-// Camera files: OpenCV FileStorage YAML in the ROS camera_info layout (image_width, image_height,
-// camera_name, camera_matrix, distortion_model, distortion_coefficients) plus flatland's extras
-// (table pose, joint axis, encoder offset, calibration report).
+// Camera files: YAML in the ROS camera_info layout (image_width, image_height, camera_name,
+// camera_matrix, distortion_model, distortion_coefficients) plus flatland's extras (table pose,
+// joint axis, encoder offset, calibration report). Written by OpenCV's FileStorage (its "%YAML:1.0"
+// flavour), read with yaml-cpp: OpenCV 4.6's YAML reader hangs on some malformed files.
 #pragma once
 
 #include "flatland/render/camera.hpp"
