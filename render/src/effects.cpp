@@ -38,34 +38,50 @@ void require_f32(const cv::Mat& image, const char* what) {
 
 }  // namespace
 
-cv::Mat average_frames(const std::vector<cv::Mat>& subframes) {
-  if (subframes.empty()) fail("average_frames", "no sub-frames");
-  const cv::Mat& first = subframes.front();
-  if (first.empty()) fail("average_frames", "empty sub-frame");
-  cv::Mat sum = cv::Mat::zeros(first.size(), CV_MAKETYPE(CV_32F, first.channels()));
-  cv::Mat as_float;
-  for (const cv::Mat& f : subframes) {
-    if (f.size() != first.size() || f.channels() != first.channels())
-      fail("average_frames", "sub-frames differ in size or channels");
-    // convertTo is a plain copy for CV_32F input; other depths (8-bit renders) are accepted too.
-    f.convertTo(as_float, CV_32F);
-    sum += as_float;
+void FrameMean::add(const cv::Mat& f) {
+  if (f.empty()) fail("average_frames", "empty sub-frame");
+  if (count_ == 0) {
+    sum_ = cv::Mat::zeros(f.size(), CV_MAKETYPE(CV_32F, f.channels()));
+  } else if (f.size() != sum_.size() || f.channels() != sum_.channels()) {
+    fail("average_frames", "sub-frames differ in size or channels");
   }
-  sum *= 1.0 / static_cast<double>(subframes.size());
-  return sum;
+  // convertTo is a plain copy for CV_32F input; other depths (8-bit renders) are accepted too.
+  f.convertTo(as_float_, CV_32F);
+  sum_ += as_float_;
+  ++count_;
+}
+
+cv::Mat FrameMean::finish() {
+  if (count_ == 0) fail("average_frames", "no sub-frames");
+  sum_ *= 1.0 / static_cast<double>(count_);
+  count_ = 0;
+  return std::move(sum_);
+}
+
+cv::Mat average_frames(const std::vector<cv::Mat>& subframes) {
+  FrameMean mean;
+  for (const cv::Mat& f : subframes) mean.add(f);
+  return mean.finish();
 }
 
 cv::Mat downsample(const cv::Mat& image, int factor) {
+  cv::Mat out;
+  downsample(image, factor, out);
+  return out;
+}
+
+void downsample(const cv::Mat& image, int factor, cv::Mat& out) {
   if (factor < 1) fail("downsample", "factor must be >= 1, got " + std::to_string(factor));
-  if (factor == 1) return image;
+  if (factor == 1) {
+    out = image;  // nothing to average: the image itself, not a copy
+    return;
+  }
   if (image.empty() || image.cols % factor != 0 || image.rows % factor != 0)
     fail("downsample", "image size " + std::to_string(image.cols) + " x " +
                            std::to_string(image.rows) + " is not a multiple of " +
                            std::to_string(factor));
   // INTER_AREA with an integer ratio is the exact mean over each factor x factor block.
-  cv::Mat out;
   cv::resize(image, out, cv::Size(image.cols / factor, image.rows / factor), 0, 0, cv::INTER_AREA);
-  return out;
 }
 
 void apply_vignetting(cv::Mat& image_f32, double strength, cv::Point2d principal_point) {
@@ -111,10 +127,10 @@ std::uint64_t splitmix64(std::uint64_t& state) {
 /// Standard normal quantile (Acklam's rational approximation, refined by one Halley step on
 /// erfc: ~1e-15 relative).
 double normal_quantile(double p) {
-  static const double a[] = {-3.969683028665376e+01, 2.209460984245205e+02, -2.759285104469687e+02,
+  static const double a[] = {-3.969683028665376e+01, 2.209460984245205e+02,  -2.759285104469687e+02,
                              1.383577518672690e+02,  -3.066479806614716e+01, 2.506628277459239e+00};
   static const double b[] = {-5.447609879822406e+01, 1.615858368580409e+02, -1.556989798598866e+02,
-                             6.680131188771972e+01,  -1.328068155288572e+01};
+                             6.680131188771972e+01, -1.328068155288572e+01};
   static const double c[] = {-7.784894002430293e-03, -3.223964580411365e-01, -2.400758277161838e+00,
                              -2.549732539343734e+00, 4.374664141464968e+00,  2.938163982698783e+00};
   static const double d[] = {7.784695709041462e-03, 3.224671290700398e-01, 2.445134137142996e+00,
@@ -183,8 +199,7 @@ void apply_noise(cv::Mat& image_f32, double read_sigma_dn, double shot_gain, Eff
       const float z = quantile[bits & 0xffff];
       bits >>= 16;
       --left;
-      const float sigma =
-          gain == 0 ? read : std::sqrt(read_var + gain * std::max(row[i], 0.0f));
+      const float sigma = gain == 0 ? read : std::sqrt(read_var + gain * std::max(row[i], 0.0f));
       row[i] += sigma * z;
     }
   }

@@ -533,6 +533,8 @@ struct Renderer::Impl {
   cv::Vec3f table_color;
   EffectsRng rng;
   cv::Mat readback;  // CV_8UC4 (RGBA), reused
+  // render_linear's intermediates at the supersampled size, and capture's sub-frame: reused.
+  cv::Mat ideal_bgr, ideal_f32, distorted_f32, subframe;
 
   Impl(const Scene& s, GlBackend backend)
       : scene(s), camera(CameraModel::from_spec(*s.camera)), rng(s.effects.seed) {
@@ -831,18 +833,32 @@ struct Renderer::Impl {
   }
 
   // The geometric image: supersampled ideal render -> distortion remap -> area downsample.
-  cv::Mat render_linear(const SceneState& st) {
+  // The geometric image into `out`, reusing its memory when its size and type fit. The
+  // supersampled intermediates are members and keep theirs too: fresh multi-megabyte buffers every
+  // frame cost page faults (every allocation under AddressSanitizer, whose allocator maps each
+  // large block anew, and any that glibc hands back to the system).
+  void render_linear(const SceneState& st, cv::Mat& out) {
     render_ideal(st);
-    cv::Mat bgr;
-    cv::cvtColor(readback, bgr, cv::COLOR_RGBA2BGR);
-    cv::Mat f;
-    bgr.convertTo(f, CV_32FC3);
-    if (camera.distorted()) {
-      cv::Mat out;
-      cv::remap(f, out, maps.map_x, maps.map_y, cv::INTER_LINEAR, cv::BORDER_CONSTANT);
-      f = out;
+    cv::cvtColor(readback, ideal_bgr, cv::COLOR_RGBA2BGR);
+    const bool distorted = camera.distorted();
+    if (!distorted && supersample == 1) {
+      ideal_bgr.convertTo(out, CV_32FC3);
+      return;
     }
-    return downsample(f, supersample);
+    ideal_bgr.convertTo(ideal_f32, CV_32FC3);
+    if (!distorted) {
+      downsample(ideal_f32, supersample, out);
+      return;
+    }
+    cv::Mat& remapped = supersample == 1 ? out : distorted_f32;
+    cv::remap(ideal_f32, remapped, maps.map_x, maps.map_y, cv::INTER_LINEAR, cv::BORDER_CONSTANT);
+    if (supersample > 1) downsample(distorted_f32, supersample, out);
+  }
+
+  cv::Mat render_linear(const SceneState& st) {
+    cv::Mat out;
+    render_linear(st, out);
+    return out;
   }
 
   // Fast path for 8-bit frames without effects: no float conversion when nothing resamples.
@@ -921,13 +937,15 @@ Frame Renderer::capture(const StateAt& state_at, double t) {
   }
   cv::Mat linear;
   if (fx.blur_subframes > 1 && exposure > 0) {
-    // Exposure blur: equally weighted sub-frames over the exposure centred on the capture time.
-    std::vector<cv::Mat> subs;
+    // Exposure blur: equally weighted sub-frames over the exposure centred on the capture time,
+    // each rendered into the same buffer and added to the running mean.
+    FrameMean mean;
     for (int i = 0; i < fx.blur_subframes; ++i) {
       const double ts = t_capture - 0.5 * exposure + (i + 0.5) * exposure / fx.blur_subframes;
-      subs.push_back(impl_->render_linear(state_at(ts)));
+      impl_->render_linear(state_at(ts), impl_->subframe);
+      mean.add(impl_->subframe);
     }
-    linear = average_frames(subs);
+    linear = mean.finish();
   } else {
     linear = impl_->render_linear(mid);
   }

@@ -20,10 +20,25 @@ class EffectsRng {
   std::mt19937_64 engine_;
 };
 
+/// Exposure blur as a running mean: sub-frames (same size and channels; CV_32F, other depths are
+/// converted) are added one at a time, so a caller need not hold them all.
+class FrameMean {
+ public:
+  void add(const cv::Mat& subframe);
+  /// The mean of what was added (CV_32F). The sum is scaled in place and handed over: call once.
+  cv::Mat finish();
+
+ private:
+  cv::Mat sum_, as_float_;
+  int count_ = 0;
+};
 /// Average of equally weighted sub-frames (CV_32F, same size and channels), for exposure blur.
 cv::Mat average_frames(const std::vector<cv::Mat>& subframes);
 /// Downsample an image rendered at `factor` x the resolution by area averaging (anti-aliasing).
 cv::Mat downsample(const cv::Mat& image, int factor);
+/// The same into `out`, reusing its memory when its size and type fit (factor 1: `out` becomes
+/// the image itself).
+void downsample(const cv::Mat& image, int factor, cv::Mat& out);
 /// Vignetting: multiply by (1 - strength * (r / r_corner)^2)^2 about the principal point.
 void apply_vignetting(cv::Mat& image_f32, double strength, cv::Point2d principal_point);
 /// Sensor noise on a float image in DN: Gaussian with variance read^2 + gain * max(signal, 0).
