@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <numbers>
+#include <vector>
 
 using namespace flatland;
 using namespace flatland::render;
@@ -162,6 +163,32 @@ TEST(Render, SameSceneAndSeedGiveIdenticalFrames) {
   Renderer fresh(scene), reseeded(other);
   const Frame f42 = fresh.capture(run.trajectory, 0.5), f43 = reseeded.capture(run.trajectory, 0.5);
   EXPECT_GT(cv::norm(f42.image, f43.image, cv::NORM_INF), 0.0);
+}
+
+// Exposure blur is the mean of the sub-frames over the exposure centred on the capture time.
+// capture() renders them one at a time into a reused buffer; here each is rendered on its own
+// (render_linear) and averaged with average_frames, through distortion and supersampling.
+TEST(Render, BlurredCaptureIsTheMeanOfItsSubFrames) {
+  Scene scene = overhead_scene(2);
+  scene.camera->distortion = {-0.2, 0.05, 0.0, 0.0, 0.0};
+  scene.camera->exposure = 0.02;
+  scene.effects.blur_subframes = 4;
+  scene.effects.quantize = false;  // the float image, before rounding
+  const sim::RunResult run = sim::run_spec(scene.sim);
+  Renderer blurred(scene), single(scene);
+  for (double t : {0.3, 0.6}) {
+    const Frame f = blurred.capture(run.trajectory, t);
+    std::vector<cv::Mat> subs;
+    for (int i = 0; i < 4; ++i)
+      subs.push_back(single.render_linear(
+          SceneState::from_sample(run.trajectory.sample(t - 0.01 + (i + 0.5) * 0.005))));
+    const cv::Mat mean = average_frames(subs);
+    ASSERT_EQ(f.image.size(), mean.size());
+    ASSERT_EQ(f.image.type(), CV_32FC3);
+    EXPECT_EQ(cv::norm(f.image, mean, cv::NORM_INF), 0.0) << "t = " << t;
+    // The sub-frames differ (the disk moves during the exposure), so the mean is a blur.
+    EXPECT_GT(cv::norm(subs.front(), subs.back(), cv::NORM_INF), 10.0);
+  }
 }
 
 TEST(Render, OsmesaAndEglAgreeWithinOneLevel) {
