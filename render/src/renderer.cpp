@@ -533,8 +533,9 @@ struct Renderer::Impl {
   cv::Vec3f table_color;
   EffectsRng rng;
   cv::Mat readback;  // CV_8UC4 (RGBA), reused
-  // render_linear's intermediates at the supersampled size, and capture's sub-frame: reused.
-  cv::Mat ideal_bgr, ideal_f32, distorted_f32, subframe;
+  // render_linear's intermediates at the supersampled size, capture's sub-frame and its float
+  // image before quantisation: reused.
+  cv::Mat ideal_bgr, ideal_f32, distorted_f32, subframe, linear_scratch;
 
   Impl(const Scene& s, GlBackend backend)
       : scene(s), camera(CameraModel::from_spec(*s.camera)), rng(s.effects.seed) {
@@ -935,7 +936,10 @@ Frame Renderer::capture(const StateAt& state_at, double t) {
     frame.image = impl_->render_8u(mid);
     return frame;
   }
-  cv::Mat linear;
+  // The float image is the frame only when it is not quantised; otherwise it is scratch that the
+  // renderer keeps from frame to frame (see render_linear).
+  cv::Mat unquantized;
+  cv::Mat& linear = fx.quantize ? impl_->linear_scratch : unquantized;
   if (fx.blur_subframes > 1 && exposure > 0) {
     // Exposure blur: equally weighted sub-frames over the exposure centred on the capture time,
     // each rendered into the same buffer and added to the running mean.
@@ -947,7 +951,7 @@ Frame Renderer::capture(const StateAt& state_at, double t) {
     }
     linear = mean.finish();
   } else {
-    linear = impl_->render_linear(mid);
+    impl_->render_linear(mid, linear);
   }
   if (fx.vignetting > 0)
     apply_vignetting(linear, fx.vignetting, {impl_->camera.K(0, 2), impl_->camera.K(1, 2)});
