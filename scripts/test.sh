@@ -53,6 +53,8 @@ export FLATLAND_TEST_SHORT=1 FLATLAND_MC_RUNS=10
 # leak check (which stops every thread with a ptrace-based tracer) crashes reproducibly in some
 # rendering tests ("Tracer caught signal 11 ... LeakSanitizer has encountered a fatal error";
 # google/sanitizers#1353) after they have passed. flatland's code paths are the same either way.
+# (OpenCV's oneTBB workers, the other threads alive at exit, are off in sanitized builds:
+# tests/sanitizers/opencv_serial.cpp.)
 export LP_NUM_THREADS=0
 ctest --test-dir build-asan --output-on-failure -j"$jobs"
 
