@@ -311,9 +311,11 @@ void stop_interrupt_watcher() {
   // From here on SIGINT and SIGTERM terminate the process by default: the command has finished.
   ::signal(SIGINT, SIG_DFL);
   ::signal(SIGTERM, SIG_DFL);
-  // The watcher never calls exit() (interrupted() ends the process with _exit), so it is never
-  // the thread running this handler.
   if (!g_interrupt_watcher.joinable()) return;
+  if (g_interrupt_watcher.get_id() == std::this_thread::get_id()) {  // exit() on the watcher
+    g_interrupt_watcher.detach();
+    return;
+  }
   const unsigned char c = kStopWatcher;
   if (::write(g_signal_pipe[1], &c, 1) == 1)
     g_interrupt_watcher.join();
