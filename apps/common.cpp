@@ -300,45 +300,20 @@ extern "C" void on_interrupt(int sig) {
   ::_exit(128 + sig);
 }
 
-// The watcher thread is joined at exit (an atexit handler: before the process's static objects
-// are destroyed) rather than detached, so that no flatland thread is alive when a sanitized build's
-// LeakSanitizer stops every thread for its exit-time leak check (tests/sanitizers/opencv_serial.cpp
-// says why that matters).
-std::thread g_interrupt_watcher;
-constexpr unsigned char kStopWatcher = 0;  // never a signal number
-
-void stop_interrupt_watcher() {
-  // From here on SIGINT and SIGTERM terminate the process by default: the command has finished.
-  ::signal(SIGINT, SIG_DFL);
-  ::signal(SIGTERM, SIG_DFL);
-  if (!g_interrupt_watcher.joinable()) return;
-  if (g_interrupt_watcher.get_id() == std::this_thread::get_id()) {  // exit() on the watcher
-    g_interrupt_watcher.detach();
-    return;
-  }
-  const unsigned char c = kStopWatcher;
-  if (::write(g_signal_pipe[1], &c, 1) == 1)
-    g_interrupt_watcher.join();
-  else
-    g_interrupt_watcher.detach();
-}
-
 }  // namespace
 
 void install_interrupt_handler() {
   if (g_signal_pipe[0] >= 0) return;
   if (::pipe2(g_signal_pipe, O_CLOEXEC) != 0) return;  // no handler: the default (die) remains
-  g_interrupt_watcher = std::thread([] {
+  std::thread([] {
     unsigned char c = 0;
     for (;;) {
       const auto n = ::read(g_signal_pipe[0], &c, 1);
-      if (n == 1 && c == kStopWatcher) return;
       if (n == 1) interrupted(c);
       if (n < 0 && errno == EINTR) continue;
       return;
     }
-  });
-  std::atexit(stop_interrupt_watcher);
+  }).detach();
   struct sigaction sa {};
   sa.sa_handler = on_interrupt;
   sigemptyset(&sa.sa_mask);
