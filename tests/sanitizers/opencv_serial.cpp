@@ -1,13 +1,11 @@
 // Linked into the sanitized build's programs only (CMakeLists.txt: FLATLAND_SANITIZE): OpenCV runs
 // its parallel loops on the calling thread.
 //
-// Why: LeakSanitizer checks for leaks at process exit by stopping every thread with a ptrace-based
-// tracer, and that tracer now and then crashes ("Tracer caught signal 11 ... LeakSanitizer has
-// encountered a fatal error", google/sanitizers#1353) when other threads are alive, which fails a
-// test that has passed. Debian's OpenCV 4.6 runs cv::parallel_for_ on oneTBB, whose worker threads
-// live until after the leak check. (llvmpipe's threads, the other ones alive at exit, are turned
-// off by LP_NUM_THREADS=0 in scripts/test.sh.) flatland's own code is the same either way: OpenCV's
-// loop bodies run, serially, and their results do not depend on the number of threads.
+// Why: speed. Debian's OpenCV 4.6 runs cv::parallel_for_ on oneTBB, and under AddressSanitizer on
+// CI's two cores, with ctest running two tests at once, its worker threads cost more than they
+// save: the rendered-sequence tracker tests took 42-47 s each with them and 14-16 s without.
+// flatland's code is the same either way (the loop bodies run, on the calling thread), and OpenCV's
+// results do not depend on the number of threads; stage 1 (Release) runs OpenCV as users do.
 #include <opencv2/core/utility.hpp>
 
 namespace {
