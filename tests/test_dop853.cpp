@@ -154,7 +154,7 @@ TEST(Dop853, AgreesWithDopri5OverTheWholeRollInBothFormulations) {
     EXPECT_LE(worst, 1e-9) << to_string(f);
     EXPECT_LE(worst_fn, 1e-7) << to_string(f);
     for (const RecordedEvent& e : b.events) {
-      if (e.kind == "junction") {
+      if (e.kind == EventKind::kJunction) {
         EXPECT_NEAR(std::abs(e.s_h), 1.0, 1e-9);
       }
     }

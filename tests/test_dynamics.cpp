@@ -246,12 +246,12 @@ TEST(Events, ContactLossIsLocated) {
 TEST(Events, SlipIsLocatedAtTheFrictionLimit) {
   auto pb = paper_butterfly();
   RunOptions o = tight(1.181, Formulation::kReduced);
-  o.events.mu = 0.2;  // the paper's solution needs about 0.306
+  pb->contact.mu = 0.2;  // the paper's solution needs about 0.306
   const RunResult r = simulate(pb, {}, o);
   ASSERT_EQ(r.reason, StopReason::kSlip);
   EXPECT_NEAR(std::abs(r.final.force_tangential), 0.2 * r.final.force_normal,
               1e-7 * std::abs(r.final.force_normal));
-  o.events.mu = 0.5;
+  pb->contact.mu = 0.5;
   EXPECT_EQ(simulate(pb, {}, o).reason, StopReason::kEndTime);
 }
 
@@ -260,7 +260,7 @@ TEST(Events, JunctionCrossingsLandOnTheJunction) {
   const RunResult r = simulate(pb, {}, tight(1.181, Formulation::kReduced));
   int junctions = 0;
   for (const RecordedEvent& e : r.events)
-    if (e.kind == "junction") {
+    if (e.kind == EventKind::kJunction) {
       ++junctions;
       EXPECT_NEAR(std::abs(e.s_h), 1.0, 1e-9);
     }

@@ -285,7 +285,7 @@ TEST(Extremes, ContactLossAtAndBeyondTheTimeOptimalSolution) {
     ASSERT_EQ(r.reason, StopReason::kContactLost);
     EXPECT_TRUE(r.contact_lost);
     ASSERT_FALSE(r.events.empty());
-    EXPECT_EQ(r.events.back().kind, "contact_lost");
+    EXPECT_EQ(r.events.back().kind, EventKind::kContactLost);
     EXPECT_NEAR(r.final.fn_ratio, 0.0, 1e-8);
     EXPECT_LE(r.final.t, 0.5 * period + 1e-9);  // the apex region, not after the roll
     // No step before the event reports a negative force.

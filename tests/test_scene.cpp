@@ -152,7 +152,7 @@ TEST(SceneTest, ButterflySceneHasThePapersValuesInSI) {
   EXPECT_DOUBLE_EQ(sp.run.integrator.atol, 1e-12);
   EXPECT_EQ(sp.run.formulation, sim::Formulation::kAuto);
   EXPECT_TRUE(sp.run.events.stop_on_contact_loss);
-  EXPECT_FALSE(sp.run.events.mu.has_value());
+  EXPECT_FALSE(sp.contact.mu.has_value());
   EXPECT_DOUBLE_EQ(sp.run.events.time_tolerance, 1e-12);
 
   // e and f are derived from the loaded a..d (paper: e = 7.2 cm, f = -9.36 cm).
@@ -237,7 +237,7 @@ TEST(SceneTest, MinimalSceneGetsDefaults) {
   EXPECT_TRUE(std::isinf(sp.run.integrator.max_step));
   EXPECT_EQ(sp.run.formulation, sim::Formulation::kAuto);
   EXPECT_TRUE(sp.run.events.stop_on_contact_loss);
-  EXPECT_FALSE(sp.run.events.mu.has_value());
+  EXPECT_FALSE(sp.contact.mu.has_value());
   EXPECT_DOUBLE_EQ(sp.run.events.time_tolerance, 1e-12);
 }
 
@@ -273,8 +273,8 @@ contact:
   EXPECT_DOUBLE_EQ(sp.run.integrator.fixed_step, 2e-4);
   EXPECT_DOUBLE_EQ(sp.run.integrator.max_step, 0.01);
   EXPECT_EQ(sp.run.formulation, sim::Formulation::kGeneral);
-  ASSERT_TRUE(sp.run.events.mu.has_value());
-  EXPECT_DOUBLE_EQ(*sp.run.events.mu, 0.5);
+  ASSERT_TRUE(sp.contact.mu.has_value());
+  EXPECT_DOUBLE_EQ(*sp.contact.mu, 0.5);
   EXPECT_FALSE(sp.run.events.stop_on_contact_loss);
   EXPECT_DOUBLE_EQ(sp.run.events.time_tolerance, 1e-9);
 }

@@ -58,11 +58,12 @@ PlanInfo make_plan(const Scene& nominal) {
   PlanInfo info;
   info.period = spec.motion.period;
   info.k = spec.motion.k;
-  sim::SimulationSpec plan_spec = spec;
+  // The paper planned with its rolling simulation: no losses, rolling enforced.
+  sim::SimulationSpec plan_spec = sim::paper_model(spec);
   plan_spec.duration = info.period;
   plan_spec.run.record = true;
   plan_spec.run.events.stop_on_contact_loss = false;  // the plan is followed whatever it does
-  plan_spec.run.events.mu.reset();
+  plan_spec.run.events.stop_on_slip = false;
   if (nominal.controller.plan == "solve") {
     const sim::SolveReport sol = sim::solve_k(spec, info.period);
     info.k = sol.k;

@@ -128,7 +128,7 @@ void SimWorld::step_disk(double alpha) {
   if (r.reason != sim::StopReason::kEndTime) {
     failure_ = (r.reason == sim::StopReason::kContactLost ? "contact lost"
                 : r.reason == sim::StopReason::kSlip      ? "slip (at mu = " +
-                                                           fmt(*opt.events.mu) + ")"
+                                                           fmt(problem_->contact.mu_static()) + ")"
                                                      : "disk rolled off the hand") +
                std::string(" at t = ") + fmt(r.final.t) + " s, s_h = " + fmt(r.final.s_h);
     failure_time_ = r.final.t;

@@ -388,14 +388,46 @@ void read_integrator(const MapReader& root, sim::SimulationSpec& spec) {
 }
 
 void read_contact(const MapReader& root, sim::SimulationSpec& spec) {
-  const auto c =
-      root.optional_section("contact", {"mu", "stop_on_contact_loss", "event_tolerance"});
+  const auto c = root.optional_section(
+      "contact", {"model", "mu", "mu_kinetic", "restitution", "capture_velocity",
+                  "rolling_resistance", "drag", "drag_angular", "stop_on_contact_loss",
+                  "event_tolerance"});
   if (!c) return;
   auto& ev = spec.run.events;
-  if (c->has("mu")) {
-    const double mu = c->number("mu");
-    if (!(mu >= 0)) c->fail_at("mu", "must be >= 0, got " + c->node("mu").Scalar());
-    ev.mu = mu;
+  auto& law = spec.contact;
+  const bool hybrid = c->choice_or("model", {"rolling", "hybrid"}, "rolling") == "hybrid";
+  spec.run.model = hybrid ? sim::ContactModel::kHybrid : sim::ContactModel::kRolling;
+  const auto non_negative_key = [&](const char* key) -> std::optional<double> {
+    if (!c->has(key)) return std::nullopt;
+    const double v = c->number(key);
+    if (!(v >= 0)) c->fail_at(key, "must be >= 0, got " + c->node(key).Scalar());
+    return v;
+  };
+  law.mu = non_negative_key("mu");
+  law.mu_kinetic = non_negative_key("mu_kinetic");
+  if (law.mu_kinetic && !law.mu)
+    c->fail_at("mu_kinetic", "needs contact.mu (the static coefficient it may not exceed)");
+  if (law.mu_kinetic && !(*law.mu_kinetic <= *law.mu))
+    c->fail_at("mu_kinetic", "must not exceed contact.mu (" + c->node("mu").Scalar() + "), got " +
+                                 c->node("mu_kinetic").Scalar());
+  if (c->has("restitution")) {
+    law.restitution = c->number("restitution");
+    if (!(law.restitution >= 0 && law.restitution <= 1))
+      c->fail_at("restitution", "must be in [0, 1], got " + c->node("restitution").Scalar());
+  }
+  law.capture_velocity = non_negative_key("capture_velocity").value_or(law.capture_velocity);
+  law.rolling_resistance = non_negative_key("rolling_resistance").value_or(0.0);
+  law.drag = non_negative_key("drag").value_or(0.0);
+  law.drag_angular = non_negative_key("drag_angular").value_or(0.0);
+  if (!hybrid) {
+    // The rolling model is the paper's: it enforces rolling and has no losses or impacts.
+    for (const char* key : {"mu_kinetic", "restitution", "capture_velocity", "rolling_resistance",
+                            "drag", "drag_angular"})
+      c->reject_if_present(key, "only for model: hybrid (the rolling model enforces rolling "
+                                "without losses; it stops where contact is lost or it slips)");
+  } else {
+    c->reject_if_present("stop_on_contact_loss",
+                         "only for model: rolling (the hybrid model flies where contact is lost)");
   }
   ev.stop_on_contact_loss = c->boolean_or("stop_on_contact_loss", ev.stop_on_contact_loss);
   ev.time_tolerance = c->positive_or("event_tolerance", ev.time_tolerance);

@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <limits>
+#include <numbers>
 #include <sstream>
 #include <stdexcept>
 
@@ -16,6 +17,34 @@ std::string fmt(double v) {
   os << v;
   return os.str();
 }
+
+// Newton's method on f(s) = (c(s) - p) . c'(s) = 0 from s, each step at most `max_step`, the
+// piece re-chosen at each iterate: the nearest point of a smooth curve from a good start.
+double refine_nearest(const Curve& curve, const Vec2& p, double s, double max_step) {
+  for (int i = 0; i < 8; ++i) {
+    const CurveJet j = curve.jet(s, curve.piece_at(s, +1));
+    const Vec2 d = j.c - p;
+    const double f = d.dot(j.d1), fs = j.d1.squaredNorm() + d.dot(j.d2);
+    if (!(fs > 0)) break;  // not a minimum here: keep the sampled start
+    const double step = std::clamp(-f / fs, -max_step, max_step);
+    s += step;
+    if (std::abs(step) <= 1e-15 * (1.0 + std::abs(s))) break;
+  }
+  return s;
+}
+
+// Index of the sample nearest to p.
+std::size_t nearest_sample(const std::vector<Vec2>& pts, const Vec2& p) {
+  std::size_t best = 0;
+  double d2 = (pts[0] - p).squaredNorm();
+  for (std::size_t i = 1; i < pts.size(); ++i) {
+    const double e = (pts[i] - p).squaredNorm();
+    if (e < d2) d2 = e, best = i;
+  }
+  return best;
+}
+
+constexpr int kOutlineSamples = 1024;  // over the polynomial hand's closed outline
 }  // namespace
 
 CurveGeometry geometry_from_jet(const CurveJet& jet, int normal_side) {
@@ -53,6 +82,19 @@ PolynomialHand::PolynomialHand(double a, double b, double c, double d)
     : a_(a), b_(b), c_(c), d_(d), e_(-(a + c)), f_(-(b + 3.0 * d) / 5.0) {
   for (double v : {a, b, c, d})
     if (!std::isfinite(v)) throw std::invalid_argument("hand: shape coefficients must be finite");
+  outline_.reserve(kOutlineSamples);
+  for (int i = 0; i < kOutlineSamples; ++i) {
+    const double s = -1.0 + 4.0 * i / kOutlineSamples;
+    outline_.push_back(jet(s, piece_at(s, +1)).c);
+    reach_ = std::max(reach_, outline_.back().norm());
+  }
+}
+
+double PolynomialHand::nearest(const Vec2& p) const {
+  const double spacing = 4.0 / kOutlineSamples;
+  const double s0 = -1.0 + spacing * static_cast<double>(nearest_sample(outline_, p));
+  const double s = refine_nearest(*this, p, s0, spacing);
+  return std::remainder(s - 1.0, 4.0) + 1.0;  // into [-1, 3)
 }
 
 int PolynomialHand::piece_at(double s, int direction) const {
@@ -101,6 +143,7 @@ LineCurve::LineCurve(Vec2 origin, Vec2 direction) : origin_(origin), direction_(
   direction_ /= n;
 }
 PieceInterval LineCurve::piece_interval(int) const { return {-kInf, kInf}; }
+double LineCurve::reach() const { return kInf; }
 CurveJet LineCurve::jet(double s, int) const {
   return {origin_ + s * direction_, direction_, Vec2::Zero(), Vec2::Zero()};
 }
@@ -119,6 +162,10 @@ CurveJet CircleCurve::jet(double s, int) const {
     return {center_ + r * Vec2(cs, sn), r * Vec2(-sn, cs), r * Vec2(-cs, -sn), r * Vec2(sn, -cs)};
   return {center_ + r * Vec2(sn, -cs), r * Vec2(cs, sn), r * Vec2(-sn, cs), r * Vec2(-cs, -sn)};
 }
+double CircleCurve::nearest(const Vec2& p) const {
+  const Vec2 d = p - center_;
+  return side_ == Side::kConvexBody ? std::atan2(d.y(), d.x()) : std::atan2(d.x(), -d.y());
+}
 std::string CircleCurve::describe() const {
   return std::string(side_ == Side::kConvexBody ? "circle" : "circular well") + " of radius " +
          fmt(radius_) + " m";
@@ -134,6 +181,13 @@ CurveJet EllipseCurve::jet(double s, int) const {
   const double cs = std::cos(s), sn = std::sin(s);
   return {Vec2(ax_ * cs, ay_ * sn), Vec2(-ax_ * sn, ay_ * cs), Vec2(-ax_ * cs, -ay_ * sn),
           Vec2(ax_ * sn, -ay_ * cs)};
+}
+double EllipseCurve::nearest(const Vec2& p) const {
+  std::vector<Vec2> pts(64);
+  for (std::size_t i = 0; i < pts.size(); ++i)
+    pts[i] = jet(2.0 * std::numbers::pi * static_cast<double>(i) / 64.0, 0).c;
+  const double spacing = 2.0 * std::numbers::pi / 64.0;
+  return refine_nearest(*this, p, spacing * static_cast<double>(nearest_sample(pts, p)), spacing);
 }
 std::string EllipseCurve::describe() const {
   return "ellipse " + fmt(ax_) + " x " + fmt(ay_) + " m";

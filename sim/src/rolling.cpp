@@ -23,10 +23,12 @@ double wrap_pi(double a) { return std::remainder(a, 2.0 * std::numbers::pi); }
 
 double angle_of(const Vec2& v) { return std::atan2(v.y(), v.x()); }
 
-// Contact forces on the object and their ratios to its weight in the table plane.
+// Contact forces on the object and their ratios to its weight in the table plane: what the hand
+// exerts besides gravity and the drag on the centre (m a = m g + f - c v).
 void fill_forces(Sample& s, const RollingProblem& pb, const Vec2& accel, const Vec2& normal_w,
-                 const Vec2& tangent_w) {
-  const Vec2 force = pb.object.mass * (accel - pb.gravity_vector());
+                 const Vec2& tangent_w, const Vec2& velocity) {
+  const Vec2 force =
+      pb.object.mass * (accel - pb.gravity_vector()) + pb.contact.drag * velocity;
   const double weight = pb.object.mass * pb.gravity;
   s.force_normal = force.dot(normal_w);
   s.force_tangential = force.dot(tangent_w);
@@ -81,10 +83,12 @@ WorldContact world_contact(const RollingProblem& pb, double t, double theta_o, d
 // General formulation
 // =============================================================================================
 
-GeneralRolling::GeneralRolling(std::shared_ptr<const RollingProblem> problem)
-    : problem_(std::move(problem)) {
+GeneralRolling::GeneralRolling(std::shared_ptr<const RollingProblem> problem, ContactPhase phase)
+    : problem_(std::move(problem)), phase_(phase) {
   if (!problem_ || !problem_->hand || !problem_->object.boundary || !problem_->motion)
     throw std::invalid_argument("rolling problem: hand, object and motion are required");
+  if (phase_.mode == ContactMode::kFlight)
+    throw std::logic_error("general formulation: flight has no contact equations");
 }
 
 Pieces GeneralRolling::pieces_for(const State& y, int direction) const {
@@ -150,15 +154,22 @@ void GeneralRolling::snap(double t, State& y, const Pieces& p) const {
   //  contact point moves at the same rate along both outlines: R_o J_o sdot_o = R_h J_h sdot_h;
   //  normals stay opposite: omega_o = omega_h + p . (R_o K_o sdot_o + R_h K_h sdot_h), p = z x n_h;
   //  rolling: v_o + omega_o z x r_o = v_h + omega_h z x r_h.
-  const double sdot_h = y[9];
-  const double sdot_o = Jo.dot(Jh) * sdot_h / go.speed / go.speed;
+  //  (sliding: only their sum is tied, v_o + omega_o z x r_o + R_o J_o sdot_o = v_h + ...;
+  //   at rest: sdot_h = sdot_o = 0.)
+  const bool sliding = phase_.mode == ContactMode::kSliding;
+  const double sdot_h = phase_.mode == ContactMode::kRest ? 0.0 : y[9];
+  const double sdot_o = sliding                               ? y[8]
+                        : phase_.mode == ContactMode::kRest ? 0.0
+                                                              : Jo.dot(Jh) * sdot_h / go.speed / go.speed;
   const double omega_o =
       h.angular_velocity + perp(nh).dot(Ro * go.normal_ds * sdot_o + Rh * gh.normal_ds * sdot_h);
   y[2] = theta_o;
   y.segment<2>(0) = h.position + rh - ro;
   y.segment<2>(5) = h.velocity + h.angular_velocity * perp(rh) - omega_o * perp(ro);
+  if (sliding) y.segment<2>(5) += Jh * sdot_h - Jo * sdot_o;
   y[7] = omega_o;
   y[8] = sdot_o;
+  y[9] = sdot_h;
 }
 
 GeneralRolling::Assembled GeneralRolling::assemble_and_solve(double t, const State& y,
@@ -187,18 +198,43 @@ GeneralRolling::Assembled GeneralRolling::assemble_and_solve(double t, const Sta
   b.segment<2>(2) =
       -(-wo * wo * w.no + 2.0 * wo * sdo * perp(w.Ko) + w.Ko_ds * sdo * sdo + ah * perp(w.nh) -
         wh * wh * w.nh + 2.0 * wh * sdh * perp(w.Kh) + w.Kh_ds * sdh * sdh);
-  // (3) rolling: material contact points have equal tangential acceleration (row scaled by |J_h|).
   const Vec2 th = w.Jh / w.gh.speed;
-  A.block<1, 2>(4, 0) = -th.transpose();
-  A(4, 2) = -th.dot(perp(w.ro));
-  b(4) = -th.dot(a_h + ah * perp(w.rh) - wh * wh * w.rh + wo * wo * w.ro);
-  // (4) the contact force passes through the contact point: I alpha_o = r_o x m (a_o - g),
-  //     divided by m. (Gravity acts at the centre of mass and has no moment about it.)
-  const double rho2 = pb.object.inertia / pb.object.mass;
-  A(5, 0) = w.ro.y();
-  A(5, 1) = -w.ro.x();
-  A(5, 2) = rho2;
-  b(5) = -cross2(w.ro, pb.gravity_vector());
+  const double m = pb.object.mass;
+  // The contact force f = m (a_o - g) + c v_o (the drag c v_o acts on the centre); g_d is what
+  // f is when a_o = 0, divided by m.
+  const Vec2 v_o = y.segment<2>(5);
+  const Vec2 g_d = -pb.gravity_vector() + pb.contact.drag / m * v_o;
+  if (phase_.mode == ContactMode::kSliding) {
+    // (3') Coulomb: f . t_h = -mu_k sign f . n_h, i.e. f . (t_h + mu_k sign n_h) = 0.
+    const Vec2 dir = th + pb.contact.kinetic() * phase_.sign * w.nh;
+    A.block<1, 2>(4, 0) = dir.transpose();
+    b(4) = -g_d.dot(dir);
+  } else {
+    // (3) rolling: material contact points have equal tangential acceleration (row scaled by
+    // |J_h|).
+    A.block<1, 2>(4, 0) = -th.transpose();
+    A(4, 2) = -th.dot(perp(w.ro));
+    b(4) = -th.dot(a_h + ah * perp(w.rh) - wh * wh * w.rh + wo * wo * w.ro);
+  }
+  if (phase_.mode == ContactMode::kRest) {
+    // At rest the object does not roll (sddot_h = 0); the couple that holds it is what row (4)
+    // would leave over (sample()).
+    A(5, 4) = 1.0;
+    b(5) = 0.0;
+  } else {
+    // (4) the contact force passes through the contact point: I alpha_o = r_o x f + tau, divided
+    //     by m, with tau the drag couple -c_w omega_o and, when rolling, the rolling-resistance
+    //     couple eps delta sign(sdot_h) f_n. (Gravity and drag act at the centre: no moment.)
+    //     While sliding, the couple is -delta f_n turn (it opposes the relative rotation).
+    const double rho2 = pb.object.inertia / m;
+    const double rr = phase_.mode == ContactMode::kRolling
+                          ? pb.hand->normal_side() * pb.contact.rolling_resistance * phase_.sign
+                          : -pb.contact.rolling_resistance * phase_.turn;
+    A(5, 0) = w.ro.y() - rr * w.nh.x();
+    A(5, 1) = -w.ro.x() - rr * w.nh.y();
+    A(5, 2) = rho2;
+    b(5) = cross2(w.ro, g_d) + rr * w.nh.dot(g_d) - pb.contact.drag_angular / m * wo;
+  }
   Eigen::ColPivHouseholderQR<Eigen::Matrix<double, 6, 5>> qr(A);
   // A loses rank when the contact is degenerate, e.g. conforming curvatures (kappa_h + kappa_o = 0:
   // a disk lying in a well of its own radius), where s_o'' and s_h'' are not determined; the
@@ -248,10 +284,22 @@ Sample GeneralRolling::sample(double t, const State& y, const Pieces& p) const {
   out.object_angle = y[2];
   out.object_velocity = y.segment<2>(5);
   out.object_angular_velocity = y[7];
-  fill_forces(out, pb, s.x.segment<2>(0), w.nh, w.Jh / w.gh.speed);
+  out.object_angular_acceleration = s.x[2];
+  const Vec2 th = w.Jh / w.gh.speed;
+  fill_forces(out, pb, s.x.segment<2>(0), w.nh, th, y.segment<2>(5));
   const Vec2 gap = w.hand.position + w.rh - y.segment<2>(0) - w.ro;
   out.constraint_residual = std::max(gap.norm(), (w.no + w.nh).norm());
   out.redundant_residual = s.residual;
+  out.mode = phase_.mode;
+  // Velocity of the object's material contact point relative to the hand's.
+  const Vec2 v_rel = y.segment<2>(5) + y[7] * perp(w.ro) - w.hand.velocity -
+                     w.hand.angular_velocity * perp(w.rh);
+  out.slip_velocity = phase_.mode == ContactMode::kSliding ? v_rel.dot(th) : 0.0;
+  const Vec2 force = pb.object.mass * (s.x.segment<2>(0) - pb.gravity_vector()) +
+                     pb.contact.drag * y.segment<2>(5);
+  // The couple on the object besides the contact force's moment and the drag couple.
+  out.rolling_couple = pb.object.inertia * s.x[2] - cross2(w.ro, force) +
+                       pb.contact.drag_angular * y[7];
   return out;
 }
 
@@ -262,21 +310,99 @@ Sample GeneralRolling::sample(double t, const State& y, const Pieces& p) const {
 // sigma = |J| (1 + r kappa), the disk's angular velocity for rolling is
 // omega_o = theta' - side sigma s' / r (side = the hand's normal_side). d'Alembert along the
 // admissible direction (delta p = sigma R t delta s, delta theta_o = -side sigma/r delta s):
-//   m (p'' - g) . R t - side (I / r) alpha_o = 0.
-// Expanding p'' and alpha_o and solving for s'' gives sddot() below (docs/DYNAMICS.md).
+//   m (p'' - g) . R t - side (I / r) alpha_o = Q,
+// Q the generalised force of the losses (drag on the centre and its couple, the rolling-resistance
+// couple). Expanding p'' and alpha_o and solving for s'' gives sddot() below (docs/DYNAMICS.md).
 // =============================================================================================
 
-ReducedDiskRolling::ReducedDiskRolling(std::shared_ptr<const RollingProblem> problem)
-    : problem_(std::move(problem)) {
+namespace {
+
+/// What every contact mode of a disk needs at one state: the centre's kinematics on the offset
+/// curve and the parts of (p'' - g) that do not involve s''.
+struct DiskTerms {
+  Eigen::Matrix2d R;
+  Vec2 q;                  ///< centre, hand frame
+  double sigma, sigma_ds;  ///< |q'| and its derivative
+  Vec2 N, T;               ///< hand's outward normal and tangent, world
+  Vec2 velocity;           ///< centre, world
+  double along;   ///< (p'' - g) . T without sigma' s'^2 + sigma s''
+  double normal;  ///< (p'' - g) . N (independent of s'')
+};
+
+DiskTerms disk_terms(const RollingProblem& pb, double r, double side, const HandKinematics& h,
+                     const CurveGeometry& g, double sdot) {
+  DiskTerms d;
+  const double one_rk = 1.0 + r * g.curvature;
+  d.sigma = g.speed * one_rk;
+  d.sigma_ds = g.speed_ds * one_rk + g.speed * r * g.curvature_ds;
+  d.q = g.point + r * g.normal;
+  d.R = rotation(h.angle);
+  d.N = d.R * g.normal;
+  d.T = d.R * g.tangent;
+  const Vec2 a_local = d.R.transpose() * (h.acceleration - pb.gravity_vector());  // R^T (a_h - g)
+  const double w = h.angular_velocity, al = h.angular_acceleration;
+  d.along = a_local.dot(g.tangent) + al * perp(d.q).dot(g.tangent) - w * w * d.q.dot(g.tangent);
+  d.normal = a_local.dot(g.normal) + al * perp(d.q).dot(g.normal) - w * w * d.q.dot(g.normal) +
+             2.0 * side * w * d.sigma * sdot - d.sigma * g.curvature * g.speed * sdot * sdot;
+  d.velocity = h.velocity + w * perp(d.R * d.q) + d.sigma * sdot * d.T;
+  return d;
+}
+
+/// p'' in world axes for a centre moving on the offset curve with s' and s''.
+Vec2 centre_acceleration(const HandKinematics& h, const CurveGeometry& g, const DiskTerms& d,
+                         double sd, double sdd) {
+  const double w = h.angular_velocity;
+  // p'' = a_h + R [theta'' z x q - theta'^2 q + 2 theta' sigma s' z x t
+  //                + (sigma' t - sigma kappa |J| n) s'^2 + sigma s'' t]
+  const Vec2 local = h.angular_acceleration * perp(d.q) - w * w * d.q +
+                     2.0 * w * d.sigma * sd * perp(g.tangent) +
+                     (d.sigma_ds * g.tangent - d.sigma * g.curvature * g.speed * g.normal) * sd * sd +
+                     d.sigma * sdd * g.tangent;
+  return h.acceleration + d.R * local;
+}
+
+/// Normal force f_n = m (p'' - g) . N + c v . N (independent of the tangential mode).
+double normal_force(const RollingProblem& pb, const DiskTerms& d) {
+  return pb.object.mass * d.normal + pb.contact.drag * d.velocity.dot(d.N);
+}
+
+void check_fits(const RollingProblem& pb, double r, double t, double s_h, double sigma,
+                const Pieces& p, const char* who) {
+  // sigma > 0 is the disk fitting the hand's concave parts (r kappa > -1); at sigma = 0 the
+  // equation divides by zero (the contact point is not determined), so say so instead of
+  // producing inf/NaN. validate_hand_for_disk rules this out for the paper's hands.
+  // Only inside the active piece (stages may overshoot a junction onto the piece's extension,
+  // where a non-finite value just makes the step fail and shrink).
+  const PieceInterval iv = pb.hand->piece_interval(p.hand);
+  if (!(sigma > 0) && s_h >= iv.lo && s_h <= iv.hi) {
+    const CurveGeometry g = pb.hand->geometry(s_h, p.hand);
+    std::ostringstream os;
+    os.precision(8);
+    os << who << ": the disk does not fit the hand at t=" << t << " s, s_h=" << s_h
+       << " (r*kappa = " << r * g.curvature << ", needs > -1: curvature radius "
+       << (g.curvature != 0 ? -1.0 / g.curvature : 0.0) << " m vs disk radius " << r << " m)";
+    throw std::runtime_error(os.str());
+  }
+}
+
+}  // namespace
+
+ReducedDiskRolling::ReducedDiskRolling(std::shared_ptr<const RollingProblem> problem,
+                                       ContactPhase phase)
+    : problem_(std::move(problem)), phase_(phase) {
   if (!problem_ || !problem_->hand || !problem_->motion)
     throw std::invalid_argument("rolling problem: hand, object and motion are required");
   if (!problem_->object.disk_radius)
     throw std::invalid_argument(
         "integrator.formulation: 'reduced' needs a disk object; use 'general' for " +
         problem_->object.kind);
+  if (phase_.mode != ContactMode::kRolling && phase_.mode != ContactMode::kRest)
+    throw std::logic_error("reduced rolling: the phase must be rolling or rest");
   r_ = *problem_->object.disk_radius;
   rho2_ = problem_->object.inertia / problem_->object.mass;
   side_ = problem_->hand->normal_side();
+  rest_ = phase_.mode == ContactMode::kRest;
+  losses_ = problem_->contact.has_losses();
 }
 
 Pieces ReducedDiskRolling::pieces_for(const State& y, int direction) const {
@@ -302,16 +428,28 @@ ReducedDiskRolling::State ReducedDiskRolling::initial_state(const InitialContact
 
 double ReducedDiskRolling::sddot(const HandKinematics& h, const CurveGeometry& g,
                                  double sdot) const {
+  if (rest_) return 0.0;
+  const RollingProblem& pb = *problem_;
   const double one_rk = 1.0 + r_ * g.curvature;
   const double sigma = g.speed * one_rk;
   const double sigma_ds = g.speed_ds * one_rk + g.speed * r_ * g.curvature_ds;
   const Vec2 q = g.point + r_ * g.normal;
   const double c = std::cos(h.angle), s = std::sin(h.angle);
-  const Vec2 a = h.acceleration - problem_->gravity_vector();
+  const Vec2 a = h.acceleration - pb.gravity_vector();
   const Vec2 a_local(c * a.x() + s * a.y(), -s * a.x() + c * a.y());  // R^T (a_h - g)
   const double th2 = h.angular_velocity * h.angular_velocity;
-  const double drive = a_local.dot(g.tangent) + h.angular_acceleration * perp(q).dot(g.tangent) -
-                       th2 * q.dot(g.tangent) - side_ * rho2_ / r_ * h.angular_acceleration;
+  double drive = a_local.dot(g.tangent) + h.angular_acceleration * perp(q).dot(g.tangent) -
+                 th2 * q.dot(g.tangent) - side_ * rho2_ / r_ * h.angular_acceleration;
+  if (losses_) {
+    // Q / m: drag on the centre along the rolling direction, the drag couple and the
+    // rolling-resistance couple eps delta sign(s') f_n, through the lever -eps sigma / r.
+    const DiskTerms d = disk_terms(pb, r_, side_, h, g, sdot);
+    const double m = pb.object.mass;
+    const double omega_o = h.angular_velocity - side_ * sigma * sdot / r_;
+    const double couple = side_ * pb.contact.rolling_resistance * phase_.sign * normal_force(pb, d) -
+                          pb.contact.drag_angular * omega_o;
+    drive += pb.contact.drag / m * d.velocity.dot(d.T) + side_ * couple / (m * r_);
+  }
   return -(sigma_ds * sdot * sdot + drive / (1.0 + rho2_ / (r_ * r_))) / sigma;
 }
 
@@ -319,20 +457,7 @@ void ReducedDiskRolling::derivative(double t, const State& y, const Pieces& p, S
   const HandKinematics h = problem_->motion->at(t, p.motion);
   const CurveGeometry g = problem_->hand->geometry(y[0], p.hand);
   const double sigma = g.speed * (1.0 + r_ * g.curvature);
-  // sigma > 0 is the disk fitting the hand's concave parts (r kappa > -1); at sigma = 0 the
-  // equation divides by zero (the contact point is not determined), so say so instead of
-  // producing inf/NaN. validate_hand_for_disk rules this out for the paper's hands.
-  // Only inside the active piece (stages may overshoot a junction onto the piece's extension,
-  // where a non-finite value just makes the step fail and shrink).
-  const PieceInterval iv = problem_->hand->piece_interval(p.hand);
-  if (!(sigma > 0) && y[0] >= iv.lo && y[0] <= iv.hi) {
-    std::ostringstream os;
-    os.precision(8);
-    os << "reduced formulation: the disk does not fit the hand at t=" << t << " s, s_h=" << y[0]
-       << " (r*kappa = " << r_ * g.curvature << ", needs > -1: curvature radius "
-       << (g.curvature != 0 ? -1.0 / g.curvature : 0.0) << " m vs disk radius " << r_ << " m)";
-    throw std::runtime_error(os.str());
-  }
+  if (!(sigma > 0)) check_fits(*problem_, r_, t, y[0], sigma, p, "reduced formulation");
   dy[0] = y[2];
   dy[1] = h.angular_velocity - side_ * sigma * y[2] / r_;
   dy[2] = sddot(h, g, y[2]);
@@ -353,31 +478,108 @@ Sample ReducedDiskRolling::sample_with(const HandKinematics& h, double t, const 
   const CurveGeometry g = pb.hand->geometry(y[0], hand_piece);
   const double sd = y[2];
   const double sdd = sddot(h, g, sd);
-  const double one_rk = 1.0 + r_ * g.curvature;
-  const double sigma = g.speed * one_rk;
-  const double sigma_ds = g.speed_ds * one_rk + g.speed * r_ * g.curvature_ds;
-  const Vec2 q = g.point + r_ * g.normal;
-  const Eigen::Matrix2d R = rotation(h.angle);
+  const DiskTerms d = disk_terms(pb, r_, side_, h, g, sd);
   const double w = h.angular_velocity;
-  // p'' = a_h + R [theta'' z x q - theta'^2 q + 2 theta' sigma s' z x t
-  //                + (sigma' t - sigma kappa |J| n) s'^2 + sigma s'' t]
-  const Vec2 local = h.angular_acceleration * perp(q) - w * w * q +
-                     2.0 * w * sigma * sd * perp(g.tangent) +
-                     (sigma_ds * g.tangent - sigma * g.curvature * g.speed * g.normal) * sd * sd +
-                     sigma * sdd * g.tangent;
   Sample out;
   fill_hand(out, t, h);
   out.s_h = y[0];
   out.sdot_h = sd;
   out.sddot_h = sdd;
-  const Vec2 nw = R * g.normal;
   out.object_angle = y[1];
-  out.s_o = wrap_pi(angle_of(-nw) - y[1]);
+  out.s_o = wrap_pi(angle_of(-d.N) - y[1]);
   out.sdot_o = side_ * g.speed * sd / r_;
-  out.object_position = h.position + R * q;
-  out.object_velocity = h.velocity + w * perp(R * q) + sigma * sd * (R * g.tangent);
-  out.object_angular_velocity = w - side_ * sigma * sd / r_;
-  fill_forces(out, pb, h.acceleration + R * local, nw, R * g.tangent);
+  out.object_position = h.position + d.R * d.q;
+  out.object_velocity = d.velocity;
+  out.object_angular_velocity = w - side_ * d.sigma * sd / r_;
+  out.object_angular_acceleration =
+      h.angular_acceleration - side_ * (d.sigma_ds * sd * sd + d.sigma * sdd) / r_;
+  fill_forces(out, pb, centre_acceleration(h, g, d, sd, sdd), d.N, d.T, d.velocity);
+  out.mode = phase_.mode;
+  if (phase_.mode == ContactMode::kRest) {
+    // The couple that keeps the disk from rolling: I alpha_o - eps r f_t + c_w omega_o, with
+    // alpha_o = theta'' (the disk turns with the hand).
+    out.rolling_couple = pb.object.inertia * h.angular_acceleration -
+                         side_ * r_ * out.force_tangential +
+                         pb.contact.drag_angular * out.object_angular_velocity;
+  } else {
+    out.rolling_couple =
+        side_ * pb.contact.rolling_resistance * phase_.sign * out.force_normal;
+  }
+  return out;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Sliding disk: the centre on the offset curve (f_n from the normal constraint, as in rolling),
+// f_t = -mu_k sign f_n, and the disk's own rotation I omega' = eps r f_t - c_w omega.
+
+ReducedDiskSliding::ReducedDiskSliding(std::shared_ptr<const RollingProblem> problem,
+                                       int slip_sign, int turn)
+    : problem_(std::move(problem)), phase_{ContactMode::kSliding, slip_sign, turn} {
+  if (!problem_ || !problem_->hand || !problem_->motion)
+    throw std::invalid_argument("rolling problem: hand, object and motion are required");
+  if (!problem_->object.disk_radius)
+    throw std::invalid_argument("sliding (reduced formulation): needs a disk object");
+  if (slip_sign != 1 && slip_sign != -1)
+    throw std::logic_error("sliding: the slip sign must be +1 or -1");
+  r_ = *problem_->object.disk_radius;
+  side_ = problem_->hand->normal_side();
+}
+
+Pieces ReducedDiskSliding::pieces_for(const State& y, int direction) const {
+  return {problem_->hand->piece_at(y[0], direction), 0, 0};
+}
+
+void ReducedDiskSliding::derivative(double t, const State& y, const Pieces& p, State& dy) const {
+  const RollingProblem& pb = *problem_;
+  const HandKinematics h = pb.motion->at(t, p.motion);
+  const CurveGeometry g = pb.hand->geometry(y[0], p.hand);
+  const DiskTerms d = disk_terms(pb, r_, side_, h, g, y[2]);
+  if (!(d.sigma > 0)) check_fits(pb, r_, t, y[0], d.sigma, p, "sliding");
+  const double m = pb.object.mass;
+  const double f_n = normal_force(pb, d);
+  const double f_t = -pb.contact.kinetic() * phase_.sign * f_n;
+  const double couple = -pb.contact.rolling_resistance * phase_.turn * f_n;
+  dy[0] = y[2];
+  dy[1] = y[3];
+  dy[2] = ((f_t - pb.contact.drag * d.velocity.dot(d.T)) / m - d.along -
+           d.sigma_ds * y[2] * y[2]) /
+          d.sigma;
+  dy[3] = (side_ * r_ * f_t + couple - pb.contact.drag_angular * y[3]) / pb.object.inertia;
+}
+
+Sample ReducedDiskSliding::sample(double t, const State& y, const Pieces& p) const {
+  return sample_with(problem_->motion->at(t, p.motion), t, y, p.hand);
+}
+
+Sample ReducedDiskSliding::sample_with(const HandKinematics& h, double t, const State& y,
+                                       int hand_piece) const {
+  const RollingProblem& pb = *problem_;
+  const CurveGeometry g = pb.hand->geometry(y[0], hand_piece);
+  const DiskTerms d = disk_terms(pb, r_, side_, h, g, y[2]);
+  const double m = pb.object.mass;
+  const double f_n = normal_force(pb, d);
+  const double f_t = -pb.contact.kinetic() * phase_.sign * f_n;
+  const double sdd =
+      ((f_t - pb.contact.drag * d.velocity.dot(d.T)) / m - d.along - d.sigma_ds * y[2] * y[2]) /
+      d.sigma;
+  Sample out;
+  fill_hand(out, t, h);
+  out.s_h = y[0];
+  out.sdot_h = y[2];
+  out.sddot_h = sdd;
+  out.object_angle = y[1];
+  out.s_o = wrap_pi(angle_of(-d.N) - y[1]);
+  // The contact point moves over the disk at the rate the normal turns relative to it.
+  out.sdot_o = h.angular_velocity - side_ * g.curvature * g.speed * y[2] - y[3];
+  out.object_position = h.position + d.R * d.q;
+  out.object_velocity = d.velocity;
+  out.object_angular_velocity = y[3];
+  fill_forces(out, pb, centre_acceleration(h, g, d, y[2], sdd), d.N, d.T, d.velocity);
+  out.mode = ContactMode::kSliding;
+  out.slip_velocity = d.sigma * y[2] + side_ * r_ * (y[3] - h.angular_velocity);
+  out.rolling_couple = -pb.contact.rolling_resistance * phase_.turn * f_n;
+  out.object_angular_acceleration =
+      (side_ * r_ * f_t + out.rolling_couple - pb.contact.drag_angular * y[3]) / pb.object.inertia;
   return out;
 }
 

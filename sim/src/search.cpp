@@ -32,7 +32,7 @@ RunOptions search_options(const SimulationSpec& spec, double t_end) {
   o.t_end = t_end;
   o.record = false;
   o.events.stop_on_contact_loss = false;  // rolling is enforced; forces are checked afterwards
-  o.events.mu.reset();
+  o.events.stop_on_slip = false;
   // Past the mirrored tips (|s_h| = 3 is the far side of the outline) the disk has rolled off
   // around the hand; stopping there keeps s_h(T) continuous (it ends at the bound) and avoids
   // integrating an enforced roll that spins ever faster.
@@ -144,7 +144,7 @@ void check_root_is_continuous(const std::function<double(double)>& f, const Root
 
 double half_period_s_h(const SimulationSpec& spec, double period, double k, long* rhs_evals) {
   check_period(period);
-  SimulationSpec s = spec;
+  SimulationSpec s = paper_model(spec);
   s.motion.kind = MotionSpec::Kind::kButterfly;
   s.motion.period = period;
   s.motion.k = k;
@@ -153,7 +153,7 @@ double half_period_s_h(const SimulationSpec& spec, double period, double k, long
 
 SolveReport evaluate(const SimulationSpec& spec, double period, double k) {
   check_period(period);
-  SimulationSpec s = spec;
+  SimulationSpec s = paper_model(spec);
   s.motion.kind = MotionSpec::Kind::kButterfly;
   s.motion.period = period;
   s.motion.k = k;
@@ -214,7 +214,7 @@ SolveReport solve_k_from(const SimulationSpec& spec,
 
 SolveReport solve_k(const SimulationSpec& spec, double period, const SearchSettings& set) {
   check_period(period);
-  SimulationSpec s = spec;
+  SimulationSpec s = paper_model(spec);
   s.motion.kind = MotionSpec::Kind::kButterfly;
   s.motion.period = period;
   return solve_k_from(s, build_problem(s), period, spec.motion.k, set);
@@ -223,7 +223,7 @@ SolveReport solve_k(const SimulationSpec& spec, double period, const SearchSetti
 SolveReport solve_d(const SimulationSpec& spec, double period, double k,
                     const SearchSettings& set) {
   check_period(period);
-  SimulationSpec s = spec;
+  SimulationSpec s = paper_model(spec);
   s.motion.kind = MotionSpec::Kind::kButterfly;
   s.motion.period = period;
   s.motion.k = k;
@@ -262,7 +262,7 @@ std::vector<SolveReport> locus(const SimulationSpec& spec, double from, double t
   check_period(to);
   if (n < 1) throw std::invalid_argument("n: must be at least 1");
   if (n > 1 && !(to > from)) throw std::invalid_argument("to: must be larger than from");
-  SimulationSpec s = spec;
+  SimulationSpec s = paper_model(spec);
   s.motion.kind = MotionSpec::Kind::kButterfly;
   const auto base = build_problem(s);
   std::vector<SolveReport> out;
@@ -287,7 +287,7 @@ SurfaceResult surface(const SimulationSpec& spec, double k_lo, double k_hi, int 
   check_period(p_lo);
   check_period(p_hi);
   if (!(p_hi > p_lo)) throw std::invalid_argument("period-to: must be larger than period-from");
-  SimulationSpec s = spec;
+  SimulationSpec s = paper_model(spec);
   s.motion.kind = MotionSpec::Kind::kButterfly;
   const auto base = build_problem(s);
   SurfaceResult res;
@@ -334,7 +334,7 @@ TimeOptimalReport time_optimal(const SimulationSpec& spec, double lo, double hi,
   check_period(lo);
   check_period(hi);
   if (!(hi > lo)) throw std::invalid_argument("to: must be larger than from");
-  SimulationSpec s = spec;
+  SimulationSpec s = paper_model(spec);
   s.motion.kind = MotionSpec::Kind::kButterfly;
   const auto base = build_problem(s);
   TimeOptimalReport rep;

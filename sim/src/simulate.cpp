@@ -1,6 +1,9 @@
 #include "flatland/sim/simulate.hpp"
 
+#include "flatland/sim/hybrid.hpp"
 #include "flatland/sim/roots.hpp"
+
+#include "integration.hpp"
 
 #include <algorithm>
 #include <array>
@@ -42,6 +45,43 @@ std::string to_string(StopReason r) {
       return "slip";
     case StopReason::kLeftBounds:
       return "left_bounds";
+    case StopReason::kDropped:
+      return "dropped";
+    case StopReason::kTransition:
+      return "transition";
+  }
+  return "?";
+}
+std::string to_string(EventKind k) {
+  switch (k) {
+    case EventKind::kJunction:
+      return "junction";
+    case EventKind::kContactLost:
+      return "contact_lost";
+    case EventKind::kSlip:
+      return "slip";
+    case EventKind::kLeftBounds:
+      return "left_bounds";
+    case EventKind::kApex:
+      return "apex";
+    case EventKind::kLiftOff:
+      return "lift_off";
+    case EventKind::kSlipStart:
+      return "slip_start";
+    case EventKind::kSlipReverse:
+      return "slip_reverse";
+    case EventKind::kStick:
+      return "stick";
+    case EventKind::kRest:
+      return "rest";
+    case EventKind::kRelease:
+      return "release";
+    case EventKind::kImpact:
+      return "impact";
+    case EventKind::kDropped:
+      return "dropped";
+    case EventKind::kTurn:
+      return "turn";
   }
   return "?";
 }
@@ -59,41 +99,98 @@ Formulation resolve_formulation(const RollingProblem& problem, Formulation reque
 // ---------------------------------------------------------------------------------------------
 // Trajectory
 
-void Trajectory::append(double t0, double h, const Pieces& p, const double* coeffs) {
-  steps_.push_back({t0, h, p});
-  coeffs_.insert(coeffs_.end(), coeffs, coeffs + terms_ * n_);
+bool Trajectory::empty() const {
+  for (const Part& p : parts_)
+    if (!p.steps.empty() || p.closed) return false;
+  return true;
 }
 
-std::size_t Trajectory::find(double t) const {
-  if (steps_.empty()) throw std::logic_error("trajectory: empty (run was not recorded)");
-  auto it = std::upper_bound(steps_.begin(), steps_.end(), t,
+double Trajectory::t_begin() const {
+  for (const Part& p : parts_)
+    if (!p.steps.empty() || p.closed) return p.t0;
+  throw std::logic_error("trajectory: empty (run was not recorded)");
+}
+
+double Trajectory::t_end() const {
+  for (auto it = parts_.rbegin(); it != parts_.rend(); ++it)
+    if (!it->steps.empty() || it->closed) return it->t1;
+  throw std::logic_error("trajectory: empty (run was not recorded)");
+}
+
+void Trajectory::begin_part(int dimension, Sampler sampler, int terms, int s_h_index) {
+  Part p;
+  p.n = dimension;
+  p.terms = terms;
+  p.s_h_index = s_h_index;
+  p.sampler = std::move(sampler);
+  parts_.push_back(std::move(p));
+}
+
+void Trajectory::append(double t0, double h, const Pieces& pieces, const double* coeffs) {
+  if (parts_.empty() || parts_.back().closed)
+    throw std::logic_error("trajectory: append without an open integrated part");
+  Part& p = parts_.back();
+  if (p.steps.empty()) p.t0 = t0;
+  p.t1 = t0 + h;
+  p.steps.push_back({t0, h, pieces});
+  p.coeffs.insert(p.coeffs.end(), coeffs, coeffs + p.terms * p.n);
+}
+
+void Trajectory::add_closed_part(double t0, double t1, Closed f) {
+  Part p;
+  p.t0 = t0;
+  p.t1 = t1;
+  p.closed = std::move(f);
+  parts_.push_back(std::move(p));
+}
+
+const Trajectory::Part& Trajectory::part_at(double t) const {
+  // The last non-empty part that starts at or before t: right-continuous at the instants
+  // where one part ends and the next begins (an impact changes the velocities there).
+  const Part* found = nullptr;
+  for (const Part& p : parts_) {
+    if (p.steps.empty() && !p.closed) continue;
+    if (!found || p.t0 <= t) found = &p;
+    if (p.t0 > t) break;
+  }
+  if (!found) throw std::logic_error("trajectory: empty (run was not recorded)");
+  return *found;
+}
+
+std::size_t Trajectory::Part::find(double t) const {
+  auto it = std::upper_bound(steps.begin(), steps.end(), t,
                              [](double v, const Step& s) { return v < s.t0; });
-  return it == steps_.begin() ? 0 : static_cast<std::size_t>(it - steps_.begin() - 1);
+  return it == steps.begin() ? 0 : static_cast<std::size_t>(it - steps.begin() - 1);
 }
 
-void Trajectory::interpolate(std::size_t i, double t, double* y) const {
-  const Step& s = steps_[i];
+void Trajectory::Part::interpolate(std::size_t i, double t, double* y) const {
+  const Step& s = steps[i];
   const double th = std::clamp((t - s.t0) / s.h, 0.0, 1.0), th1 = 1.0 - th;
-  const double* c = coeffs_.data() + static_cast<std::size_t>(terms_ * n_) * i;
-  for (int k = 0; k < n_; ++k) {
+  const double* c = coeffs.data() + static_cast<std::size_t>(terms * n) * i;
+  for (int k = 0; k < n; ++k) {
     // Horner from the innermost term outwards: term j multiplies the rest by th1 (odd j) or th.
-    double v = c[(terms_ - 1) * n_ + k];
-    for (int j = terms_ - 2; j >= 1; --j) v = c[j * n_ + k] + (j % 2 == 1 ? th1 : th) * v;
+    double v = c[(terms - 1) * n + k];
+    for (int j = terms - 2; j >= 1; --j) v = c[j * n + k] + (j % 2 == 1 ? th1 : th) * v;
     y[k] = c[k] + th * v;
   }
 }
 
 Sample Trajectory::sample(double t) const {
-  const std::size_t i = find(t);
+  const Part& p = part_at(t);
+  const double tc = std::clamp(t, t_begin(), t_end());
+  if (p.closed) return p.closed(std::clamp(tc, p.t0, p.t1));
+  const std::size_t i = p.find(t);
   std::array<double, 16> y{};
-  interpolate(i, t, y.data());
-  return sampler_(std::clamp(t, t_begin(), t_end()), y.data(), steps_[i].pieces);
+  p.interpolate(i, t, y.data());
+  return p.sampler(std::clamp(tc, p.t0, p.t1), y.data(), p.steps[i].pieces);
 }
 
 double Trajectory::s_h(double t) const {
+  const Part& p = part_at(t);
+  if (p.closed) return p.closed(std::clamp(t, p.t0, p.t1)).s_h;
   std::array<double, 16> y{};
-  interpolate(find(t), t, y.data());
-  return y[s_h_index_];
+  p.interpolate(p.find(t), t, y.data());
+  return y[p.s_h_index];
 }
 
 std::vector<Sample> Trajectory::resample(double dt) const {
@@ -107,633 +204,25 @@ std::vector<Sample> Trajectory::resample(double dt) const {
 }
 
 // ---------------------------------------------------------------------------------------------
-namespace {
 
-// Dormand-Prince 5(4) tableau (Hairer, Norsett, Wanner: DOPRI5).
-constexpr double c2 = 1.0 / 5, c3 = 3.0 / 10, c4 = 4.0 / 5, c5 = 8.0 / 9;
-constexpr double a21 = 1.0 / 5;
-constexpr double a31 = 3.0 / 40, a32 = 9.0 / 40;
-constexpr double a41 = 44.0 / 45, a42 = -56.0 / 15, a43 = 32.0 / 9;
-constexpr double a51 = 19372.0 / 6561, a52 = -25360.0 / 2187, a53 = 64448.0 / 6561,
-                 a54 = -212.0 / 729;
-constexpr double a61 = 9017.0 / 3168, a62 = -355.0 / 33, a63 = 46732.0 / 5247, a64 = 49.0 / 176,
-                 a65 = -5103.0 / 18656;
-constexpr double a71 = 35.0 / 384, a73 = 500.0 / 1113, a74 = 125.0 / 192, a75 = -2187.0 / 6784,
-                 a76 = 11.0 / 84;
-constexpr double e1 = 71.0 / 57600, e3 = -71.0 / 16695, e4 = 71.0 / 1920, e5 = -17253.0 / 339200,
-                 e6 = 22.0 / 525, e7 = -1.0 / 40;
-constexpr double d1 = -12715105075.0 / 11282082432, d3 = 87487479700.0 / 32700410799,
-                 d4 = -10690763975.0 / 1880347072, d5 = 701980252875.0 / 199316789632,
-                 d6 = -1453857185.0 / 822651844, d7 = 69997945.0 / 29380423;
-
-// Dormand-Prince 8(5,3) (Hairer, Norsett, Wanner, Solving ODEs I, and Hairer's DOP853): 12
-// stages, stage 13 = f(t + h, y1) (FSAL), stages 14-16 only for the dense output. Indices are
-// 0-based stages.
-namespace dop853 {
-constexpr int kStages = 12;
-constexpr std::array<double, 16> c = {0.0,
-                                      0.526001519587677318785587544488e-01,
-                                      0.789002279381515978178381316732e-01,
-                                      0.118350341907227396726757197510,
-                                      0.281649658092772603273242802490,
-                                      0.333333333333333333333333333333,
-                                      0.25,
-                                      0.307692307692307692307692307692,
-                                      0.651282051282051282051282051282,
-                                      0.6,
-                                      0.857142857142857142857142857142,
-                                      1.0,
-                                      1.0,
-                                      0.1,
-                                      0.2,
-                                      0.777777777777777777777777777778};
-// a[i][j], j < i; rows 13-15 are the dense-output stages (they use stage 12 = f(t + h, y1)).
-constexpr double a[16][16] = {
-    {},
-    {5.26001519587677318785587544488e-2},
-    {1.97250569845378994544595329183e-2, 5.91751709536136983633785987549e-2},
-    {2.95875854768068491816892993775e-2, 0, 8.87627564304205475450678981324e-2},
-    {2.41365134159266685502369798665e-1, 0, -8.84549479328286085344864962717e-1,
-     9.24834003261792003115737966543e-1},
-    {3.7037037037037037037037037037e-2, 0, 0, 1.70828608729473871279604482173e-1,
-     1.25467687566822425016691814123e-1},
-    {3.7109375e-2, 0, 0, 1.70252211019544039314978060272e-1, 6.02165389804559606850219397283e-2,
-     -1.7578125e-2},
-    {3.70920001185047927108779319836e-2, 0, 0, 1.70383925712239993810214054705e-1,
-     1.07262030446373284651809199168e-1, -1.53194377486244017527936158236e-2,
-     8.27378916381402288758473766002e-3},
-    {6.24110958716075717114429577812e-1, 0, 0, -3.36089262944694129406857109825,
-     -8.68219346841726006818189891453e-1, 2.75920996994467083049415600797e1,
-     2.01540675504778934086186788979e1, -4.34898841810699588477366255144e1},
-    {4.77662536438264365890433908527e-1, 0, 0, -2.48811461997166764192642586468,
-     -5.90290826836842996371446475743e-1, 2.12300514481811942347288949897e1,
-     1.52792336328824235832596922938e1, -3.32882109689848629194453265587e1,
-     -2.03312017085086261358222928593e-2},
-    {-9.3714243008598732571704021658e-1, 0, 0, 5.18637242884406370830023853209,
-     1.09143734899672957818500254654, -8.14978701074692612513997267357,
-     -1.85200656599969598641566180701e1, 2.27394870993505042818970056734e1,
-     2.49360555267965238987089396762, -3.0467644718982195003823669022},
-    {2.27331014751653820792359768449, 0, 0, -1.05344954667372501984066689879e1,
-     -2.00087205822486249909675718444, -1.79589318631187989172765950534e1,
-     2.79488845294199600508499808837e1, -2.85899827713502369474065508674,
-     -8.87285693353062954433549289258, 1.23605671757943030647266201528e1,
-     6.43392746015763530355970484046e-1},
-    // row 12: the 8th-order weights b
-    {5.42937341165687622380535766363e-2, 0, 0, 0, 0, 4.45031289275240888144113950566,
-     1.89151789931450038304281599044, -5.8012039600105847814672114227,
-     3.1116436695781989440891606237e-1, -1.52160949662516078556178806805e-1,
-     2.01365400804030348374776537501e-1, 4.47106157277725905176885569043e-2},
-    {5.61675022830479523392909219681e-2, 0, 0, 0, 0, 0, 2.53500210216624811088794765333e-1,
-     -2.46239037470802489917441475441e-1, -1.24191423263816360469010140626e-1,
-     1.5329179827876569731206322685e-1, 8.20105229563468988491666602057e-3,
-     7.56789766054569976138603589584e-3, -8.298e-3},
-    {3.18346481635021405060768473261e-2, 0, 0, 0, 0, 2.83009096723667755288322961402e-2,
-     5.35419883074385676223797384372e-2, -5.49237485713909884646569340306e-2, 0, 0,
-     -1.08347328697249322858509316994e-4, 3.82571090835658412954920192323e-4,
-     -3.40465008687404560802977114492e-4, 1.41312443674632500278074618366e-1},
-    {-4.28896301583791923408573538692e-1, 0, 0, 0, 0, -4.69762141536116384314449447206,
-     7.68342119606259904184240953878, 4.06898981839711007970213554331,
-     3.56727187455281109270669543021e-1, 0, 0, 0, -1.39902416515901462129418009734e-3,
-     2.9475147891527723389556272149, -9.15095847217987001081870187138}};
-// 5th-order error weights (stages 0-11).
-constexpr std::array<double, 12> err5 = {0.1312004499419488073250102996e-1,
-                                         0,
-                                         0,
-                                         0,
-                                         0,
-                                         -0.1225156446376204440720569753e1,
-                                         -0.4957589496572501915214079952,
-                                         0.1664377182454986536961530415e1,
-                                         -0.3503288487499736816886487290,
-                                         0.3341791187130174790297318841,
-                                         0.8192320648511571246570742613e-1,
-                                         -0.2235530786388629525884427845e-1};
-// The 3rd-order estimate is b minus these (stages 0, 8, 11).
-constexpr double bhh1 = 0.244094488188976377952755905512, bhh2 = 0.733846688281611857341361741547,
-                 bhh3 = 0.220588235294117647058823529412e-1;
-// Dense output: coefficients 4-7 of the interpolant are h * d[i] . k over the 16 stages.
-constexpr double d[4][16] = {
-    {-0.84289382761090128651353491142e1, 0, 0, 0, 0, 0.56671495351937776962531783590,
-     -0.30689499459498916912797304727e1, 0.23846676565120698287728149680e1,
-     0.21170345824450282767155149946e1, -0.87139158377797299206789907490,
-     0.22404374302607882758541771650e1, 0.63157877876946881815570249290,
-     -0.88990336451333310820698117400e-1, 0.18148505520854727256656404962e2,
-     -0.91946323924783554000451984436e1, -0.44360363875948939664310572000e1},
-    {0.10427508642579134603413151009e2, 0, 0, 0, 0, 0.24228349177525818288430175319e3,
-     0.16520045171727028198505394887e3, -0.37454675472269020279518312152e3,
-     -0.22113666853125306036270938578e2, 0.77334326684722638389603898808e1,
-     -0.30674084731089398182061213626e2, -0.93321305264302278729567221706e1,
-     0.15697238121770843886131091075e2, -0.31139403219565177677282850411e2,
-     -0.93529243588444783865713862664e1, 0.35816841486394083752465898540e2},
-    {0.19985053242002433820987653617e2, 0, 0, 0, 0, -0.38703730874935176555105901742e3,
-     -0.18917813819516756882830838328e3, 0.52780815920542364900561016686e3,
-     -0.11573902539959630126141871134e2, 0.68812326946963000169666922661e1,
-     -0.10006050966910838403183860980e1, 0.77771377980534432092869265740,
-     -0.27782057523535084065932004339e1, -0.60196695231264120758267380846e2,
-     0.84320405506677161018159903784e2, 0.11992291136182789328035130030e2},
-    {-0.25693933462703749003312586129e2, 0, 0, 0, 0, -0.15418974869023643374053993627e3,
-     -0.23152937917604549567536039109e3, 0.35763911791061412378285349910e3,
-     0.93405324183624310003907691704e2, -0.37458323136451633156875139351e2,
-     0.10409964950896230045147246184e3, 0.29840293426660503123344363579e2,
-     -0.43533456590011143754432175058e2, 0.96324553959188282948394950600e2,
-     -0.39177261675615439165231486172e2, -0.14972683625798562581422125276e3}};
-}  // namespace dop853
-
-std::string at_text(double t, double s_h) {
-  std::ostringstream os;
-  os.precision(10);
-  os << "at t=" << t << " s (s_h=" << s_h << ")";
-  return os.str();
-}
-
-template <class Model>
-class Integration {
- public:
-  using State = typename Model::State;
-  static constexpr int N = Model::N;
-  using Dense = std::array<State, 8>;  // interpolant coefficients (5 used unless dop853)
-
-  Integration(const Model& model, const RunOptions& opt, RunResult& res)
-      : model_(model), opt_(opt), res_(res), st_(res.stats) {}
-
-  void run(const InitialContact& init);
-
- private:
-  void rhs(double t, const State& y, State& dy) {
-    model_.derivative(t, y, pieces_, dy);
-    ++st_.rhs_evals;
-  }
-  using Stages853 = std::array<State, 16>;
-  /// One step of size h from (t, y) with k1 = f(t, y): y1, k7 = f(t + h, y1) and the scaled
-  /// error norm (0 for RK4), and the dense output in `rc` except for DOP853, whose three extra
-  /// stages are paid only for accepted recorded steps (dense_dop853). `trial` steps (event
-  /// location on the step map) keep DOP853's stages out of the step's own (k853_).
-  double attempt(double t, const State& y, const State& k1, double h, State& y1, State& k7,
-                 Dense& rc, bool trial = false);
-  double attempt_dop853(double t, const State& y, const State& k1, double h, State& y1, State& k13,
-                        Stages853& k);
-  /// DOP853's 7th-order interpolant of the last non-trial attempt (from k853_).
-  void dense_dop853(double t, const State& y, const State& y1, double h, Dense& rc);
-  double initial_step(double t, const State& y, const State& f0, double t_stop);
-  Sample sample(double t, const State& y) {
-    ++st_.event_evals;
-    return model_.sample(t, y, pieces_);
-  }
-  void record(double t, const State& y, const Sample* s);
-  void finish();
-
-  const Model& model_;
-  const RunOptions& opt_;
-  RunResult& res_;
-  RunStats& st_;
-  Pieces pieces_;
-  Stages853 k853_;
-};
-
-template <class Model>
-double Integration<Model>::attempt_dop853(double t, const State& y, const State& k1, double h,
-                                          State& y1, State& k13, Stages853& k) {
-  using namespace dop853;
-  k[0] = k1;
-  for (int i = 1; i < kStages; ++i) {
-    State yi = y;
-    for (int j = 0; j < i; ++j)
-      if (a[i][j] != 0) yi += (h * a[i][j]) * k[j];
-    rhs(t + c[i] * h, yi, k[i]);
-  }
-  y1 = y;
-  for (int j = 0; j < kStages; ++j)
-    if (a[kStages][j] != 0) y1 += (h * a[kStages][j]) * k[j];
-  rhs(t + h, y1, k[12]);
-  k13 = k[12];
-  // Hairer's error norm: the 5th-order estimate err5 ~ h^6, damped by the 3rd-order one
-  // err3 ~ h^4 as err5^2 / sqrt(err5^2 + 0.01 err3^2) ~ h^8, so that the step size follows the
-  // 8th-order solution's own error (steps ~ tol^(-1/8)) instead of the 5th-order estimate's.
-  const double rtol = opt_.integrator.rtol, atol = opt_.integrator.atol;
-  double s5 = 0, s3 = 0;
-  for (int n = 0; n < N; ++n) {
-    const double sk = atol + rtol * std::max(std::abs(y[n]), std::abs(y1[n]));
-    double e5n = 0, bn = 0;
-    for (int j = 0; j < kStages; ++j) {
-      e5n += err5[j] * k[j][n];
-      bn += a[kStages][j] * k[j][n];
-    }
-    const double e3n = bn - bhh1 * k[0][n] - bhh2 * k[8][n] - bhh3 * k[11][n];
-    s5 += (e5n / sk) * (e5n / sk);
-    s3 += (e3n / sk) * (e3n / sk);
-  }
-  double deno = s5 + 0.01 * s3;
-  if (deno <= 0) deno = 1;
-  const double e = std::abs(h) * s5 / std::sqrt(N * deno);
-  return std::isfinite(e) && y1.allFinite() ? e : std::numeric_limits<double>::infinity();
-}
-
-template <class Model>
-void Integration<Model>::dense_dop853(double t, const State& y, const State& y1, double h,
-                                      Dense& rc) {
-  using namespace dop853;
-  Stages853& k = k853_;
-  for (int i = kStages + 1; i < 16; ++i) {
-    State yi = y;
-    for (int j = 0; j < i; ++j)
-      if (a[i][j] != 0) yi += (h * a[i][j]) * k[j];
-    rhs(t + c[i] * h, yi, k[i]);
-  }
-  rc[0] = y;
-  rc[1] = y1 - y;
-  rc[2] = h * k[0] - rc[1];
-  rc[3] = rc[1] - h * k[12] - rc[2];
-  for (int r = 0; r < 4; ++r) {
-    rc[4 + r].setZero();
-    for (int j = 0; j < 16; ++j)
-      if (d[r][j] != 0) rc[4 + r] += (h * d[r][j]) * k[j];
-  }
-}
-
-template <class Model>
-double Integration<Model>::attempt(double t, const State& y, const State& k1, double h, State& y1,
-                                   State& k7, Dense& rc, bool trial) {
-  if (opt_.integrator.method == Method::kDormandPrince853) {
-    if (!trial) return attempt_dop853(t, y, k1, h, y1, k7, k853_);
-    Stages853 scratch;
-    return attempt_dop853(t, y, k1, h, y1, k7, scratch);
-  }
-  if (opt_.integrator.method == Method::kRungeKutta4) {
-    State k2, k3, k4;
-    rhs(t + 0.5 * h, y + 0.5 * h * k1, k2);
-    rhs(t + 0.5 * h, y + 0.5 * h * k2, k3);
-    rhs(t + h, y + h * k3, k4);
-    y1 = y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4);
-    rhs(t + h, y1, k7);  // reused as the next step's k1; gives the Hermite dense output
-    rc[0] = y;
-    rc[1] = y1 - y;
-    rc[2] = h * k1 - rc[1];
-    rc[3] = rc[1] - h * k7 - rc[2];
-    rc[4].setZero();
-    return 0.0;
-  }
-  State k2, k3, k4, k5, k6;
-  rhs(t + c2 * h, y + h * (a21 * k1), k2);
-  rhs(t + c3 * h, y + h * (a31 * k1 + a32 * k2), k3);
-  rhs(t + c4 * h, y + h * (a41 * k1 + a42 * k2 + a43 * k3), k4);
-  rhs(t + c5 * h, y + h * (a51 * k1 + a52 * k2 + a53 * k3 + a54 * k4), k5);
-  rhs(t + h, y + h * (a61 * k1 + a62 * k2 + a63 * k3 + a64 * k4 + a65 * k5), k6);
-  y1 = y + h * (a71 * k1 + a73 * k3 + a74 * k4 + a75 * k5 + a76 * k6);
-  rhs(t + h, y1, k7);
-  const State err = h * (e1 * k1 + e3 * k3 + e4 * k4 + e5 * k5 + e6 * k6 + e7 * k7);
-  const double rtol = opt_.integrator.rtol, atol = opt_.integrator.atol;
-  double sum = 0;
-  for (int i = 0; i < N; ++i) {
-    const double sk = atol + rtol * std::max(std::abs(y[i]), std::abs(y1[i]));
-    sum += (err[i] / sk) * (err[i] / sk);
-  }
-  rc[0] = y;
-  rc[1] = y1 - y;
-  rc[2] = h * k1 - rc[1];
-  rc[3] = rc[1] - h * k7 - rc[2];
-  rc[4] = h * (d1 * k1 + d3 * k3 + d4 * k4 + d5 * k5 + d6 * k6 + d7 * k7);
-  const double e = std::sqrt(sum / N);
-  return std::isfinite(e) && y1.allFinite() ? e : std::numeric_limits<double>::infinity();
-}
-
-// Hairer's starting step size heuristic.
-template <class Model>
-double Integration<Model>::initial_step(double t, const State& y, const State& f0, double t_stop) {
-  const double rtol = opt_.integrator.rtol, atol = opt_.integrator.atol;
-  double dnf = 0, dny = 0;
-  for (int i = 0; i < N; ++i) {
-    const double sk = atol + rtol * std::abs(y[i]);
-    dnf += (f0[i] / sk) * (f0[i] / sk);
-    dny += (y[i] / sk) * (y[i] / sk);
-  }
-  double h = (dnf <= 1e-10 || dny <= 1e-10) ? 1e-6 : std::sqrt(dny / dnf) * 0.01;
-  h = std::min({h, opt_.integrator.max_step, t_stop - t});
-  State f1;
-  rhs(t + h, y + h * f0, f1);
-  double der2 = 0;
-  for (int i = 0; i < N; ++i) {
-    const double sk = atol + rtol * std::abs(y[i]);
-    der2 += ((f1[i] - f0[i]) / sk) * ((f1[i] - f0[i]) / sk);
-  }
-  der2 = std::sqrt(der2) / h;
-  const double der12 = std::max(std::abs(der2), std::sqrt(dnf));
-  const double order = opt_.integrator.method == Method::kDormandPrince853 ? 8.0 : 5.0;
-  const double h1 = der12 <= 1e-15 ? std::max(1e-6, h * 1e-3) : std::pow(0.01 / der12, 1.0 / order);
-  return std::min({100 * h, h1, opt_.integrator.max_step});
-}
-
-template <class Model>
-void Integration<Model>::record(double t, const State& y, const Sample* s) {
-  if (!opt_.record) return;
-  res_.steps.push_back(s ? *s : sample(t, y));
-}
-
-template <class Model>
-void Integration<Model>::run(const InitialContact& init) {
-  const IntegratorSettings& is = opt_.integrator;
-  const EventSettings& ev = opt_.events;
+void validate_run_options(const RunOptions& o, double t0) {
+  const IntegratorSettings& is = o.integrator;
   const bool rk4 = is.method == Method::kRungeKutta4;
-  const bool dop853 = is.method == Method::kDormandPrince853;
-  const int terms = dop853 ? 8 : 5;
   if (rk4 && !(is.fixed_step > 0 && std::isfinite(is.fixed_step)))
     throw std::invalid_argument("integrator.step: must be positive and finite");
   if (!rk4 &&
       (!(is.rtol > 0) || !(is.atol > 0) || !std::isfinite(is.rtol) || !std::isfinite(is.atol)))
     throw std::invalid_argument("integrator.rtol/atol: must be positive and finite");
-  if (!std::isfinite(init.s_h) || !std::isfinite(init.sdot_h) || !std::isfinite(init.t0))
-    throw std::invalid_argument("initial: s_h, sdot_h and t0 must be finite");
-  if (!(opt_.t_end > init.t0) || !std::isfinite(opt_.t_end))
+  if (!std::isfinite(t0)) throw std::invalid_argument("initial: t0 must be finite");
+  if (!(o.t_end > t0) || !std::isfinite(o.t_end))
     throw std::invalid_argument("duration: the end time must be finite and after the start");
-  if (ev.mu && !(*ev.mu >= 0)) throw std::invalid_argument("contact.mu: must be >= 0");
-
-  double t = init.t0;
-  State y = model_.initial_state(init);
-  // Direction of travel decides which piece is active when starting on a junction; at rest the
-  // initial acceleration decides.
-  int dir = model_.sdot_h(y) < 0 ? -1 : +1;
-  const int motion_segment = model_.problem().motion->segment_at(t);
-  if (model_.sdot_h(y) == 0) {
-    pieces_ = model_.pieces_for(y, +1);
-    pieces_.motion = motion_segment;
-    State dy;
-    rhs(t, y, dy);
-    const double sdd = model_.sdot_h(dy);  // the rate slot of the derivative holds sddot_h
-    dir = sdd < 0 ? -1 : +1;
-  }
-  pieces_ = model_.pieces_for(y, dir);
-  pieces_.motion = motion_segment;
-  model_.project(t, y, pieces_);
-
-  if (opt_.record) {
-    res_.trajectory = Trajectory(
-        N,
-        [m = model_](double tt, const double* yy, const Pieces& p) {
-          State s = Eigen::Map<const State>(yy);
-          m.project(tt, s, p);
-          return m.sample(tt, s, p);
-        },
-        terms);
-    res_.trajectory.set_s_h_index(N == 3 ? 0 : 4);
-  }
-  res_.initial = sample(t, y);
-  record(t, y, &res_.initial);
-  if (ev.stop_on_contact_loss && res_.initial.force_normal < 0) {
-    res_.reason = StopReason::kContactLost;
-    res_.events.push_back({"contact_lost", t, model_.s_h(y)});
-    res_.final = res_.initial;
-    finish();
-    return;
-  }
-
-  std::vector<double> stops;
-  for (double b : model_.problem().motion->breakpoints())
-    if (b > t && b < opt_.t_end) stops.push_back(b);
-  std::sort(stops.begin(), stops.end());
-  stops.push_back(opt_.t_end);
-
-  State k1, y1, k7;
-  Dense rc;
-  bool need_k1 = true;
-  double h = rk4 ? is.fixed_step : 0.0;
-  double facold = 1e-4;  // PI step-size controller memory
-  bool last_rejected = false;
-  bool stopped = false;
-  int zero_progress = 0;
-  const bool need_force = ev.stop_on_contact_loss || ev.mu.has_value();
-
-  for (double t_stop : stops) {
-    while (t < t_stop && !stopped) {
-      if (need_k1) {
-        rhs(t, y, k1);
-        need_k1 = false;
-        if (!rk4 && h == 0.0) h = initial_step(t, y, k1, t_stop);
-      }
-      double h_try = rk4 ? is.fixed_step : std::min(h, is.max_step);
-      if (t + 1.01 * h_try >= t_stop) h_try = t_stop - t;  // land exactly on the stop
-      if (st_.steps + st_.rejected >= is.max_steps)
-        throw std::runtime_error("integrator: step budget (" + std::to_string(is.max_steps) +
-                                 ") exhausted " + at_text(t, model_.s_h(y)));
-      const double err = attempt(t, y, k1, h_try, y1, k7, rc);
-      if (!rk4 && err > 1.0) {
-        ++st_.rejected;
-        last_rejected = true;
-        h = h_try * (!std::isfinite(err) ? 0.1
-                     : dop853            ? std::max(1.0 / 3.0, 0.9 * std::pow(err, -1.0 / 8.0))
-                                         : std::max(0.2, 0.9 * std::pow(err, -0.2)));
-        if (h < 1e-14 * std::max(1.0, std::abs(t)))
-          throw std::runtime_error("integrator: step size underflow " + at_text(t, model_.s_h(y)) +
-                                   " (singular or non-finite dynamics)");
-        continue;
-      }
-      if (!y1.allFinite())
-        throw std::runtime_error("integrator: non-finite state " + at_text(t, model_.s_h(y)) +
-                                 " (reduce integrator.step)");
-      double t1 = (h_try == t_stop - t) ? t_stop : t + h_try;
-      State y1p = y1;
-      double drift = model_.project(t1, y1p, pieces_);
-
-      // ---- events on (t, t1] ----
-      const PieceInterval iv = model_.problem().hand->piece_interval(pieces_.hand);
-      const double s1 = model_.s_h(y1p);
-      enum Kind { kNone, kJunction, kContact, kSlip, kBounds } kind = kNone;
-      double t_event = t1, junction = 0;
-      // Events are located on the integrator's own step map, h -> step(y, h), rather than on the
-      // dense output: the step that then ends on the event lands on it by construction (a coarse
-      // fixed step's Hermite interpolant can be far off), and g(h_try) is exactly g1.
-      const double h_full = h_try;
-      auto step_state = [&](double hh) {
-        State out, k7_unused;
-        Dense rc_unused;
-        attempt(t, y, k1, hh, out, k7_unused, rc_unused, true);
-        model_.project(t + hh, out, pieces_);
-        return out;
-      };
-      auto locate = [&](const std::function<double(const State&, double)>& g, double g0,
-                        double g1) {
-        return t + brent_root([&](double hh) { return g(step_state(hh), t + hh); }, 0.0, h_full, g0,
-                              g1, ev.time_tolerance)
-                       .x;
-      };
-      if (s1 > iv.hi || s1 < iv.lo) {
-        junction = s1 > iv.hi ? iv.hi : iv.lo;
-        const double g0 = model_.s_h(y) - junction, g1 = s1 - junction;
-        // A previous crossing may have landed a rounding error short of its junction; if the
-        // disk turns back right there, it is already across at the start of this step.
-        const double tj =
-            (g0 > 0) == (g1 > 0) || g0 == 0
-                ? t
-                : locate([&](const State& s, double) { return model_.s_h(s) - junction; }, g0, g1);
-        if (tj < t_event || kind == kNone) t_event = tj, kind = kJunction;
-      }
-      if (ev.s_h_bounds && (s1 < ev.s_h_bounds->first || s1 > ev.s_h_bounds->second)) {
-        const double bound =
-            s1 < ev.s_h_bounds->first ? ev.s_h_bounds->first : ev.s_h_bounds->second;
-        const double g0 = model_.s_h(y) - bound, g1 = s1 - bound;
-        const double tb =
-            (g0 > 0) == (g1 > 0) || g0 == 0
-                ? t
-                : locate([&](const State& s, double) { return model_.s_h(s) - bound; }, g0, g1);
-        if (tb < t_event || kind == kNone) t_event = tb, kind = kBounds;
-      }
-      Sample s_end;
-      bool have_end = false;
-      if (need_force) {
-        s_end = sample(t1, y1p);
-        have_end = true;
-        const Sample s0 = res_.steps.empty() || !opt_.record ? sample(t, y) : res_.steps.back();
-        if (ev.stop_on_contact_loss && s_end.force_normal < 0 && s0.force_normal >= 0) {
-          const double tc =
-              locate([&](const State& s, double tau) { return sample(tau, s).force_normal; },
-                     s0.force_normal, s_end.force_normal);
-          if (tc < t_event || kind == kNone) t_event = tc, kind = kContact;
-        }
-        if (ev.mu) {
-          auto slip_margin = [&](const Sample& s) {
-            return *ev.mu * s.force_normal - std::abs(s.force_tangential);
-          };
-          if (slip_margin(s_end) < 0 && slip_margin(s0) >= 0) {
-            const double ts =
-                locate([&](const State& s, double tau) { return slip_margin(sample(tau, s)); },
-                       slip_margin(s0), slip_margin(s_end));
-            if (ts < t_event || kind == kNone) t_event = ts, kind = kSlip;
-          }
-        }
-      }
-      if (kind != kNone) {
-        // Guard against chattering: events that keep firing without time advancing.
-        zero_progress = t_event <= t ? zero_progress + 1 : 0;
-        if (zero_progress > 8)
-          throw std::runtime_error("integrator: events repeat without progress " +
-                                   at_text(t, model_.s_h(y)) + " (chattering at a junction)");
-      }
-      if (kind != kNone && t_event < t1) {
-        // Stop exactly at the event: redo the step up to it, so no step straddles it.
-        h_try = t_event - t;
-        if (h_try > 0) {
-          attempt(t, y, k1, h_try, y1, k7, rc);
-          t1 = t_event;
-          y1p = y1;
-          drift = model_.project(t1, y1p, pieces_);
-        } else {
-          y1p = y;
-          t1 = t;
-        }
-        have_end = false;
-      }
-
-      // ---- accept ----
-      if (h_try > 0) {
-        ++st_.steps;
-        st_.max_drift = std::max(st_.max_drift, drift);
-        if (opt_.record) {
-          if (dop853) dense_dop853(t, y, y1, h_try, rc);
-          std::array<double, 8 * N> c;
-          for (int j = 0; j < terms; ++j) Eigen::Map<State>(c.data() + j * N) = rc[j];
-          res_.trajectory.append(t, h_try, pieces_, c.data());
-        }
-        const bool moved = drift > 0 && N != 3;
-        t = t1;
-        y = y1p;
-        if (moved)
-          need_k1 = true;
-        else
-          k1 = k7;
-        if (opt_.record || kind != kNone) {
-          const Sample s = have_end ? s_end : sample(t, y);
-          st_.max_constraint_residual =
-              std::max(st_.max_constraint_residual, s.constraint_residual);
-          st_.max_redundant_residual = std::max(st_.max_redundant_residual, s.redundant_residual);
-          record(t, y, &s);
-        }
-      }
-      if (!rk4 && kind == kNone && dop853) {
-        // Hairer's DOP853 control: plain I controller (beta = 0) on the h^8 error norm, growth
-        // at most 6x and shrink at most 3x; no growth right after a rejection.
-        const double fac =
-            std::clamp(std::pow(std::max(err, 1e-30), 1.0 / 8.0) / 0.9, 1.0 / 6, 3.0);
-        h = h_try / fac;
-        if (last_rejected) h = std::min(h, h_try);
-      } else if (!rk4 && kind == kNone) {
-        // PI step-size control (Hairer's DOPRI5 constants).
-        const double fac11 = std::pow(std::max(err, 1e-16), 0.17);
-        const double fac = std::clamp(fac11 / std::pow(facold, 0.04) / 0.9, 0.1, 5.0);
-        facold = std::max(err, 1e-4);
-        h = h_try / fac;
-      }
-      last_rejected = false;
-      switch (kind) {
-        case kNone:
-          break;
-        case kJunction: {
-          ++st_.junction_crossings;
-          ++st_.restarts;
-          res_.events.push_back({"junction", t, model_.s_h(y)});
-          // The landing point may sit a rounding error short of the junction: pick the next
-          // piece from the junction itself and the direction of crossing.
-          const int d = junction == iv.hi ? +1 : -1;
-          const int motion = pieces_.motion;
-          pieces_ = model_.pieces_for(y, d);
-          pieces_.hand = model_.problem().hand->piece_at(junction, d);
-          pieces_.motion = motion;
-          need_k1 = true;
-          break;
-        }
-        case kContact:
-          res_.reason = StopReason::kContactLost;
-          res_.events.push_back({"contact_lost", t, model_.s_h(y)});
-          stopped = true;
-          break;
-        case kSlip:
-          res_.reason = StopReason::kSlip;
-          res_.events.push_back({"slip", t, model_.s_h(y)});
-          stopped = true;
-          break;
-        case kBounds:
-          res_.reason = StopReason::kLeftBounds;
-          res_.events.push_back({"left_bounds", t, model_.s_h(y)});
-          stopped = true;
-          break;
-      }
-    }
-    if (stopped) break;
-    if (t_stop < opt_.t_end) {  // the motion's acceleration jumps here: restart on its next segment
-      ++st_.restarts;
-      ++pieces_.motion;
-      need_k1 = true;
-    }
-  }
-  res_.final = (opt_.record && !res_.steps.empty()) ? res_.steps.back() : sample(t, y);
-  finish();
 }
 
-template <class Model>
-void Integration<Model>::finish() {
-  if (!opt_.record || res_.steps.size() < 2) {
-    res_.contact_lost = res_.reason == StopReason::kContactLost;
-    return;
-  }
-  const auto& S = res_.steps;
-  const Trajectory& tr = res_.trajectory;
-  const std::size_t n = S.size();
-  const Extrema x = find_extrema(res_, S.front().t, S.back().t, opt_.events.time_tolerance);
-  st_.event_evals += x.evaluations;
-  res_.fn_min_ratio = x.fn_min_ratio;
-  res_.t_fn_min = x.t_fn_min;
-  res_.mu_required = x.mu_required;
-  res_.t_mu_required = x.t_mu_required;
-  for (std::size_t i = 1; i < n; ++i) {
-    if (S[i - 1].s_h < 0 && S[i].s_h >= 0) {
-      const RootResult r = brent_root([&](double tau) { return tr.s_h(tau); }, S[i - 1].t, S[i].t,
-                                      S[i - 1].s_h, S[i].s_h, opt_.events.time_tolerance);
-      res_.t_apex = r.x;
-      res_.fn_apex_ratio = tr.sample(r.x).fn_ratio;
-      res_.events.push_back({"apex", r.x, 0.0});
-      break;
-    }
-  }
-  res_.contact_lost = res_.reason == StopReason::kContactLost || res_.fn_min_ratio < 0;
+namespace {
+bool in_contact(const Sample& s) { return s.mode != ContactMode::kFlight; }
+bool needs_friction(const Sample& s) {
+  return s.mode == ContactMode::kRolling || s.mode == ContactMode::kRest;
 }
-
 }  // namespace
 
 Extrema find_extrema(const RunResult& run, double t_from, double t_to, double time_tolerance) {
@@ -749,6 +238,9 @@ Extrema find_extrema(const RunResult& run, double t_from, double t_to, double ti
   pts.push_back(tr.sample(t_to));
   x.evaluations += 2;
   const std::size_t n = pts.size();
+  // Extrema of the contact force over the contact modes: the normal force while in contact, the
+  // friction needed while not slipping (sliding uses mu_k by definition; flight has no force).
+  constexpr double kOutside = 1e300;
   auto refine = [&](std::size_t i, const std::function<double(const Sample&)>& key) {
     const double a = pts[i == 0 ? 0 : i - 1].t, b = pts[std::min(i + 1, n - 1)].t;
     const MinResult m = brent_minimize(
@@ -759,39 +251,133 @@ Extrema find_extrema(const RunResult& run, double t_from, double t_to, double ti
         a, b, time_tolerance * 10);
     return m.fx <= key(pts[i]) ? std::make_pair(m.x, m.fx) : std::make_pair(pts[i].t, key(pts[i]));
   };
-  std::size_t imin = 0, imu = 0;
+  const auto fn_key = [](const Sample& s) { return in_contact(s) ? s.fn_ratio : kOutside; };
+  const auto mu_key = [](const Sample& s) {
+    return needs_friction(s) && s.force_normal > 0 ? -s.mu_required : kOutside;
+  };
+  std::optional<std::size_t> imin, imu;
   bool nonpositive = false;
   for (std::size_t i = 0; i < n; ++i) {
-    if (pts[i].fn_ratio < pts[imin].fn_ratio) imin = i;
+    if (in_contact(pts[i]) && (!imin || pts[i].fn_ratio < pts[*imin].fn_ratio)) imin = i;
+    if (!needs_friction(pts[i])) continue;
     if (pts[i].force_normal <= 0)
       nonpositive = true;
-    else if (pts[i].mu_required > pts[imu].mu_required)
+    else if (!imu || pts[i].mu_required > pts[*imu].mu_required)
       imu = i;
   }
-  const auto fn = refine(imin, [](const Sample& s) { return s.fn_ratio; });
-  x.t_fn_min = fn.first;
-  x.fn_min_ratio = fn.second;
-  if (nonpositive || x.fn_min_ratio <= 0) {
+  if (imin) {
+    const auto fn = refine(*imin, fn_key);
+    x.t_fn_min = fn.first;
+    x.fn_min_ratio = fn.second;
+  }
+  // Rolling where the normal force is not positive needs unlimited friction.
+  const bool fn_lost_while_rolling =
+      imin && x.fn_min_ratio <= 0 && needs_friction(tr.sample(x.t_fn_min));
+  if (nonpositive || fn_lost_while_rolling) {
     x.mu_required = std::numeric_limits<double>::infinity();
     x.t_mu_required = x.t_fn_min;
-  } else {
-    const auto mu = refine(imu, [](const Sample& s) { return -s.mu_required; });
+  } else if (imu) {
+    const auto mu = refine(*imu, mu_key);
     x.t_mu_required = mu.first;
     x.mu_required = -mu.second;
   }
   return x;
 }
 
+void finish_run(RunResult& res, const RunOptions& opt) {
+  bool flew = false;
+  for (const RecordedEvent& e : res.events) flew = flew || e.kind == EventKind::kLiftOff;
+  if (!opt.record || res.steps.size() < 2) {
+    res.contact_lost = res.reason == StopReason::kContactLost || flew;
+    return;
+  }
+  const auto& S = res.steps;
+  const Trajectory& tr = res.trajectory;
+  const std::size_t n = S.size();
+  const Extrema x = find_extrema(res, S.front().t, S.back().t, opt.events.time_tolerance);
+  res.stats.event_evals += x.evaluations;
+  res.fn_min_ratio = x.fn_min_ratio;
+  res.t_fn_min = x.t_fn_min;
+  res.mu_required = x.mu_required;
+  res.t_mu_required = x.t_mu_required;
+  for (std::size_t i = 1; i < n; ++i) {
+    if (S[i - 1].s_h < 0 && S[i].s_h >= 0 && S[i].t > S[i - 1].t) {
+      const RootResult r = brent_root([&](double tau) { return tr.s_h(tau); }, S[i - 1].t, S[i].t,
+                                      S[i - 1].s_h, S[i].s_h, opt.events.time_tolerance);
+      res.t_apex = r.x;
+      res.fn_apex_ratio = tr.sample(r.x).fn_ratio;
+      RecordedEvent apex;
+      apex.kind = EventKind::kApex;
+      apex.t = r.x;
+      res.events.push_back(apex);
+      break;
+    }
+  }
+  res.contact_lost = res.reason == StopReason::kContactLost || res.fn_min_ratio < 0 || flew;
+}
+
 namespace {
 
+/// The rolling model: one segment from the initial contact; contact loss and slip (when asked)
+/// stop it, at once if the initial state already violates them.
 template <class Model>
-RunResult run_with(std::shared_ptr<const RollingProblem> problem, const InitialContact& init,
-                   const RunOptions& options) {
+RunResult run_rolling(std::shared_ptr<const RollingProblem> problem, const InitialContact& init,
+                      const RunOptions& options) {
+  if (!std::isfinite(init.s_h) || !std::isfinite(init.sdot_h) || !std::isfinite(init.t0))
+    throw std::invalid_argument("initial: s_h, sdot_h and t0 must be finite");
+  validate_run_options(options, init.t0);
+  if (problem->contact.has_losses())
+    throw std::invalid_argument(
+        "contact: the losses (rolling_resistance, drag, drag_angular) need contact.model: hybrid "
+        "(the rolling model is the paper's lossless simulation)");
   RunResult res;
   res.method = options.integrator.method;
-  Model model(std::move(problem));
-  Integration<Model> integration(model, options, res);
-  integration.run(init);
+  const Model model(problem);
+  const double weight = problem->object.mass * problem->gravity;
+  std::vector<detail::Guard> guards;
+  if (options.events.stop_on_contact_loss)
+    guards.push_back({EventKind::kContactLost,
+                      [](const Sample& s) { return s.force_normal; }, 0.0});
+  if (options.events.stop_on_slip && problem->contact.mu) {
+    const double mu = *problem->contact.mu;
+    guards.push_back({EventKind::kSlip,
+                      [mu](const Sample& s) { return mu * s.force_normal - std::abs(s.force_tangential); },
+                      1e-12 * weight});
+  }
+  detail::Integration<Model> integration(model, options, res, std::move(guards));
+
+  double t = init.t0;
+  typename Model::State y = model.initial_state(init);
+  // Direction of travel decides which piece is active when starting on a junction; at rest the
+  // initial acceleration decides.
+  int dir = Model::sdot_h(y) < 0 ? -1 : +1;
+  const int motion_segment = problem->motion->segment_at(t);
+  if (Model::sdot_h(y) == 0) {
+    Pieces p = model.pieces_for(y, +1);
+    p.motion = motion_segment;
+    typename Model::State dy;
+    model.derivative(t, y, p, dy);
+    ++res.stats.rhs_evals;
+    dir = Model::sdot_h(dy) < 0 ? -1 : +1;  // the rate slot of the derivative holds sddot_h
+  }
+  Pieces pieces = model.pieces_for(y, dir);
+  pieces.motion = motion_segment;
+  model.project(t, y, pieces);
+  const auto end = integration.run_from(t, y, pieces);
+  res.initial = end.first;
+  res.final = end.last;
+  if (end.fired) {
+    res.reason = *end.fired == EventKind::kContactLost ? StopReason::kContactLost
+                 : *end.fired == EventKind::kSlip      ? StopReason::kSlip
+                                                       : StopReason::kLeftBounds;
+    RecordedEvent e;
+    e.kind = *end.fired;
+    e.t = end.t;
+    e.s_h = Model::s_h(end.y);
+    e.position = end.last.object_position;
+    res.events.push_back(e);
+  }
+  finish_run(res, options);
   return res;
 }
 
@@ -800,10 +386,11 @@ RunResult run_with(std::shared_ptr<const RollingProblem> problem, const InitialC
 RunResult simulate(std::shared_ptr<const RollingProblem> problem, const InitialContact& init,
                    const RunOptions& options) {
   if (!problem) throw std::invalid_argument("simulate: no problem");
+  problem->contact.validate();
   const Formulation f = resolve_formulation(*problem, options.formulation);
-  RunResult r = f == Formulation::kReduced
-                    ? run_with<ReducedDiskRolling>(std::move(problem), init, options)
-                    : run_with<GeneralRolling>(std::move(problem), init, options);
+  if (options.model == ContactModel::kHybrid) return simulate_hybrid(problem, init, options);
+  RunResult r = f == Formulation::kReduced ? run_rolling<ReducedDiskRolling>(problem, init, options)
+                                           : run_rolling<GeneralRolling>(problem, init, options);
   r.formulation = f;
   return r;
 }

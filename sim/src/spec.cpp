@@ -43,7 +43,22 @@ std::shared_ptr<const RollingProblem> build_problem(const SimulationSpec& spec) 
   else
     pb->motion = std::make_shared<FixedHand>(spec.motion.angle);
   pb->gravity = spec.effective_gravity();
+  spec.contact.validate();
+  pb->contact = spec.contact;
+  if (spec.run.model == ContactModel::kRolling && spec.contact.has_losses())
+    throw std::invalid_argument(
+        "contact.model: the losses (rolling_resistance, drag, drag_angular) need model: hybrid "
+        "(the rolling model is the paper's lossless simulation)");
   return pb;
+}
+
+SimulationSpec paper_model(const SimulationSpec& spec) {
+  SimulationSpec s = spec;
+  s.run.model = ContactModel::kRolling;
+  s.contact.rolling_resistance = 0;
+  s.contact.drag = 0;
+  s.contact.drag_angular = 0;
+  return s;
 }
 
 RunOptions run_options(const SimulationSpec& spec) {

@@ -8,6 +8,8 @@
 
 #include <Eigen/Core>
 
+#include <algorithm>
+
 #include <memory>
 #include <string>
 #include <vector>
@@ -62,6 +64,12 @@ class Curve {
   virtual int normal_side() const = 0;
   /// Short human-readable description, for errors and reports.
   virtual std::string describe() const = 0;
+  /// The parameter of the point of the whole curve (every piece of a closed outline) nearest to
+  /// `p`, in the curve's frame: the global minimum of the distance, refined by Newton's method.
+  virtual double nearest(const Vec2& p) const = 0;
+  /// The largest distance of a point of the curve from the frame's origin (infinite for an
+  /// unbounded curve): nothing farther from the origin can touch it.
+  virtual double reach() const = 0;
 
   CurveGeometry geometry(double s, int piece) const;
   CurveGeometry geometry(double s) const { return geometry(s, piece_at(s, +1)); }
@@ -97,9 +105,15 @@ class PolynomialHand final : public Curve {
   CurveJet jet(double s, int piece) const override;
   int normal_side() const override { return +1; }
   std::string describe() const override;
+  /// In [-1, 3): the closed outline's period.
+  double nearest(const Vec2& p) const override;
+  double reach() const override { return reach_; }
 
  private:
   double a_, b_, c_, d_, e_, f_;
+  /// The closed outline sampled evenly in s over [-1, 3) (the start of the nearest-point search).
+  std::vector<Vec2> outline_;
+  double reach_ = 0;
 };
 
 /// A straight line through `origin` along unit `direction`, s in metres. Outward normal is the
@@ -112,6 +126,8 @@ class LineCurve final : public Curve {
   CurveJet jet(double s, int piece) const override;
   int normal_side() const override { return +1; }
   std::string describe() const override;
+  double nearest(const Vec2& p) const override { return (p - origin_).dot(direction_); }
+  double reach() const override;
 
  private:
   Vec2 origin_, direction_;
@@ -133,6 +149,8 @@ class CircleCurve final : public Curve {
   CurveJet jet(double s, int piece) const override;
   int normal_side() const override { return side_ == Side::kConvexBody ? -1 : +1; }
   std::string describe() const override;
+  double nearest(const Vec2& p) const override;
+  double reach() const override { return center_.norm() + radius_; }
 
  private:
   Vec2 center_;
@@ -152,6 +170,8 @@ class EllipseCurve final : public Curve {
   CurveJet jet(double s, int piece) const override;
   int normal_side() const override { return -1; }
   std::string describe() const override;
+  double nearest(const Vec2& p) const override;
+  double reach() const override { return std::max(ax_, ay_); }
 
  private:
   double ax_, ay_;

@@ -12,6 +12,7 @@
 // Both take the hand's motion (pose, velocity, acceleration) as input.
 #pragma once
 
+#include "flatland/sim/contact.hpp"
 #include "flatland/sim/curve.hpp"
 #include "flatland/sim/motion.hpp"
 #include "flatland/sim/object.hpp"
@@ -30,7 +31,21 @@ struct RollingProblem {
   std::shared_ptr<const HandMotion> motion;
   double gravity = 9.8;  ///< effective gravity in the table plane, m/s^2,
                          ///< acting along world -y (= g sin(tilt))
+  /// Friction, restitution and losses. The rolling model uses only mu (as a stopping event);
+  /// the losses enter every formulation's equations when set.
+  ContactLaw contact;
   Vec2 gravity_vector() const { return {0.0, -gravity}; }
+};
+
+/// Which contact equations a formulation integrates over one segment of a run.
+struct ContactPhase {
+  ContactMode mode = ContactMode::kRolling;  ///< kRolling, kRest or kSliding
+  /// kSliding: the sign of the slip velocity (+1 / -1), which the kinetic friction opposes.
+  /// kRolling with rolling resistance: the sign of sdot_h, which the couple opposes (0: none).
+  int sign = 0;
+  /// kSliding with rolling resistance: the sign of the object's rotation relative to the hand,
+  /// omega_o - omega_h, which the couple -delta f_n turn opposes (0: none yet).
+  int turn = 0;
 };
 
 /// Where the object starts: hand contact parameter and its rate; the object's contact point s_o
@@ -62,13 +77,39 @@ struct Sample {
   double object_angle = 0;              ///< rad, unwrapped
   Vec2 object_velocity = Vec2::Zero();
   double object_angular_velocity = 0;
+  double object_angular_acceleration = 0;
   double force_normal = 0;      ///< N, hand on object along the hand's outward normal (> 0 pushes)
   double force_tangential = 0;  ///< N, along the hand's tangent (direction of increasing s_h)
   double fn_ratio = 0;          ///< force_normal / (m g_eff)
   double ft_ratio = 0;          ///< force_tangential / (m g_eff)
-  double mu_required = 0;       ///< |f_t| / f_n (infinite when f_n <= 0)
+  double mu_required = 0;       ///< |f_t| / f_n (infinite when f_n <= 0; NaN in flight)
   double constraint_residual = 0;  ///< max(|contact point gap| in m, |n_o + n_h|), 0 for reduced
   double redundant_residual = 0;   ///< |A x - b| of the 6 x 5 solve (general), 0 for reduced
+  ContactMode mode = ContactMode::kRolling;
+  /// m/s: velocity of the object's contact point relative to the hand's, along the hand's
+  /// tangent (0 while rolling or at rest).
+  double slip_velocity = 0;
+  /// N m: the rolling-resistance couple on the object (rolling: -delta f_n against the rolling;
+  /// at rest: the couple that holds it, whose bound is delta f_n).
+  double rolling_couple = 0;
+  /// m: distance from the object to the hand outline (flight; 0 in contact).
+  double gap = 0;
+};
+
+/// The object's state in any contact mode, independent of the formulation: what the hybrid model
+/// carries from one segment to the next (and a driver from one call to the next).
+struct HybridState {
+  double t = 0;
+  ContactMode mode = ContactMode::kRolling;
+  int sign = 0;  ///< the phase's sign (ContactPhase::sign)
+  int turn = 0;  ///< the phase's turn (ContactPhase::turn)
+  // In contact: the contact parameters and their rates (s_o for non-disk objects).
+  double s_h = 0, sdot_h = 0;
+  double s_o = 0, sdot_o = 0;
+  int hand_piece = 0;  ///< the piece of the hand outline the contact is on
+  // Always: the object's centre and rotation, world.
+  Vec2 position = Vec2::Zero(), velocity = Vec2::Zero();
+  double angle = 0, angular_velocity = 0;
 };
 
 /// The paper's A x = b formulation. State (10): object position (2), object angle, s_o, s_h,
@@ -78,7 +119,10 @@ class GeneralRolling {
  public:
   static constexpr int N = 10;
   using State = Eigen::Matrix<double, N, 1>;
-  explicit GeneralRolling(std::shared_ptr<const RollingProblem> problem);
+  /// `phase`: rolling (the paper's equations), rest (the object moves with the hand) or sliding
+  /// (row (3), equal tangential accelerations, becomes Coulomb's f_t = -mu_k sign f_n, and
+  /// sdot_o is no longer tied to sdot_h).
+  explicit GeneralRolling(std::shared_ptr<const RollingProblem> problem, ContactPhase phase = {});
 
   State initial_state(const InitialContact& init) const;
   void derivative(double t, const State& y, const Pieces& p, State& dy) const;
@@ -101,10 +145,13 @@ class GeneralRolling {
   Assembled assemble_and_solve(double t, const State& y, const Pieces& p) const;
   double constraint_residual(double t, const State& y, const Pieces& p) const;
 
+  const ContactPhase& phase() const { return phase_; }
+
  private:
   /// The projection itself (project() without measuring the residual first).
   void snap(double t, State& y, const Pieces& p) const;
   std::shared_ptr<const RollingProblem> problem_;
+  ContactPhase phase_;
 };
 
 /// One-coordinate formulation for a disk (radius r, inertia I about its centre). State (3):
@@ -113,8 +160,10 @@ class ReducedDiskRolling {
  public:
   static constexpr int N = 3;
   using State = Eigen::Matrix<double, N, 1>;
-  /// Throws std::invalid_argument if the object is not a disk.
-  explicit ReducedDiskRolling(std::shared_ptr<const RollingProblem> problem);
+  /// Throws std::invalid_argument if the object is not a disk. `phase`: rolling or rest (the
+  /// disk moves with the hand, sdot_h = 0, held by the rolling-resistance couple).
+  explicit ReducedDiskRolling(std::shared_ptr<const RollingProblem> problem,
+                              ContactPhase phase = {});
 
   State initial_state(const InitialContact& init) const;
   void derivative(double t, const State& y, const Pieces& p, State& dy) const;
@@ -130,11 +179,41 @@ class ReducedDiskRolling {
   /// that propagate with measured hand kinematics. `hand_piece` as from pieces_for.
   double acceleration(const HandKinematics& h, double s_h, double sdot_h, int hand_piece) const;
   Sample sample_with(const HandKinematics& h, double t, const State& y, int hand_piece) const;
+  const ContactPhase& phase() const { return phase_; }
 
  private:
   double sddot(const HandKinematics& h, const CurveGeometry& g, double sdot) const;
   std::shared_ptr<const RollingProblem> problem_;
+  ContactPhase phase_;
   double r_, rho2_, side_;
+  bool rest_ = false, losses_ = false;
+};
+
+/// A disk sliding on the hand (reduced formulation): the centre stays on the offset curve
+/// q = c + r n, and the disk turns independently of s_h. State (4): s_h, object angle, sdot_h,
+/// object angular velocity. The kinetic friction mu_k f_n opposes the slip velocity, whose sign
+/// is the phase's (fixed over a segment; its change is an event), and the rolling-resistance
+/// couple delta f_n the disk's rotation relative to the hand (the phase's turn).
+class ReducedDiskSliding {
+ public:
+  static constexpr int N = 4;
+  using State = Eigen::Matrix<double, N, 1>;
+  ReducedDiskSliding(std::shared_ptr<const RollingProblem> problem, int slip_sign, int turn = 0);
+
+  void derivative(double t, const State& y, const Pieces& p, State& dy) const;
+  double project(double, State&, const Pieces&) const { return 0.0; }
+  Sample sample(double t, const State& y, const Pieces& p) const;
+  Sample sample_with(const HandKinematics& h, double t, const State& y, int hand_piece) const;
+  Pieces pieces_for(const State& y, int direction) const;
+  static double s_h(const State& y) { return y[0]; }
+  static double sdot_h(const State& y) { return y[2]; }
+  const RollingProblem& problem() const { return *problem_; }
+  const ContactPhase& phase() const { return phase_; }
+
+ private:
+  std::shared_ptr<const RollingProblem> problem_;
+  ContactPhase phase_;
+  double r_, side_;
 };
 
 }  // namespace flatland::sim

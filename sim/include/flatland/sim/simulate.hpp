@@ -3,6 +3,7 @@
 
 #include "flatland/sim/rolling.hpp"
 
+#include <array>
 #include <functional>
 #include <limits>
 #include <memory>
@@ -39,9 +40,12 @@ struct IntegratorSettings {
 };
 
 struct EventSettings {
-  bool stop_on_contact_loss = true;  ///< stop where the normal force reaches 0
-  std::optional<double> mu;          ///< stop where |f_t| exceeds mu f_n (rolling -> slipping)
-  double time_tolerance = 1e-12;     ///< s, events are located to this
+  /// Rolling model: stop where the normal force reaches 0 (the hybrid model flies instead).
+  bool stop_on_contact_loss = true;
+  /// Rolling model: stop where |f_t| exceeds mu f_n, mu = the problem's contact.mu (the hybrid
+  /// model slides instead). Off for searches, which enforce rolling and check friction after.
+  bool stop_on_slip = true;
+  double time_tolerance = 1e-12;  ///< s, events are located to this
   /// Stop when s_h leaves [lo, hi] (e.g. the disk rolled off around the outline); off if empty.
   std::optional<std::pair<double, double>> s_h_bounds;
 };
@@ -51,12 +55,47 @@ struct RunOptions {
   Formulation formulation = Formulation::kAuto;
   IntegratorSettings integrator;
   EventSettings events;
+  ContactModel model = ContactModel::kRolling;
+  /// Hybrid model: stop right after the first change of contact mode or impact. For a driver
+  /// whose hand motion depends on the contact (the closed loop's joint, loaded by the disk).
+  bool stop_at_transition = false;
+  /// Hybrid model: the hand's inertia about its fixed pivot, kg m^2, for impacts; the hand's
+  /// velocity change is reported with the impact and the run stops there (its motion is no
+  /// longer the prescribed one). Absent: the motion is prescribed (an infinitely heavy hand).
+  std::optional<double> hand_inertia;
   bool record =
       true;  ///< keep every step (dense output, per-step samples, extrema); off for search
 };
 
-enum class StopReason { kEndTime, kContactLost, kSlip, kLeftBounds };
+enum class StopReason {
+  kEndTime,
+  kContactLost,  ///< rolling model: the normal force reached 0
+  kSlip,         ///< rolling model: |f_t| reached mu f_n
+  kLeftBounds,
+  kDropped,      ///< hybrid model: the object flew out of the hand's reach and cannot come back
+  kTransition,   ///< hybrid model with stop_at_transition: the first mode change or impact
+};
 std::string to_string(StopReason r);
+
+enum class EventKind {
+  kJunction,     ///< s_h crossed a junction of the hand's pieces
+  kContactLost,  ///< rolling model: stopped at f_n = 0
+  kSlip,         ///< rolling model: stopped at |f_t| = mu f_n
+  kLeftBounds,
+  kApex,         ///< s_h rose through 0 (the fingertip)
+  kLiftOff,      ///< f_n reached 0: flight begins
+  kSlipStart,    ///< |f_t| reached mu f_n: sliding begins
+  kSlipReverse,  ///< the slip stopped and resumed the other way (rolling needs more than mu)
+  kStick,        ///< the slip stopped within the friction cone: rolling again
+  kRest,         ///< the rolling stopped, held by the rolling-resistance couple
+  kRelease,      ///< the couple reached its bound: rolling again
+  kImpact,       ///< the object hit the hand (and bounced, or stayed: see `caught`)
+  kDropped,      ///< the object left the hand's reach for good
+  /// While sliding, the object's rotation relative to the hand reversed (the rolling-resistance
+  /// couple turns with it). Changes the load only: not recorded.
+  kTurn,
+};
+std::string to_string(EventKind k);
 
 /// What the integrator did, so accuracy can be audited.
 struct RunStats {
@@ -69,15 +108,33 @@ struct RunStats {
   double max_drift = 0;        ///< largest constraint residual removed by a projection (general)
   double max_constraint_residual = 0;  ///< largest constraint residual after projection
   double max_redundant_residual = 0;   ///< largest |A x - b| seen at step ends (general)
+  // Hybrid model.
+  int mode_changes = 0;  ///< changes between rolling, rest, sliding and flight
+  int impacts = 0;
+  /// s spent in each mode (indexed by ContactMode).
+  std::array<double, 4> mode_time{0, 0, 0, 0};
+  long gap_evals = 0;  ///< distance computations in flight
 };
 
 struct RecordedEvent {
-  std::string kind;  ///< "junction", "contact_lost", "slip", "left_bounds", "apex"
+  EventKind kind = EventKind::kJunction;
   double t = 0;
   double s_h = 0;
+  Vec2 position = Vec2::Zero();  ///< object centre, world, m (hybrid events)
+  /// kImpact: the law's result; whether the object stayed in contact (the rebound was at most
+  /// contact.capture_velocity); the hand's velocity change when it has an inertia.
+  std::optional<ImpactResult> impact;
+  bool caught = false;
+  double hand_rate_change = 0;  ///< rad/s
+  /// J: the object's mechanical energy (kinetic + potential in the table plane) after the event
+  /// minus before (kImpact; with a prescribed hand, the hand may give energy when it moves).
+  double energy_change = 0;
 };
 
 /// Dense output over a whole run: the state at any time, projected onto the contact manifold.
+/// A hybrid run is a sequence of parts, one per segment in one mode: integrated parts keep each
+/// step's interpolant, flights their closed form. At an instant where one part ends and the next
+/// begins (an impact), the later part answers.
 class Trajectory {
  public:
   struct Step {
@@ -85,17 +142,12 @@ class Trajectory {
     Pieces pieces;
   };
   using Sampler = std::function<Sample(double t, const double* y, const Pieces& p)>;
-  Trajectory() = default;
-  /// `terms` coefficient vectors per step: 5 for the 4th-order (and Hermite) interpolants, 8 for
-  /// DOP853's 7th-order one; both evaluate c0 + th(c1 + th1(c2 + th(c3 + th1(c4 + ...)))).
-  Trajectory(int dimension, Sampler sampler, int terms = 5)
-      : n_(dimension), terms_(terms), sampler_(std::move(sampler)) {}
+  /// The sample at any time of a closed-form part.
+  using Closed = std::function<Sample(double t)>;
 
-  bool empty() const { return steps_.empty(); }
-  double t_begin() const { return steps_.front().t0; }
-  double t_end() const { return steps_.back().t0 + steps_.back().h; }
-  std::size_t size() const { return steps_.size(); }
-  const Step& step(std::size_t i) const { return steps_[i]; }
+  bool empty() const;
+  double t_begin() const;
+  double t_end() const;
   /// Everything at time t (clamped to the run), from the dense output.
   Sample sample(double t) const;
   /// Only the hand contact parameter at t (cheap: no force solve).
@@ -103,19 +155,27 @@ class Trajectory {
   /// Samples every dt from the beginning to the end, both included.
   std::vector<Sample> resample(double dt) const;
 
-  // Used by the integrator.
+  // Used by the integrators.
+  /// Start an integrated part: `dimension` state values, `terms` coefficient vectors per step (5
+  /// for the 4th-order and Hermite interpolants, 8 for DOP853's 7th-order one; both evaluate
+  /// c0 + th(c1 + th1(c2 + th(c3 + th1(c4 + ...))))), s_h at `s_h_index` of the state.
+  void begin_part(int dimension, Sampler sampler, int terms, int s_h_index);
   void append(double t0, double h, const Pieces& p, const double* coeffs /* terms * n values */);
-  void set_s_h_index(int i) { s_h_index_ = i; }
+  void add_closed_part(double t0, double t1, Closed f);
 
  private:
-  std::size_t find(double t) const;
-  void interpolate(std::size_t i, double t, double* y) const;
-  int n_ = 0;
-  int terms_ = 5;
-  int s_h_index_ = 0;
-  Sampler sampler_;
-  std::vector<Step> steps_;
-  std::vector<double> coeffs_;
+  struct Part {
+    int n = 0, terms = 5, s_h_index = 0;
+    Sampler sampler;
+    Closed closed;
+    double t0 = 0, t1 = 0;
+    std::vector<Step> steps;
+    std::vector<double> coeffs;
+    std::size_t find(double t) const;
+    void interpolate(std::size_t i, double t, double* y) const;
+  };
+  const Part& part_at(double t) const;
+  std::vector<Part> parts_;
 };
 
 struct RunResult {
@@ -127,7 +187,8 @@ struct RunResult {
   Trajectory trajectory;      ///< dense output (when recorded)
   std::vector<RecordedEvent> events;
   RunStats stats;
-  // Extrema over the run, located on the dense output (when recorded).
+  // Extrema over the run, located on the dense output (when recorded): the smallest normal force
+  // while in contact, the largest friction coefficient needed while rolling (or at rest).
   double fn_min_ratio = std::numeric_limits<double>::quiet_NaN();
   double t_fn_min = std::numeric_limits<double>::quiet_NaN();
   double mu_required =
@@ -135,7 +196,10 @@ struct RunResult {
   double t_mu_required = std::numeric_limits<double>::quiet_NaN();
   std::optional<double> t_apex;         ///< first time s_h rises through 0 (the fingertip)
   std::optional<double> fn_apex_ratio;  ///< normal force ratio there
-  bool contact_lost = false;            ///< f_n < 0 somewhere (or the run stopped on it)
+  /// f_n < 0 somewhere (or the run stopped on it), or, in the hybrid model, the object flew.
+  bool contact_lost = false;
+  /// Hybrid model: where the run ended, to continue it (the closed loop steps the world so).
+  std::optional<HybridState> final_state;
 };
 
 struct Extrema {
@@ -152,7 +216,13 @@ Extrema find_extrema(const RunResult& run, double t_from, double t_to, double ti
 /// The formulation a problem will use under `requested`; throws if kReduced is impossible.
 Formulation resolve_formulation(const RollingProblem& problem, Formulation requested);
 
-/// Run the dynamics from `init` until options.t_end or a stopping event. Throws
+/// Settings that every model checks: integrator tolerances, step and the time span from t0.
+void validate_run_options(const RunOptions& options, double t0);
+/// Extrema, apex and contact_lost of a finished recorded run.
+void finish_run(RunResult& run, const RunOptions& options);
+
+/// Run the dynamics from `init` until options.t_end or a stopping event (options.model: the
+/// rolling model, or the hybrid model of sim/hybrid.hpp). Throws
 /// std::invalid_argument for bad settings and std::runtime_error for numerical failure (step size
 /// underflow, non-finite state, step budget exhausted), naming the time and s_h.
 RunResult simulate(std::shared_ptr<const RollingProblem> problem, const InitialContact& init,

@@ -39,7 +39,8 @@ struct SimulationSpec {
   MotionSpec motion;
   InitialContact initial;
   std::optional<double> duration;  ///< s; default: the butterfly's period, else 1 s
-  RunOptions run;                  ///< integrator, formulation, events (run.t_end is derived)
+  ContactLaw contact;              ///< friction, restitution, losses (scene `contact`)
+  RunOptions run;  ///< integrator, formulation, events, contact model (run.t_end is derived)
 
   /// g sin(tilt): gravity in the table plane.
   double effective_gravity() const;
@@ -52,6 +53,10 @@ struct SimulationSpec {
 std::shared_ptr<const RollingProblem> build_problem(const SimulationSpec& spec);
 /// spec.run with t_end set from end_time().
 RunOptions run_options(const SimulationSpec& spec);
+/// The paper's model of a spec: the rolling model without losses (mu is kept, for the friction
+/// margins it reports). The design searches and the closed loop's plan use it: the losses break
+/// the time symmetry the searches rely on, and the paper planned without them.
+SimulationSpec paper_model(const SimulationSpec& spec);
 /// build_problem + simulate.
 RunResult run_spec(const SimulationSpec& spec);
 
