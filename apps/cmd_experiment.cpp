@@ -64,7 +64,8 @@ const std::vector<std::string>& log_columns() {
                                              "theta_true[rad]",
                                              "fn_ratio",
                                              "mu_required",
-                                             "nees"};
+                                             "nees",
+                                             "mode_true"};
   return c;
 }
 
@@ -93,7 +94,8 @@ std::string log_csv(const std::vector<drivers::TickLog>& log) {
            format_number(r.theta_plan) + ',' + format_number(r.s_true) + ',' +
            format_number(r.sdot_true) + ',' + format_number(r.theta_true) + ',' +
            format_number(r.fn_ratio) + ',' + format_number(r.mu_required) + ',' +
-           format_number(r.nees) + '\n';
+           format_number(r.nees) + ',' +
+           (std::isfinite(r.s_true) ? sim::to_string(r.mode_true) : std::string()) + '\n';
   }
   return out;
 }
@@ -234,6 +236,7 @@ void run_experiment(const ExperimentOptions& o) {
   // fields are std::invalid_argument here.
   const drivers::LoopSetup setup(scene);
   const control::Plan& plan = *setup.plan.plan;
+  if (kind == CameraKind::kSynthetic) drivers::require_friction(scene);
 
   // The drivers: a bad --camera/--joint is bad input (missing recording, no such device).
   drivers::LoopOptions loop_options;
@@ -436,9 +439,18 @@ void run_experiment(const ExperimentOptions& o) {
   j["ticks"] = static_cast<long>(loop.log.size());
   j["t_stage2"] = loop.t_stage2 ? number(*loop.t_stage2) : Json(nullptr);
   j["t_stage3"] = loop.t_stage3 ? number(*loop.t_stage3) : Json(nullptr);
+  j["outcome"] = truth ? Json(drivers::to_string(synthetic->outcome)) : Json(nullptr);
   if (truth) {
     j["frames_rendered"] = synthetic->frames_rendered;
     j["frames_dropped"] = synthetic->frames_dropped;
+    // What the disk did on the hand (the world is the hybrid model): time sliding and flying,
+    // each flight's landing and impulse.
+    sim::Sample start;
+    start.t = loop.log.empty() ? 0.0 : loop.log.front().t;
+    j["contact"] = contact_summary_json(synthetic->mode_time, synthetic->mode_changes,
+                                        synthetic->impacts, synthetic->contact_events, start);
+  } else {
+    j["contact"] = nullptr;
   }
   if (log_joint_driver)
     j["replay"] = {{"ticks", log_joint_driver->ticks()},
@@ -475,7 +487,19 @@ void run_experiment(const ExperimentOptions& o) {
      << "  duration           " << opt(j["duration_s"], " s") << "\n"
      << "  s_h at the end     " << opt(j["s_end"]) << "\n"
      << "  min f_n / mg       " << opt(j["fn_min_ratio"]) << "\n"
-     << "  max mu required    " << opt(j["mu_max"]) << "\n"
+     << "  max mu required    " << opt(j["mu_max"]) << " (while rolling)\n";
+  if (truth) {
+    const auto& m = synthetic->mode_time;
+    os << "  contact            sliding " << format_number(std::round(m[2] * 1e4) / 1e4)
+       << " s, flight " << format_number(std::round(m[3] * 1e4) / 1e4) << " s, "
+       << synthetic->impacts << " impacts, " << synthetic->mode_changes << " mode changes\n";
+    for (const Json& f : j["contact"]["flights"])
+      os << "  flight             leaves at t = " << opt(f["t_lift_off"], " s")
+         << ", lands at t = " << opt(f["t_landing"], " s") << " on s_h = " << opt(f["s_landing"])
+         << ", impulse " << opt(f["impulse_normal"], " N s") << (f["dropped"].get<bool>() ? ", dropped" : "")
+         << "\n";
+  }
+  os
      << "  frames             " << loop.frames << " received, " << loop.frames_lost
      << " not usable, " << loop.measurements << " measurements\n"
      << "  safe stop          " << (loop.safe_stop ? "yes (" + loop.stop_reason + ")" : "no")

@@ -12,16 +12,19 @@ namespace {
 
 struct LocusOptions {
   CommonOptions common;
+  MuOption mu;
   double from = 1.1, to = 3.0, tolerance = 1e-9;
   int n = 20;
 };
 
 std::string locus_csv(const std::vector<sim::SolveReport>& points) {
-  std::string s = "period,k,fn_min_ratio,fn_apex_ratio,mu_required,s_end,sdot_end\n";
+  std::string s =
+      "period,k,fn_min_ratio,fn_apex_ratio,mu_required,s_end,sdot_end,friction_margin\n";
   for (const auto& p : points)
     s += format_number(p.period) + "," + format_number(p.k) + "," + format_number(p.fn_min_ratio) +
          "," + format_number(p.fn_apex_ratio) + "," + format_number(p.mu_required) + "," +
-         format_number(p.s_end) + "," + format_number(p.sdot_end) + "\n";
+         format_number(p.s_end) + "," + format_number(p.sdot_end) + "," +
+         format_number(p.friction_margin) + "\n";
   return s;
 }
 
@@ -34,8 +37,10 @@ void run_locus(const LocusOptions& o) {
   require_increasing("--from", o.from, "--to", o.to);
   if (o.n < 1) throw UsageError("--n: must be at least 1, got " + std::to_string(o.n));
   require_positive("--tolerance", o.tolerance, "");
+  apply_mu_option(o.mu, spec);
   spec.motion.period = o.from;
-  sim::build_problem(spec);
+  build_problem_checked(sim::paper_model(spec), {{"contact.mu", "--mu"}});
+  const bool friction = spec.contact.mu.has_value();
   const fs::path dir = o.common.out;
   if (!dir.empty()) check_output_directory("--out", dir, o.common.force);
   const bool plots = !dir.empty() && !o.common.no_plot;
@@ -89,10 +94,13 @@ void run_locus(const LocusOptions& o) {
       q["k"] = number(p.k);
       q["fn_min_ratio"] = number(p.fn_min_ratio);
       q["mu_required"] = number(p.mu_required);
+      q["friction_margin"] = number(p.friction_margin);
+      q["slips"] = friction && p.friction_margin < 0;
       q["contact_lost"] = p.fn_min_ratio < 0;
       arr.push_back(q);
     }
     j["points"] = arr;
+    j["mu"] = friction ? number(*spec.contact.mu) : Json(nullptr);
     j["csv"] = csv_path.empty() ? Json(nullptr) : Json(csv_path);
     j["png"] = png_path.empty() ? Json(nullptr) : Json(png_path);
     j["seconds"] = seconds;
@@ -100,13 +108,21 @@ void run_locus(const LocusOptions& o) {
     return;
   }
   std::ostringstream os;
-  os << "flatland locus: " << points.size() << " solutions (" << scene.origin << ")\n"
-     << "      2T (s)            k   min f_n/mg  required mu\n";
+  os << "flatland locus: " << points.size() << " solutions (" << scene.origin << ")"
+     << (friction ? ", mu = " + format_number(*spec.contact.mu) : std::string()) << "\n"
+     << "      2T (s)            k   min f_n/mg  required mu"
+     << (friction ? "  friction margin" : "") << "\n";
   for (const auto& p : points) {
-    char line[128];
-    std::snprintf(line, sizeof line, "  %10.5f  %11.6f  %11.5f  %11.5f%s\n", p.period, p.k,
-                  p.fn_min_ratio, p.mu_required, p.fn_min_ratio < 0 ? "  contact lost" : "");
+    char line[160];
+    std::snprintf(line, sizeof line, "  %10.5f  %11.6f  %11.5f  %11.5f", p.period, p.k,
+                  p.fn_min_ratio, p.mu_required);
     os << line;
+    if (friction) {
+      std::snprintf(line, sizeof line, "  %15.5f", p.friction_margin);
+      os << line;
+    }
+    os << (p.fn_min_ratio < 0 ? "  contact lost" : "")
+       << (friction && p.friction_margin < 0 ? "  slips" : "") << "\n";
   }
   for (const auto& p : outputs.paths()) os << "  wrote " << p << "\n";
   std::cout << os.str();
@@ -122,9 +138,14 @@ Command add_locus_command(CLI::App& app) {
       "against 2T and the minimum normal force ratio of each solution.");
   add_common_options(*cmd, o->common,
                      "Directory for locus.csv (period in s, k, fn_min_ratio, fn_apex_ratio, "
-                     "mu_required, s_end, sdot_end in 1/s) and locus.png with its gnuplot script; "
+                     "mu_required, s_end, sdot_end in 1/s, friction_margin) and locus.png with its "
+                     "gnuplot script; "
                      "created if missing. Default: no files",
                      true);
+  add_mu_option(*cmd, o->mu,
+                "Static friction coefficient (>= 0): each solution reports its friction margin, "
+                "min (mu f_n - |f_t|) / mg (< 0: it would slip). Default: the scene's contact.mu, "
+                "else none reported");
   cmd->add_option("--from", o->from, "Shortest duration 2T, s (> 0). Default: 1.1 s");
   cmd->add_option("--to", o->to, "Longest duration 2T, s (> FROM). Default: 3.0 s");
   cmd->add_option("--n", o->n, "Number of durations (>= 1; 1 solves at FROM only). Default: 20");

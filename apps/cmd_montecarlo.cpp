@@ -40,7 +40,8 @@ std::string csv_field(const std::string& s) {
 std::string runs_csv(const drivers::MonteCarloResult& r) {
   std::string s =
       "run,controller,success,failure,duration_s,s_end,fn_min_ratio,mu_max,safe_stop,frames,"
-      "frames_lost,s_h0,tilt_deg,radius_m,friction_scale,effects_seed\n";
+      "frames_lost,s_h0,tilt_deg,radius_m,friction_scale,effects_seed,outcome,slide_s,flight_s,"
+      "impacts,mu_scale,loss_scale\n";
   for (const drivers::RunRecord& x : r.records)
     s += std::to_string(x.run) + "," + x.controller + "," + (x.success ? "1" : "0") + "," +
          csv_field(x.failure) + "," + format_number(x.duration_s) + "," + format_number(x.s_end) +
@@ -48,7 +49,10 @@ std::string runs_csv(const drivers::MonteCarloResult& r) {
          (x.safe_stop ? "1" : "0") + "," + std::to_string(x.frames) + "," +
          std::to_string(x.frames_lost) + "," + format_number(x.drawn.s_h0) + "," +
          format_number(x.drawn.tilt_deg) + "," + format_number(x.drawn.radius) + "," +
-         format_number(x.drawn.friction_scale) + "," + std::to_string(x.drawn.effects_seed) + "\n";
+         format_number(x.drawn.friction_scale) + "," + std::to_string(x.drawn.effects_seed) + "," +
+         drivers::to_string(x.outcome) + "," + format_number(x.slide_s) + "," +
+         format_number(x.flight_s) + "," + std::to_string(x.impacts) + "," +
+         format_number(x.drawn.mu_scale) + "," + format_number(x.drawn.loss_scale) + "\n";
   return s;
 }
 
@@ -62,6 +66,7 @@ Json perturbations_json(const drivers::Perturbations& p) {
   j["latency_jitter"] = p.latency_jitter;
   j["drop"] = p.drop;
   j["friction_rel"] = p.friction_rel;
+  j["contact_rel"] = p.contact_rel;
   return j;
 }
 
@@ -81,7 +86,8 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
                 {"--latency", o.p.latency},
                 {"--latency-jitter", o.p.latency_jitter},
                 {"--drop", o.p.drop},
-                {"--friction-rel", o.p.friction_rel}};
+                {"--friction-rel", o.p.friction_rel},
+                {"--contact-rel", o.p.contact_rel}};
   for (const auto& v : values)
     if (!std::isfinite(v.value) || v.value < 0)
       throw UsageError(std::string(v.option) + ": must be finite and >= 0, got " +
@@ -90,6 +96,8 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
     throw UsageError("--radius-rel: must be < 1, got " + format_number(o.p.radius_rel));
   if (o.p.friction_rel >= 1)
     throw UsageError("--friction-rel: must be < 1, got " + format_number(o.p.friction_rel));
+  if (o.p.contact_rel >= 1)
+    throw UsageError("--contact-rel: must be < 1, got " + format_number(o.p.contact_rel));
   if (o.p.drop >= 1) throw UsageError("--drop: must be < 1, got " + format_number(o.p.drop));
   if (o.p.latency_jitter > o.p.latency)
     throw UsageError("--latency-jitter: must not exceed --latency (" + format_number(o.p.latency) +
@@ -102,6 +110,7 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
     throw UsageError(scene.origin +
                      ": camera: the scene has no camera section (needed by the "
                      "closed loop)");
+  drivers::require_friction(scene);
   const fs::path dir = o.common.out;
   if (!dir.empty()) check_output_directory("--out", dir, o.common.force);
 
@@ -127,6 +136,21 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
   j["success_feedback"] = count(r.success_feedback);
   j["ci95"] = {{"open_loop", ci(r.success_open_loop, r.ci_open_loop)},
                {"feedback", ci(r.success_feedback, r.ci_feedback)}};
+  // How the runs ended, per controller (drivers::Outcome).
+  Json outcomes;
+  for (const std::string& c : o.controllers) {
+    Json counts;
+    for (const drivers::Outcome k :
+         {drivers::Outcome::kSuccess, drivers::Outcome::kDropped, drivers::Outcome::kSlidOff,
+          drivers::Outcome::kWrongWell, drivers::Outcome::kNotSettled, drivers::Outcome::kSafeStop,
+          drivers::Outcome::kNotFinished}) {
+      int n = 0;
+      for (const drivers::RunRecord& x : r.records) n += x.controller == c && x.outcome == k;
+      counts[drivers::to_string(k)] = n;
+    }
+    outcomes[c] = counts;
+  }
+  j["outcomes"] = outcomes;
   j["perturbations"] = perturbations_json(o.p);
   j["runs_per_second"] = number(per_second);
   j["experiments"] = experiments;
@@ -160,6 +184,13 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
   };
   line("open loop          ", r.success_open_loop, r.ci_open_loop);
   line("feedback           ", r.success_feedback, r.ci_feedback);
+  for (const std::string& c : o.controllers) {
+    std::string failures;
+    for (const auto& [kind, n] : j["outcomes"][c].items())
+      if (kind != "success" && n.get<int>() > 0)
+        failures += (failures.empty() ? "" : ", ") + std::to_string(n.get<int>()) + " " + kind;
+    if (!failures.empty()) os << "  " << c << " failures: " << failures << "\n";
+  }
   os << "  speed              " << format_number(std::round(per_second * 100) / 100)
      << " experiments/s on " << threads << " threads (" << format_number(std::round(r.seconds))
      << " s)\n";
@@ -210,6 +241,11 @@ Command add_montecarlo_command(CLI::App& app) {
                   "Joint viscous and Coulomb friction: scaled by 1 +- this (< 1), one factor for "
                   "both." +
                       def(d.friction_rel))
+      ->group(g);
+  cmd->add_option("--contact-rel", o->p.contact_rel,
+                  "The contact's friction coefficients (mu, mu_kinetic) scaled by 1 +- this, its "
+                  "losses (rolling resistance, drag) by another factor 1 +- this (< 1)." +
+                      def(d.contact_rel))
       ->group(g);
   cmd->add_option("--noise-dn", o->p.noise_dn,
                   "Camera read noise sigma, DN (set in every run)." + def(d.noise_dn))

@@ -83,7 +83,7 @@ cv::Mat to_bgr8(const cv::Mat& image) {
   return out;
 }
 
-/// --overlay: time, s_h and the hand's contact force on the frame. The force f = f_n n + f_t t
+/// --overlay: time, s_h, the contact's mode and the hand's contact force on the frame. The force f = f_n n + f_t t
 /// (n the hand's outward normal, t its tangent towards increasing s_h, both rotated by theta into
 /// the table frame) is drawn from the projected contact point, 0.1 m on the table per m g.
 void draw_overlay(cv::Mat& bgr, const render::CameraModel& camera, const sim::PolynomialHand& hand,
@@ -109,7 +109,13 @@ void draw_overlay(cv::Mat& bgr, const render::CameraModel& camera, const sim::Po
   }
   char line[3][96];
   std::snprintf(line[0], sizeof line[0], "t = %.3f s", truth.t);
-  std::snprintf(line[1], sizeof line[1], "s_h = %+.3f", s.s_h);
+  // The contact's mode (the hybrid model's): in flight, how far the disk is from the hand.
+  if (s.mode == sim::ContactMode::kFlight)
+    std::snprintf(line[1], sizeof line[1], "s_h = %+.3f  flight, gap %.1f mm", s.s_h,
+                  1e3 * s.gap);
+  else
+    std::snprintf(line[1], sizeof line[1], "s_h = %+.3f  %s", s.s_h,
+                  sim::to_string(s.mode).c_str());
   std::snprintf(line[2], sizeof line[2], "f = %.3f mg (f_n %+.3f, f_t %+.3f)", force.norm(),
                 s.fn_ratio, s.ft_ratio);
   const double font = 1.2 * scale;
@@ -338,6 +344,9 @@ void run_render(const RenderOptions& o) {
   meta["t_begin"] = t0;
   meta["t_end"] = t_end;
   meta["stop_reason"] = sim::to_string(run.reason);
+  meta["model"] = sim::to_string(spec.run.model);
+  meta["contact"] = contact_summary_json(run.stats.mode_time, run.stats.mode_changes,
+                                         run.stats.impacts, run.events, run.initial);
   meta["motion"] = {{"type", butterfly ? "butterfly" : "fixed"},
                     {"period", butterfly ? number(spec.motion.period) : Json(nullptr)},
                     {"k", butterfly ? number(spec.motion.k) : Json(nullptr)},

@@ -1,6 +1,9 @@
 // flatland simulate: one run of the scene, with command-line overrides.
 #include "common.hpp"
 
+#include "flatland/sim/hybrid.hpp"
+
+#include <algorithm>
 #include <iostream>
 #include <memory>
 #include <sstream>
@@ -11,13 +14,62 @@ namespace {
 
 struct SimulateOptions {
   CommonOptions common;
+  MuOption mu;
+  std::string model;
   double period = 0, k = 0, sample_dt = 0, duration = 0;
   bool no_stop_on_contact_loss = false;
+  CLI::Option* model_opt = nullptr;
   CLI::Option* period_opt = nullptr;
   CLI::Option* k_opt = nullptr;
   CLI::Option* sample_dt_opt = nullptr;
   CLI::Option* duration_opt = nullptr;
 };
+
+std::string hybrid_text(const sim::SimulationSpec& spec, const sim::RunResult& r) {
+  // Six significant digits: these lines describe; the JSON has every digit.
+  const auto format_number = [](double v) {
+    std::ostringstream b;
+    b.precision(6);
+    b << v;
+    return b.str();
+  };
+  std::ostringstream os;
+  const sim::ContactLaw& law = spec.contact;
+  os << "  contact            hybrid, mu = " << (law.mu ? format_number(*law.mu) : "unlimited");
+  if (law.mu_kinetic) os << ", mu_k = " << format_number(*law.mu_kinetic);
+  os << ", e = " << format_number(law.restitution);
+  if (law.has_losses())
+    os << "; rolling resistance " << format_number(law.rolling_resistance) << " m, drag "
+       << format_number(law.drag) << " N s/m, " << format_number(law.drag_angular)
+       << " N m s/rad";
+  os << "\n  modes              ";
+  bool first = true;
+  for (int m = 0; m < 4; ++m) {
+    if (r.stats.mode_time[m] <= 0) continue;
+    os << (first ? "" : ", ") << sim::to_string(static_cast<sim::ContactMode>(m)) << " "
+       << format_number(r.stats.mode_time[m]) << " s";
+    first = false;
+  }
+  os << "; " << r.stats.mode_changes << " changes, " << r.stats.impacts << " impacts, ends "
+     << sim::to_string(r.final.mode) << "\n";
+  int i = 0;
+  for (const sim::FlightReport& f : sim::flight_reports(r)) {
+    os << "  flight " << ++i << "           leaves at t = " << format_number(f.t_lift_off)
+       << " s (s_h = " << format_number(f.s_lift_off) << ")";
+    if (f.t_landing)
+      os << ", lands at t = " << format_number(*f.t_landing) << " s on s_h = "
+         << format_number(f.s_landing) << " (x = " << format_number(f.landing_position.x())
+         << ", y = " << format_number(f.landing_position.y()) << " m) after "
+         << format_number(*f.t_landing - f.t_lift_off) << " s, impulse "
+         << format_number(f.impulse_normal) << " N s normal, "
+         << format_number(f.impulse_tangential) << " N s tangential";
+    if (f.bounces) os << ", " << f.bounces << " bounces";
+    if (f.t_caught) os << ", caught at t = " << format_number(*f.t_caught) << " s";
+    if (f.dropped) os << ", dropped (out of the hand's reach)";
+    os << "\n";
+  }
+  return os.str();
+}
 
 void run_simulate(const SimulateOptions& o) {
   // Everything that can be bad input is checked before anything is computed or written.
@@ -41,9 +93,18 @@ void run_simulate(const SimulateOptions& o) {
   }
   if (o.sample_dt_opt->count()) require_positive("--sample-dt", o.sample_dt, "s");
   if (o.no_stop_on_contact_loss) spec.run.events.stop_on_contact_loss = false;
+  apply_mu_option(o.mu, spec);
+  if (o.model_opt && o.model_opt->count())
+    spec.run.model = o.model == "hybrid" ? sim::ContactModel::kHybrid : sim::ContactModel::kRolling;
+  if (o.no_stop_on_contact_loss && spec.run.model == sim::ContactModel::kHybrid)
+    throw UsageError(
+        "--no-stop-on-contact-loss: only for the rolling model (the hybrid model flies where "
+        "contact is lost)");
   std::vector<std::pair<std::string, std::string>> given;
   if (o.k_opt->count()) given.emplace_back("motion.k", "--k");
   if (o.period_opt->count()) given.emplace_back("motion.period", "--period");
+  if (o.mu.opt->count()) given.emplace_back("contact.mu", "--mu");
+  if (o.model_opt->count()) given.emplace_back("contact.model", "--model");
   const auto problem = build_problem_checked(spec, given);
   sim::resolve_formulation(*problem, spec.run.formulation);  // e.g. reduced for an ellipse
 
@@ -93,6 +154,17 @@ void run_simulate(const SimulateOptions& o) {
     j["junction_crossings"] = r.stats.junction_crossings;
     j["max_constraint_residual"] = number(r.stats.max_constraint_residual);
     j["max_redundant_residual"] = number(r.stats.max_redundant_residual);
+    j["model"] = sim::to_string(spec.run.model);
+    j["mu"] = spec.contact.mu ? number(*spec.contact.mu) : Json(nullptr);
+    j["end_mode"] = sim::to_string(r.final.mode);
+    j["mode_changes"] = r.stats.mode_changes;
+    j["impacts"] = r.stats.impacts;
+    Json modes;
+    for (int m = 0; m < 4; ++m)
+      modes[sim::to_string(static_cast<sim::ContactMode>(m))] = number(r.stats.mode_time[m]);
+    j["mode_time"] = modes;
+    j["flights"] = flights_json(sim::flight_reports(r));
+    j["events"] = contact_events_json(r.events);
     j["csv"] = out.empty() ? Json(nullptr) : Json(out.string());
     emit_json(j);
     return;
@@ -118,6 +190,7 @@ void run_simulate(const SimulateOptions& o) {
      << "  required mu        " << format_number(r.mu_required) << "\n"
      << "  steps              " << r.stats.steps << " accepted, " << r.stats.rejected
      << " rejected, " << r.stats.rhs_evals << " rhs evaluations\n";
+  if (spec.run.model == sim::ContactModel::kHybrid) os << hybrid_text(spec, r);
   if (!out.empty()) os << "  wrote              " << out.string() << "\n";
   std::cout << os.str();
 }
@@ -148,8 +221,17 @@ Command add_simulate_command(CLI::App& app) {
                                      "CSV row spacing, s (> 0), from the dense output. Default: "
                                      "one row per accepted integrator step");
   cmd->add_flag("--no-stop-on-contact-loss", o->no_stop_on_contact_loss,
-                "Keep integrating (rolling enforced) where the normal force reaches 0. Default: "
-                "stop there");
+                "Rolling model: keep integrating (rolling enforced) where the normal force "
+                "reaches 0. Default: stop there");
+  o->model_opt = cmd->add_option("--model", o->model,
+                                 "Contact model: rolling (the paper's: rolling enforced, it stops "
+                                 "where contact is lost or, with mu, where it slips) or hybrid "
+                                 "(it slides, flies, bounces and is caught, with the scene's "
+                                 "losses). Default: the scene's contact.model, else rolling")
+                     ->check(CLI::IsMember({"rolling", "hybrid"}));
+  add_mu_option(*cmd, o->mu,
+                "Static friction coefficient (>= 0): the rolling model stops where the disk would "
+                "slip, the hybrid model slides. Default: the scene's contact.mu, else unlimited");
   return {cmd, [o] { run_simulate(*o); }};
 }
 

@@ -11,6 +11,7 @@ namespace {
 
 struct TimeOptimalOptions {
   CommonOptions common;
+  MuOption mu;
   double from = 0.9, to = 1.5, period_tolerance = 1e-7, tolerance = 1e-9;
 };
 
@@ -23,16 +24,19 @@ void run_time_optimal(const TimeOptimalOptions& o) {
   require_increasing("--from", o.from, "--to", o.to);
   require_positive("--period-tolerance", o.period_tolerance, "s");
   require_positive("--tolerance", o.tolerance, "");
+  apply_mu_option(o.mu, spec);
   spec.motion.period = o.from;
-  sim::build_problem(spec);
+  build_problem_checked(sim::paper_model(spec), {{"contact.mu", "--mu"}});
   const fs::path dir = o.common.out;
   if (!dir.empty()) check_output_directory("--out", dir, o.common.force);
   if (!dir.empty() && !o.common.no_plot) require_gnuplot();
+  const bool friction = spec.contact.mu.has_value();
 
   sim::SearchSettings settings;
   settings.tolerance = o.tolerance;
-  std::cerr << "flatland: searching the fastest contact-keeping butterfly in ["
-            << format_number(o.from) << ", " << format_number(o.to) << "] s\n";
+  std::cerr << "flatland: searching the fastest butterfly keeping contact"
+            << (friction ? " within mu = " + format_number(*spec.contact.mu) : std::string())
+            << " in [" << format_number(o.from) << ", " << format_number(o.to) << "] s\n";
   const sim::TimeOptimalReport r =
       sim::time_optimal(spec, o.from, o.to, o.period_tolerance, settings);
 
@@ -46,6 +50,9 @@ void run_time_optimal(const TimeOptimalOptions& o) {
     j["period"] = number(r.period);
     j["k"] = number(r.k);
     j["fn_min_ratio"] = number(r.fn_min_ratio);
+    j["mu"] = friction ? number(*spec.contact.mu) : Json(nullptr);
+    j["friction_margin"] = number(r.friction_margin);
+    j["limit"] = sim::to_string(r.limit);
     j["solves"] = r.solves;
     j["contact_lost"] = r.fn_min_ratio < 0;
     j["solution"] = solve_report_json(r.solution);
@@ -53,8 +60,15 @@ void run_time_optimal(const TimeOptimalOptions& o) {
     emit_json(j);
     return;
   }
-  std::cout << "flatland time-optimal: fastest butterfly keeping f_n >= 0 (" << scene.origin
-            << "), " << r.solves << " solves\n"
+  std::cout << "flatland time-optimal: fastest butterfly keeping f_n >= 0"
+            << (friction ? " and |f_t| <= mu f_n, mu = " + format_number(*spec.contact.mu)
+                         : std::string(" (no mu: friction unlimited)"))
+            << " (" << scene.origin << "), " << r.solves << " solves\n"
+            << "  limited by         "
+            << (r.limit == sim::SpeedLimit::kFriction ? "friction (the disk would slip)"
+                                                     : "the normal force (the hand would throw "
+                                                       "the disk)")
+            << "\n"
             << solve_report_text(r.solution);
   for (const auto& p : outputs.paths()) std::cout << "  wrote              " << p << "\n";
 }
@@ -66,13 +80,18 @@ Command add_time_optimal_command(CLI::App& app) {
   CLI::App* cmd = app.add_subcommand(
       "time-optimal",
       "Find the shortest duration 2T in [FROM, TO] whose butterfly solution keeps the normal "
-      "force >= 0 throughout (paper section 4.3: 2T = 1.095 s, k = -1.1493). The minimum normal "
-      "force of the solutions must be < 0 at FROM and > 0 at TO.");
+      "force >= 0 throughout (paper section 4.3: 2T = 1.095 s, k = -1.1493) and, with a friction "
+      "coefficient (--mu or the scene's contact.mu), needs no more friction than that (mu = 0.306 "
+      "gives the paper's 1.181 s). The binding constraint must be violated at FROM and hold at "
+      "TO.");
   add_common_options(*cmd, o->common,
                      "Directory for the solution's trajectory.csv (every 1 ms; SI units), "
                      "trajectory.png and forces.png with their gnuplot scripts; created if "
                      "missing. Default: no files",
                      true);
+  add_mu_option(*cmd, o->mu,
+                "Static friction coefficient (>= 0) the solution may need at most. Default: the "
+                "scene's contact.mu, else unlimited (only the normal force limits)");
   cmd->add_option("--from", o->from, "Lower end of the 2T bracket, s (> 0). Default: 0.9 s");
   cmd->add_option("--to", o->to, "Upper end of the 2T bracket, s (> FROM). Default: 1.5 s");
   cmd->add_option("--period-tolerance", o->period_tolerance,

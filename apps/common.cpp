@@ -1,5 +1,7 @@
 #include "common.hpp"
 
+#include "flatland/sim/hybrid.hpp"
+
 #include <algorithm>
 #include <charconv>
 #include <cmath>
@@ -164,7 +166,11 @@ const std::vector<std::string>& sample_columns() {
                                                    "ft_ratio",
                                                    "mu_required",
                                                    "constraint_residual",
-                                                   "redundant_residual"};
+                                                   "redundant_residual",
+                                                   "mode",
+                                                   "slip_velocity",
+                                                   "gap",
+                                                   "rolling_couple"};
   return columns;
 }
 
@@ -208,6 +214,9 @@ std::string samples_csv(const std::vector<sim::Sample>& samples) {
       if (i) out += ',';
       out += format_number(v[i]);
     }
+    // The contact mode (a word) and what the hybrid model adds.
+    out += ',' + sim::to_string(s.mode) + ',' + format_number(s.slip_velocity) + ',' +
+           format_number(s.gap) + ',' + format_number(s.rolling_couple);
     out += '\n';
   }
   return out;
@@ -664,6 +673,87 @@ double s_at_half_period(const sim::SimulationSpec& spec, const sim::RunResult& r
   return r.trajectory.s_h(T);
 }
 
+void add_mu_option(CLI::App& cmd, MuOption& mu, const std::string& help) {
+  mu.opt = cmd.add_option("--mu", mu.value, help);
+}
+
+void apply_mu_option(const MuOption& mu, sim::SimulationSpec& spec) {
+  if (!mu.opt || !mu.opt->count()) return;
+  if (!std::isfinite(mu.value) || mu.value < 0)
+    throw UsageError("--mu: must be a finite number >= 0, got " + format_number(mu.value));
+  if (spec.contact.mu_kinetic && *spec.contact.mu_kinetic > mu.value)
+    throw UsageError("--mu: must not be below the scene's contact.mu_kinetic (" +
+                     format_number(*spec.contact.mu_kinetic) + "), got " +
+                     format_number(mu.value));
+  spec.contact.mu = mu.value;
+}
+
+Json contact_events_json(const std::vector<sim::RecordedEvent>& all) {
+  std::vector<const sim::RecordedEvent*> events;
+  for (const auto& e : all)
+    if (e.kind != sim::EventKind::kJunction && e.kind != sim::EventKind::kApex) events.push_back(&e);
+  std::stable_sort(events.begin(), events.end(),
+                   [](const auto* a, const auto* b) { return a->t < b->t; });
+  Json arr = Json::array();
+  for (const auto* e : events) {
+    Json j;
+    j["kind"] = sim::to_string(e->kind);
+    j["t"] = number(e->t);
+    j["s_h"] = number(e->s_h);
+    if (e->impact) {
+      j["impulse_normal"] = number(e->impact->impulse_normal);
+      j["impulse_tangential"] = number(e->impact->impulse_tangential);
+      j["vn_before"] = number(e->impact->vn_before);
+      j["vn_after"] = number(e->impact->vn_after);
+      j["vt_before"] = number(e->impact->vt_before);
+      j["vt_after"] = number(e->impact->vt_after);
+      j["sticking"] = e->impact->sticking;
+      j["caught"] = e->caught;
+      j["energy_change"] = number(e->energy_change);
+      j["hand_rate_change"] = number(e->hand_rate_change);
+    }
+    arr.push_back(j);
+  }
+  return arr;
+}
+
+Json flights_json(const std::vector<sim::FlightReport>& flights) {
+  Json arr = Json::array();
+  for (const sim::FlightReport& f : flights) {
+    const bool landed = f.t_landing.has_value();
+    Json j;
+    j["t_lift_off"] = number(f.t_lift_off);
+    j["s_lift_off"] = number(f.s_lift_off);
+    j["t_landing"] = landed ? number(*f.t_landing) : Json(nullptr);
+    j["duration"] = landed ? number(*f.t_landing - f.t_lift_off) : Json(nullptr);
+    j["s_landing"] = landed ? number(f.s_landing) : Json(nullptr);
+    j["landing_x"] = landed ? number(f.landing_position.x()) : Json(nullptr);
+    j["landing_y"] = landed ? number(f.landing_position.y()) : Json(nullptr);
+    j["impulse_normal"] = landed ? number(f.impulse_normal) : Json(nullptr);
+    j["impulse_tangential"] = landed ? number(f.impulse_tangential) : Json(nullptr);
+    j["bounces"] = f.bounces;
+    j["t_caught"] = f.t_caught ? number(*f.t_caught) : Json(nullptr);
+    j["dropped"] = f.dropped;
+    arr.push_back(j);
+  }
+  return arr;
+}
+
+Json contact_summary_json(const std::array<double, 4>& mode_time, int mode_changes, int impacts,
+                          const std::vector<sim::RecordedEvent>& events,
+                          const sim::Sample& initial) {
+  Json j;
+  Json modes;
+  for (int m = 0; m < 4; ++m)
+    modes[sim::to_string(static_cast<sim::ContactMode>(m))] = number(mode_time[m]);
+  j["mode_time"] = modes;
+  j["mode_changes"] = mode_changes;
+  j["impacts"] = impacts;
+  j["flights"] = flights_json(sim::flight_reports(events, initial));
+  j["events"] = contact_events_json(events);
+  return j;
+}
+
 Json solve_report_json(const sim::SolveReport& r) {
   Json j;
   j["period"] = number(r.period);
@@ -674,6 +764,7 @@ Json solve_report_json(const sim::SolveReport& r) {
   j["fn_apex_ratio"] = number(r.fn_apex_ratio);
   j["fn_min_ratio"] = number(r.fn_min_ratio);
   j["mu_required"] = number(r.mu_required);
+  j["friction_margin"] = number(r.friction_margin);
   j["contact_lost"] = r.fn_min_ratio < 0;
   j["simulations"] = r.simulations;
   j["rhs_evals"] = r.rhs_evals;
@@ -690,8 +781,12 @@ std::string solve_report_text(const sim::SolveReport& r) {
      << "  f_n at apex / mg   " << format_number(r.fn_apex_ratio) << "\n"
      << "  min f_n / mg       " << format_number(r.fn_min_ratio)
      << (r.fn_min_ratio < 0 ? "  (contact lost: the hand would throw the disk)" : "") << "\n"
-     << "  required mu        " << format_number(r.mu_required) << "\n"
-     << "  simulations        " << r.simulations << " (" << r.rhs_evals << " rhs evaluations)\n";
+     << "  required mu        " << format_number(r.mu_required) << "\n";
+  if (std::isfinite(r.friction_margin))
+    os << "  friction margin    " << format_number(r.friction_margin)
+       << " (min (mu f_n - |f_t|) / mg" << (r.friction_margin < 0 ? ": the disk would slip" : "")
+       << ")\n";
+  os << "  simulations        " << r.simulations << " (" << r.rhs_evals << " rhs evaluations)\n";
   return os.str();
 }
 

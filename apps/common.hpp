@@ -3,12 +3,14 @@
 #pragma once
 
 #include "flatland/scene/scene.hpp"
+#include "flatland/sim/hybrid.hpp"
 #include "flatland/sim/search.hpp"
 #include "flatland/sim/simulate.hpp"
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include <array>
 #include <filesystem>
 #include <functional>
 #include <mutex>
@@ -60,6 +62,26 @@ Scene load_scene_with_overrides(const CommonOptions& o);
 /// given on the command line: `given` pairs a scene field ("motion.k") with its option ("--k").
 std::shared_ptr<const sim::RollingProblem> build_problem_checked(
     const sim::SimulationSpec& spec, const std::vector<std::pair<std::string, std::string>>& given);
+
+/// The events of a run that change the contact (junction crossings and the apex left out), in
+/// time order, with the impacts' impulses and velocities.
+Json contact_events_json(const std::vector<sim::RecordedEvent>& events);
+/// Each flight: lift-off, landing (time, s_h, point), first impulse, bounces, catch or drop.
+Json flights_json(const std::vector<sim::FlightReport>& flights);
+/// Seconds in each mode, changes, impacts, flights and events: what the contact did.
+Json contact_summary_json(const std::array<double, 4>& mode_time, int mode_changes, int impacts,
+                          const std::vector<sim::RecordedEvent>& events,
+                          const sim::Sample& initial);
+
+/// --mu: the static friction coefficient for this run (the scene's contact.mu).
+struct MuOption {
+  double value = 0;
+  CLI::Option* opt = nullptr;
+};
+void add_mu_option(CLI::App& cmd, MuOption& mu, const std::string& help);
+/// Set spec.contact.mu from --mu when given (UsageError for a negative value or one below the
+/// scene's contact.mu_kinetic).
+void apply_mu_option(const MuOption& mu, sim::SimulationSpec& spec);
 
 /// UsageError unless v is finite (and, with `positive`, > 0). `what` names the option and unit.
 void require_finite(const std::string& option, double v);

@@ -45,7 +45,8 @@ struct Cell {
 /// What one experiment left that the study aggregates.
 struct RunSummary {
   bool success = false;
-  std::string failure;  // the run's own message (empty on success)
+  drivers::Outcome outcome = drivers::Outcome::kNotFinished;
+  std::string stop_reason;  // the safe stop's reason (outcome kSafeStop)
   double fn_min = NAN, duration = NAN, est_rms = NAN, nees = NAN;
   long frames = 0, frames_lost = 0;
 };
@@ -61,32 +62,25 @@ struct CellResult {
   double wall = 0, cpu = 0;  // s, the whole cell (all its runs, on all threads)
 };
 
-/// A short class for a failure message of drivers::run_synthetic (world failure first, then the
-/// safe stop's reason, then the goal check), for the breakdown per cell.
-std::string failure_class(const std::string& f) {
-  const auto starts = [&](const char* p) { return f.rfind(p, 0) == 0; };
-  if (starts("contact lost")) return "contact lost";
-  if (starts("slip")) return "slip";
-  if (starts("disk rolled off")) return "rolled off";
-  if (starts("disk at s_h")) return "wrong well";
-  if (starts("disk can still leave")) return "not settled";
+/// A short class for how a run failed, for the breakdown per cell: the outcome, and for a safe
+/// stop what triggered it (the first word of the safety monitor's reason).
+std::string failure_class(const RunSummary& r) {
+  if (r.outcome != drivers::Outcome::kSafeStop) return drivers::to_string(r.outcome);
+  const auto starts = [&](const char* p) { return r.stop_reason.rfind(p, 0) == 0; };
   for (const char* why : {"camera", "tracking", "estimator", "joint", "timeout"})
-    if (starts((std::string("safe stop: ") + why).c_str()))
-      return std::string("safe stop (") + why + ")";
-  if (starts("safe stop")) return "safe stop (other)";
-  if (starts("the motion did not finish")) return "not finished";
-  return "other";
+    if (starts(why)) return std::string("safe_stop (") + why + ")";
+  return "safe_stop (other)";
 }
 
 /// The CSV's failure columns: classes folded into five.
 int failure_column(const std::string& cls) {
-  if (cls == "contact lost") return 0;
-  if (cls == "slip" || cls == "rolled off") return 1;
-  if (cls == "wrong well" || cls == "not settled") return 2;
-  if (cls.rfind("safe stop", 0) == 0) return 3;
+  if (cls == "dropped") return 0;
+  if (cls == "slid_off") return 1;
+  if (cls == "wrong_well" || cls == "not_settled") return 2;
+  if (cls.rfind("safe_stop", 0) == 0) return 3;
   return 4;
 }
-const char* const kFailureColumns[] = {"fail_contact_lost", "fail_slip", "fail_wrong_well",
+const char* const kFailureColumns[] = {"fail_dropped", "fail_slid_off", "fail_wrong_well",
                                        "fail_safe_stop", "fail_other"};
 
 /// The scene the loop assumes in a cell: the nominal scene with the cell's camera. The truth
@@ -174,7 +168,8 @@ CellResult run_cell(const Scene& nominal, const Cell& cell, int n, unsigned thre
         const drivers::SyntheticResult r = drivers::run_synthetic(setup, truth);
         RunSummary s;
         s.success = r.success;
-        s.failure = r.failure;
+        s.outcome = r.outcome;
+        s.stop_reason = r.loop.stop_reason;
         s.fn_min = r.fn_min_ratio;
         s.duration = r.success ? r.loop.duration_s : NAN;
         const ServoStats servo = servo_stats(r.loop);
@@ -212,7 +207,7 @@ CellResult run_cell(const Scene& nominal, const Cell& cell, int n, unsigned thre
     if (r.success)
       ++out.successes;
     else
-      ++out.failures[failure_class(r.failure)];
+      ++out.failures[failure_class(r)];
     frames += r.frames;
     lost += r.frames_lost;
     if (r.success && std::isfinite(r.fn_min))

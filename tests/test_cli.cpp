@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -98,7 +99,8 @@ using CliRuntimeFailure = CliFixture;
 const char* const kTrajectoryHeader =
     "t,theta,theta_dot,theta_ddot,s_h,sdot_h,sddot_h,s_o,sdot_o,x,y,object_angle,vx,vy,omega,f_n,f_"
     "t,"
-    "fn_ratio,ft_ratio,mu_required,constraint_residual,redundant_residual";
+    "fn_ratio,ft_ratio,mu_required,constraint_residual,redundant_residual,mode,slip_velocity,gap,"
+    "rolling_couple";
 
 // ---- help -------------------------------------------------------------------------------------
 
@@ -141,7 +143,8 @@ TEST_F(CliSimulate, JsonHasRequiredKeys) {
               {"period", "k", "s_T", "s_end", "sdot_end", "fn_apex_ratio", "fn_min_ratio",
                "mu_required", "steps", "rhs_evals", "contact_lost"},
               {"formulation", "method", "stop_reason", "rejected", "restarts", "junction_crossings",
-               "max_constraint_residual", "max_redundant_residual", "t_end", "csv"});
+               "max_constraint_residual", "max_redundant_residual", "t_end", "csv", "model", "mu",
+               "end_mode", "mode_changes", "impacts", "mode_time", "flights", "events"});
   // The scene is the paper's Figure 2 motion: 2T = 1.181 s, k = -1.1393 (inputs, echoed).
   EXPECT_DOUBLE_EQ(j["period"].get<double>(), 1.181);
   EXPECT_DOUBLE_EQ(j["k"].get<double>(), -1.1393);
@@ -160,6 +163,44 @@ TEST_F(CliSimulate, FastMotionLosesContactAndReportsNull) {
   EXPECT_TRUE(j["contact_lost"].get<bool>());
   EXPECT_TRUE(j["s_T"].is_null());
   EXPECT_EQ(j["stop_reason"], "contact_lost");
+}
+
+// The bundled throw-and-catch scene (paper section 5): the disk leaves the hand before the
+// fingertip, lands on the back half (0 < s_h < 1), bounces, is caught and stays on the hand.
+TEST_F(CliSimulate, ThrowAndCatchReportsTheFlight) {
+  const Result r = run("simulate --scene " + std::string(FLATLAND_ASSET_DIR) +
+                       "/scenes/throw-catch.yaml --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const json j = parse_json(r);
+  EXPECT_EQ(j["model"], "hybrid");
+  ASSERT_EQ(j["flights"].size(), 1u) << j.dump(2);
+  const json& f = j["flights"][0];
+  EXPECT_LT(f["s_lift_off"].get<double>(), 0.0);  // before the tip
+  ASSERT_FALSE(f["t_landing"].is_null());
+  EXPECT_GT(f["t_landing"].get<double>(), f["t_lift_off"].get<double>());
+  EXPECT_NEAR(f["duration"].get<double>(),
+              f["t_landing"].get<double>() - f["t_lift_off"].get<double>(), 1e-12);
+  EXPECT_GT(f["s_landing"].get<double>(), 0.0);  // past the tip, on the back half
+  EXPECT_LT(f["s_landing"].get<double>(), 1.0);
+  EXPECT_GT(f["impulse_normal"].get<double>(), 0.0);
+  ASSERT_FALSE(f["t_caught"].is_null());
+  EXPECT_GE(f["t_caught"].get<double>(), f["t_landing"].get<double>());
+  EXPECT_FALSE(f["dropped"].get<bool>());
+  EXPECT_GT(j["mode_time"]["flight"].get<double>(), 0.0);
+  EXPECT_NE(j["end_mode"], "flight");
+  // The events in time order: the lift-off, then the impacts (the last one caught).
+  std::vector<std::string> kinds;
+  double t_prev = -1e9;
+  for (const auto& e : j["events"]) {
+    EXPECT_GE(e["t"].get<double>(), t_prev);
+    t_prev = e["t"].get<double>();
+    kinds.push_back(e["kind"]);
+  }
+  const auto lift = std::find(kinds.begin(), kinds.end(), "lift_off");
+  ASSERT_NE(lift, kinds.end());
+  EXPECT_NE(std::find(lift, kinds.end(), "impact"), kinds.end());
+  EXPECT_EQ(j["impacts"].get<int>(),
+            static_cast<int>(std::count(kinds.begin(), kinds.end(), "impact")));
 }
 
 TEST_F(CliSimulate, WritesSampledCsv) {
@@ -191,7 +232,7 @@ TEST_F(CliSolve, JsonMatchesPaper) {
   expect_keys(
       j,
       {"period", "k", "s_T", "s_end", "sdot_end", "fn_apex_ratio", "fn_min_ratio", "mu_required"},
-      {"simulations", "rhs_evals", "contact_lost", "files"});
+      {"simulations", "rhs_evals", "contact_lost", "files", "friction_margin"});
   // Paper section 4.3: 2T = 1.181 s is solved by k = -1.1393, with the normal force at the apex
   // 17.5 % of m g and a required friction coefficient of 0.306.
   EXPECT_NEAR(j["k"].get<double>(), -1.1393, 1e-3);
@@ -252,7 +293,7 @@ TEST_F(CliLocus, KIncreasesWithPeriod) {
                        (plots ? "" : " --no-plot"));
   ASSERT_EQ(r.code, 0) << r.err;
   const json j = parse_json(r);
-  expect_keys(j, {"points", "csv", "png"}, {"seconds"});
+  expect_keys(j, {"points", "csv", "png"}, {"seconds", "mu"});
   ASSERT_EQ(j["points"].size(), 3u);
   // Paper: along the locus k increases with 2T (a smaller initial dip).
   double prev = -1e9;
@@ -266,7 +307,7 @@ TEST_F(CliLocus, KIncreasesWithPeriod) {
   EXPECT_DOUBLE_EQ(j["points"][2]["period"].get<double>(), 2.0);
   const auto rows = lines_of(read_text(dir_ / "loc" / "locus.csv"));
   ASSERT_EQ(rows.size(), 4u);
-  EXPECT_EQ(rows[0], "period,k,fn_min_ratio,fn_apex_ratio,mu_required,s_end,sdot_end");
+  EXPECT_EQ(rows[0], "period,k,fn_min_ratio,fn_apex_ratio,mu_required,s_end,sdot_end,friction_margin");
   if (plots) {
     EXPECT_TRUE(is_png(dir_ / "loc" / "locus.png"));
   }
@@ -350,6 +391,29 @@ TEST_F(CliBadInput, UnknownMethod) {
 
 TEST_F(CliBadInput, NonPositiveSampleInterval) {
   expect_bad_input("simulate --sample-dt 0 --out out/run.csv", "--sample-dt", "out");
+}
+
+TEST_F(CliBadInput, ContactOptionsAndScene) {
+  expect_bad_input("simulate --mu -0.1 --out out/run.csv", "--mu", "out");
+  expect_bad_input("simulate --mu nan --out out/run.csv", "--mu", "out");
+  expect_bad_input("locus --mu -1 --out out", "--mu", "out");
+  expect_bad_input("time-optimal --mu -1 --out out", "--mu", "out");
+  expect_bad_input("simulate --model soft --out out/run.csv", "--model", "out");
+  expect_bad_input("simulate --model hybrid --no-stop-on-contact-loss --out out/run.csv",
+                   "--no-stop-on-contact-loss", "out");
+  scene_with("mu.yaml", "stop_on_contact_loss: true", "model: hybrid\n  mu: 0.5\n  mu_kinetic: 0.7");
+  expect_bad_input("simulate --scene mu.yaml --out out/run.csv", "contact.mu_kinetic", "out");
+  // --mu below the scene's kinetic coefficient.
+  scene_with("mu2.yaml", "stop_on_contact_loss: true", "model: hybrid\n  mu: 0.5\n  mu_kinetic: 0.4");
+  expect_bad_input("simulate --scene mu2.yaml --mu 0.3 --out out/run.csv", "--mu", "out");
+  scene_with("e.yaml", "stop_on_contact_loss: true", "model: hybrid\n  restitution: 2");
+  expect_bad_input("simulate --scene e.yaml --out out/run.csv", "contact.restitution", "out");
+  scene_with("loss.yaml", "stop_on_contact_loss: true", "model: hybrid\n  drag: -0.1");
+  expect_bad_input("simulate --scene loss.yaml --out out/run.csv", "contact.drag", "out");
+  scene_with("rr.yaml", "stop_on_contact_loss: true",
+             "model: hybrid\n  mu: 0.1\n  rolling_resistance: 0.01");
+  expect_bad_input("simulate --scene rr.yaml --out out/run.csv", "contact.rolling_resistance",
+                   "out");
 }
 
 TEST_F(CliBadInput, UnknownCommandAndOption) {

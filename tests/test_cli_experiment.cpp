@@ -115,7 +115,7 @@ TEST_F(CliExperimentTest, HelpListsTheOptions) {
   EXPECT_EQ(r.code, 0) << r.err;
   for (const char* s : {"--n", "--seed", "--controller", "--threads", "--s-h", "--tilt-deg",
                         "--radius-rel", "--noise-dn", "--latency", "--latency-jitter", "--drop",
-                        "--friction-rel", "--out", "--json"})
+                        "--friction-rel", "--contact-rel", "--out", "--json"})
     EXPECT_NE(r.out.find(s), std::string::npos) << "help does not mention " << s << ":\n" << r.out;
   r = run("--help");
   EXPECT_NE(r.out.find("experiment"), std::string::npos) << r.out;
@@ -158,6 +158,18 @@ TEST_F(CliExperimentTest, BadInputExits2AndWritesNothing) {
   expect_bad_input("montecarlo --tilt-deg -1", "--tilt-deg");
   expect_bad_input("montecarlo --latency 0.01 --latency-jitter 0.02", "--latency-jitter");
   expect_bad_input("montecarlo --out full", "--out", {});
+  expect_bad_input("montecarlo --contact-rel 1", "--contact-rel");
+
+  // Friction is always counted: a synthetic world needs the scene's contact.mu.
+  std::string scene = read_text(fs::path(FLATLAND_ASSET_DIR) / "scenes" / "airtable-feedback.yaml");
+  for (const char* key : {"  mu: ", "  mu_kinetic: "}) {
+    const auto at = scene.find(key);
+    ASSERT_NE(at, std::string::npos) << key;
+    scene.erase(at, scene.find('\n', at) + 1 - at);
+  }
+  write_text(dir_ / "frictionless.yaml", scene);
+  expect_bad_input("experiment --scene frictionless.yaml --out out", "contact.mu");
+  expect_bad_input("montecarlo --n 2 --scene frictionless.yaml --out out", "contact.mu");
 }
 
 TEST_F(CliExperimentTest, SyntheticFeedbackRunWritesTheLogResultPlotsAndVideo) {

@@ -55,53 +55,81 @@ struct TempDir {
   }
 };
 
+
+/// The apex time (s_h rising through 0) and the worst asymmetry of theta and s_h about it over
+/// +-1.5 s: theta(t_a + tau) + theta(t_a - tau) = 2 theta(t_a) and s_h(t_a + tau) = -s_h(t_a - tau)
+/// for the planned motion.
+struct Symmetry {
+  double t_apex = NAN, theta_apex = NAN, theta = NAN, s = NAN;
+};
+Symmetry symmetry(const std::vector<drivers::TickLog>& log) {
+  Symmetry out;
+  for (std::size_t i = 1; i < log.size(); ++i)
+    if (log[i - 1].s_true < 0 && log[i].s_true >= 0 && log[i].t > 0.5) {
+      out.t_apex = log[i - 1].t + (0 - log[i - 1].s_true) / (log[i].s_true - log[i - 1].s_true) *
+                                      (log[i].t - log[i - 1].t);
+      break;
+    }
+  if (!std::isfinite(out.t_apex)) return out;
+  const auto theta = [](const drivers::TickLog& row) { return row.theta_true; };
+  const auto s = [](const drivers::TickLog& row) { return row.s_true; };
+  out.theta_apex = at(log, out.t_apex, theta);
+  out.theta = out.s = 0;
+  for (double tau = 0.1; tau <= 1.5; tau += 0.1) {
+    out.theta = std::max(out.theta, std::abs(at(log, out.t_apex + tau, theta) +
+                                             at(log, out.t_apex - tau, theta) - 2 * out.theta_apex));
+    out.s = std::max(out.s, std::abs(at(log, out.t_apex + tau, s) + at(log, out.t_apex - tau, s)));
+  }
+  return out;
+}
+
 }  // namespace
 
 // The paper's run (Fig. 10): 5 deg, 2T = 4.0 s, k = -1.1393, 30 Hz camera with 33 ms latency and
-// 2 DN noise, feedback at 1 kHz. The paper reports symmetric theta and s_h and about 4.23 s.
+// 2 DN noise, feedback at 1 kHz. The paper reports symmetric theta and s_h and about 4.23 s: its
+// controller slowed stage 2 for the disk. In the lossless world the loop keeps the plan's time
+// and is symmetric about the apex as the plan is; with the air table's losses (the scene's
+// contact section) the disk lags the plan and the controller slows stage 2 beyond the plan's
+// 4.0 s. The losses break the time symmetry, so the lossy run is only nearly symmetric.
 TEST(ClosedLoop, PaperRunSucceedsWithFeedback) {
   const Scene scene = feedback_scene();
   ASSERT_EQ(scene.controller.mode, "feedback");
   ASSERT_NEAR(scene.sim.motion.period, 4.0, 1e-12);
   ASSERT_NEAR(scene.sim.motion.k, -1.1393, 1e-12);
+  ASSERT_TRUE(scene.sim.contact.has_losses());
   const drivers::LoopSetup setup(scene);
-  const drivers::SyntheticResult r = drivers::run_synthetic(setup, scene);
-  ASSERT_TRUE(r.success) << r.failure;
-  EXPECT_FALSE(r.loop.safe_stop);
-  EXPECT_GT(r.fn_min_ratio, 0.0);
-  EXPECT_EQ(r.loop.frames_lost, 0);
-  // Stage 2 stretches or shrinks the plan to follow the disk; the motion stays near its 4 s.
-  EXPECT_NEAR(r.loop.duration_s, 4.0, 0.4);
-  EXPECT_GT(r.goal.energy_margin, 0.0);
-
-  // Symmetry about the apex (s_h = 0): theta(t_a + tau) + theta(t_a - tau) = 2 theta(t_a) and
-  // s_h(t_a + tau) = -s_h(t_a - tau), as for the planned motion.
-  const auto& log = r.loop.log;
-  double t_apex = NAN;
-  for (std::size_t i = 1; i < log.size(); ++i)
-    if (log[i - 1].s_true < 0 && log[i].s_true >= 0 && log[i].t > 0.5) {
-      t_apex = log[i - 1].t + (0 - log[i - 1].s_true) / (log[i].s_true - log[i - 1].s_true) *
-                                  (log[i].t - log[i - 1].t);
-      break;
+  Scene lossless = scene;
+  lossless.sim.contact.rolling_resistance = lossless.sim.contact.drag =
+      lossless.sim.contact.drag_angular = 0;
+  for (const Scene* world : {static_cast<const Scene*>(&lossless), &scene}) {
+    const bool losses = world == &scene;
+    SCOPED_TRACE(losses ? "the air table's losses" : "lossless");
+    const drivers::SyntheticResult r = drivers::run_synthetic(setup, *world);
+    ASSERT_TRUE(r.success) << r.failure;
+    EXPECT_EQ(r.outcome, drivers::Outcome::kSuccess);
+    EXPECT_FALSE(r.loop.safe_stop);
+    EXPECT_GT(r.fn_min_ratio, 0.0);
+    EXPECT_LE(r.mu_max, *scene.sim.contact.mu);
+    EXPECT_EQ(r.loop.frames_lost, 0);
+    EXPECT_GT(r.goal.energy_margin, 0.0);
+    if (losses) {
+      EXPECT_GT(r.loop.duration_s, 4.1);  // stage 2 slowed for a lagging disk
+      EXPECT_LT(r.loop.duration_s, 4.5);
+    } else {
+      EXPECT_NEAR(r.loop.duration_s, 4.0, 0.1);
     }
-  ASSERT_TRUE(std::isfinite(t_apex));
-  const auto theta = [](const drivers::TickLog& row) { return row.theta_true; };
-  const auto s = [](const drivers::TickLog& row) { return row.s_true; };
-  const double theta_apex = at(log, t_apex, theta);
-  EXPECT_NEAR(theta_apex, 0.5 * std::numbers::pi, 0.1);
-  double worst_theta = 0, worst_s = 0;
-  for (double tau = 0.1; tau <= 1.5; tau += 0.1) {
-    worst_theta = std::max(worst_theta, std::abs(at(log, t_apex + tau, theta) +
-                                                 at(log, t_apex - tau, theta) - 2 * theta_apex));
-    worst_s = std::max(worst_s, std::abs(at(log, t_apex + tau, s) + at(log, t_apex - tau, s)));
+    const Symmetry sym = symmetry(r.loop.log);
+    ASSERT_TRUE(std::isfinite(sym.t_apex));
+    EXPECT_NEAR(sym.theta_apex, 0.5 * std::numbers::pi, 0.1);
+    EXPECT_LT(sym.theta, losses ? 0.15 : 0.1);
+    EXPECT_LT(sym.s, losses ? 0.2 : 0.05);
+    std::fprintf(stderr,
+                 "[ closed loop ] %s: duration %.3f s (paper ~4.23), apex at %.3f s, symmetry: "
+                 "theta %.4f rad, s_h %.4f; fn_min %.4f mg, mu_max %.3f, s_end %.4f, NEES %.2f "
+                 "over %ld frames\n",
+                 losses ? "losses" : "lossless", r.loop.duration_s, sym.t_apex, sym.theta, sym.s,
+                 r.fn_min_ratio, r.mu_max, r.s_end, r.nees_mean, r.nees_samples);
   }
-  EXPECT_LT(worst_theta, 0.1);
-  EXPECT_LT(worst_s, 0.05);
-  std::fprintf(stderr,
-               "[ closed loop ] duration %.3f s (paper ~4.23), apex at %.3f s, symmetry: theta %.4f "
-               "rad, s_h %.4f; fn_min %.4f mg, mu_max %.3f, s_end %.4f, NEES %.2f over %ld frames\n",
-               r.loop.duration_s, t_apex, worst_theta, worst_s, r.fn_min_ratio, r.mu_max, r.s_end,
-               r.nees_mean, r.nees_samples);
 }
 
 // Open-loop playback drives the joint along the plan: the joint model (reference integration,
@@ -237,7 +265,13 @@ TEST_P(ClosedLoopFault, SafeStop) {
   ASSERT_FALSE(r.loop.log.empty());
   const drivers::TickLog& last = r.loop.log.back();
   EXPECT_EQ(last.stage, control::Stage::kSafeStop);
-  EXPECT_LT(std::abs(last.theta_dot), 1e-3) << "the hand is not at rest";
+  // The hand comes to rest; the disk, thrown by the stopping hand, may fall back on it later and
+  // knock it (the drive holds it: it stays within a few mrad/s).
+  bool rested = false;
+  for (const auto& row : r.loop.log)
+    rested = rested || (row.stage == control::Stage::kSafeStop && std::abs(row.theta_dot) < 1e-3);
+  EXPECT_TRUE(rested) << "the hand never came to rest";
+  EXPECT_LT(std::abs(last.theta_dot), 0.05) << "the hand is not held";
   // Within the drive's limits: the safe stop decelerates at controller.stop_deceleration.
   double worst = 0;
   for (const auto& row : r.loop.log)

@@ -38,6 +38,46 @@ TEST(Paper, SolutionEndsAtRestOnTheBackAtTightTolerance) {
   EXPECT_NEAR(r.sdot_end, 0.0, 1e-6);
 }
 
+// With friction counted, the fastest motion is limited by mu before the normal force: the paper's
+// 2T = 1.181 s motion needs mu = 0.306, so with mu = 0.306 the fastest solution is that one (the
+// paper's 0.306 is rounded: within 5 ms), and it is the friction that binds.
+TEST(Paper, TimeOptimalWithFrictionIsThePaperMotionForItsMu) {
+  SimulationSpec spec = paper_spec();
+  spec.contact.mu = 0.306;
+  const TimeOptimalReport r = time_optimal(spec, 0.9, 1.5);
+  EXPECT_EQ(r.limit, SpeedLimit::kFriction);
+  EXPECT_NEAR(r.period, 1.181, 0.005);
+  EXPECT_NEAR(r.friction_margin, 0.0, 1e-6);
+  EXPECT_GT(r.fn_min_ratio, 0.15);
+  // Its solution needs exactly mu (the margin is mu f_n - |f_t| over the weight).
+  EXPECT_NEAR(r.solution.mu_required, 0.306, 1e-4);
+  // Much friction: the paper's 1.095 s again, where the normal force nearly vanishes (any finite
+  // mu binds a little before f_n reaches 0, where f_t does not vanish with it).
+  spec.contact.mu = 10;
+  const TimeOptimalReport loose = time_optimal(spec, 0.9, 1.5);
+  const TimeOptimalReport unlimited = time_optimal(paper_spec(), 0.9, 1.5);
+  EXPECT_EQ(unlimited.limit, SpeedLimit::kNormalForce);
+  EXPECT_NEAR(loose.period, 1.095, 0.003);
+  EXPECT_GE(loose.period, unlimited.period);
+  EXPECT_LT(loose.fn_min_ratio, 1e-3);
+}
+
+// Along the locus the friction margin and the required friction tell the same story: the margin
+// (min (mu f_n - |f_t|) / mg, one minimisation) is negative exactly where the required mu
+// (max |f_t| / f_n, another) exceeds mu.
+TEST(Paper, LocusFrictionMarginAgreesWithTheRequiredMu) {
+  SimulationSpec spec = paper_spec();
+  spec.contact.mu = 0.15;
+  const auto points = locus(spec, 1.15, 2.5, 6);
+  int slips = 0;
+  for (const SolveReport& p : points) {
+    EXPECT_EQ(p.friction_margin < 0, p.mu_required > 0.15) << "2T = " << p.period;
+    slips += p.friction_margin < 0;
+  }
+  EXPECT_GT(slips, 0);  // the fast end needs more than 0.15 (0.265 at 1.2 s) ...
+  EXPECT_LT(slips, static_cast<int>(points.size()));  // ... the slow end less (0.066 at 2 s)
+}
+
 TEST(Paper, TimeOptimalSolution) {
   const TimeOptimalReport r = time_optimal(paper_spec(), 0.9, 1.5);
   EXPECT_NEAR(r.period, 1.095, 0.003);

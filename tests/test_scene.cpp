@@ -444,6 +444,50 @@ TEST(SceneTest, OutOfRangeValues) {
                      "contact.event_tolerance", "positive");
 }
 
+// The hybrid model's contact law and losses.
+TEST(SceneTest, HybridContactSection) {
+  const std::string hybrid = "contact:\n  model: hybrid\n  mu: 0.8\n  mu_kinetic: 0.6\n"
+                             "  restitution: 0.4\n  capture_velocity: 0.002\n"
+                             "  rolling_resistance: 5.0e-5\n  drag: 0.015\n"
+                             "  drag_angular: 2.0e-5\n  event_tolerance: 1.0e-12\n";
+  const std::string rolling =
+      "contact:\n  stop_on_contact_loss: true\n  event_tolerance: 1.0e-12\n";
+  const Scene s = parse_scene(with(kBase, rolling, hybrid));
+  const sim::ContactLaw& c = s.sim.contact;
+  EXPECT_EQ(s.sim.run.model, sim::ContactModel::kHybrid);
+  EXPECT_DOUBLE_EQ(*c.mu, 0.8);
+  EXPECT_DOUBLE_EQ(*c.mu_kinetic, 0.6);
+  EXPECT_DOUBLE_EQ(c.restitution, 0.4);
+  EXPECT_DOUBLE_EQ(c.capture_velocity, 0.002);
+  EXPECT_DOUBLE_EQ(c.rolling_resistance, 5e-5);
+  EXPECT_DOUBLE_EQ(c.drag, 0.015);
+  EXPECT_DOUBLE_EQ(c.drag_angular, 2e-5);
+  // Absent: the rolling model, as the paper's simulation.
+  EXPECT_EQ(parse_scene(kBase).sim.run.model, sim::ContactModel::kRolling);
+
+  const auto bad = [&](const std::string& from, const std::string& to, const std::string& field,
+                       const std::string& reason) {
+    expect_field_error(with(with(kBase, rolling, hybrid), from, to), field, reason);
+  };
+  bad("mu: 0.8", "mu: -0.1", "contact.mu", ">= 0");
+  bad("mu_kinetic: 0.6", "mu_kinetic: 0.9", "contact.mu_kinetic", "must not exceed contact.mu");
+  bad("  mu: 0.8\n", "", "contact.mu_kinetic", "needs contact.mu");
+  bad("restitution: 0.4", "restitution: 1.5", "contact.restitution", "[0, 1]");
+  bad("restitution: 0.4", "restitution: -0.1", "contact.restitution", "[0, 1]");
+  bad("drag: 0.015", "drag: -0.015", "contact.drag", ">= 0");
+  bad("drag_angular: 2.0e-5", "drag_angular: -1", "contact.drag_angular", ">= 0");
+  bad("rolling_resistance: 5.0e-5", "rolling_resistance: -5.0e-5", "contact.rolling_resistance",
+      ">= 0");
+  bad("capture_velocity: 0.002", "capture_velocity: -1", "contact.capture_velocity", ">= 0");
+  bad("model: hybrid", "model: soft", "contact.model", "unknown value");
+  bad("model: hybrid", "model: hybrid\n  stop_on_contact_loss: true",
+      "contact.stop_on_contact_loss", "only for model: rolling");
+  // The rolling model is the paper's: no losses, no impacts.
+  bad("model: hybrid", "model: rolling", "contact.mu_kinetic", "only for model: hybrid");
+  expect_field_error(with(kBase, "stop_on_contact_loss: true", "drag: 0.1"), "contact.drag",
+                     "only for model: hybrid");
+}
+
 // These come from sim::build_problem, re-prefixed with the origin.
 TEST(SceneTest, PhysicallyInvalidScenes) {
   expect_field_error(with(kBase, "k: -1.1393", "k: -2"), "motion.k", "k = -2");

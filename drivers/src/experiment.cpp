@@ -130,7 +130,8 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
   out.k = setup.plan.k;
   out.period = setup.plan.period;
   out.duration_s = kNaN;
-  auto nominal_problem = sim::build_problem(scene.sim);
+  // The estimator knows what the planner knew: the paper's rolling model, without losses.
+  auto nominal_problem = sim::build_problem(sim::paper_model(scene.sim));
   control::Estimator estimator(nominal_problem, setup.estimator);
   control::ButterflyController controller(setup.plan.plan, setup.controller);
   control::SafetyMonitor safety(setup.safety, t_start);
@@ -201,9 +202,9 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
       if (options.on_frame) options.on_frame(*frame, tr, z);
     }
     if (auto why = safety.check_time(t)) controller.safe_stop(t, *why);
-    // Synthetic runs: the disk has left the hand (contact lost, slip); stop the hand safely.
+    // Synthetic runs: the disk has left the hand's reach for good; stop the hand safely.
     if (options.world && options.world->failure())
-      controller.safe_stop(t, "disk: " + *options.world->failure());
+      controller.safe_stop(t, "disk: " + options.world->failure_detail());
     if (t > t_limit) controller.safe_stop(t, "timeout: the motion did not finish by t = " +
                                                  fmt(t_limit) + " s");
 
@@ -230,6 +231,7 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
       row.theta_true = w.theta;
       row.fn_ratio = w.fn_ratio;
       row.mu_required = w.mu_required;
+      row.mode_true = w.mode;
       row.nees = estimating ? control::nees(est, w.s_h, w.sdot_h) : kNaN;
     } else {
       row.s_true = row.sdot_true = row.theta_true = row.fn_ratio = row.mu_required = row.nees =
@@ -288,11 +290,28 @@ SyntheticResult run_synthetic(const LoopSetup& setup, const Scene& truth,
       ++r.nees_samples;
     }
   r.nees_mean = r.nees_samples ? nees_sum / static_cast<double>(r.nees_samples) : kNaN;
-  if (world.failure()) r.failure = *world.failure();
-  else if (r.loop.safe_stop) r.failure = "safe stop: " + r.loop.stop_reason;
-  else if (!r.loop.finished) r.failure = "the motion did not finish";
-  else if (!r.goal.in_goal) r.failure = r.goal.reason;
-  r.success = r.failure.empty();
+  r.mode_time = world.mode_time();
+  r.impacts = world.impacts();
+  r.mode_changes = world.mode_changes();
+  r.contact_events = world.events();
+  if (world.failure()) {
+    r.outcome = *world.failure();
+    r.failure = world.failure_detail();
+  } else if (r.loop.safe_stop) {
+    r.outcome = Outcome::kSafeStop;
+    r.failure = "safe stop: " + r.loop.stop_reason;
+  } else if (!r.loop.finished) {
+    r.outcome = Outcome::kNotFinished;
+    r.failure = "the motion did not finish";
+  } else if (!r.goal.in_goal) {
+    const bool other_well = !(r.goal.well_bottom > 0.5 && r.goal.well_bottom < 1.5) &&
+                            r.goal.mode != sim::ContactMode::kFlight;
+    r.outcome = other_well ? Outcome::kWrongWell : Outcome::kNotSettled;
+    r.failure = r.goal.reason;
+  } else {
+    r.outcome = Outcome::kSuccess;
+  }
+  r.success = r.outcome == Outcome::kSuccess;
   return r;
 }
 

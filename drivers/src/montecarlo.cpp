@@ -48,6 +48,8 @@ void validate(const Perturbations& p) {
   require(non_negative(p.drop) && p.drop < 1, "drop", "must be in [0, 1)", p.drop);
   require(non_negative(p.friction_rel) && p.friction_rel < 1, "friction_rel", "must be in [0, 1)",
           p.friction_rel);
+  require(non_negative(p.contact_rel) && p.contact_rel < 1, "contact_rel", "must be in [0, 1)",
+          p.contact_rel);
 }
 
 Scene perturb(const Scene& nominal, const Perturbations& p, std::uint64_t seed, int run,
@@ -71,6 +73,8 @@ Scene perturb(const Scene& nominal, const Perturbations& p, std::uint64_t seed, 
   d.radius = nominal.sim.object.radius * around(rng, 1.0, p.radius_rel);
   d.friction_scale = around(rng, 1.0, p.friction_rel);
   d.effects_seed = rng();
+  d.mu_scale = around(rng, 1.0, p.contact_rel);
+  d.loss_scale = around(rng, 1.0, p.contact_rel);
 
   s.sim.initial.s_h = d.s_h0;
   s.sim.tilt = d.tilt_deg * kDeg;
@@ -80,6 +84,12 @@ Scene perturb(const Scene& nominal, const Perturbations& p, std::uint64_t seed, 
   s.effects.noise_read_dn = p.noise_dn;
   s.effects.drop_probability = p.drop;
   s.effects.seed = d.effects_seed;
+  sim::ContactLaw& law = s.sim.contact;
+  if (law.mu) *law.mu *= d.mu_scale;
+  if (law.mu_kinetic) *law.mu_kinetic *= d.mu_scale;
+  law.rolling_resistance *= d.loss_scale;
+  law.drag *= d.loss_scale;
+  law.drag_angular *= d.loss_scale;
   s.camera->latency = p.latency;
   s.camera->latency_jitter = p.latency_jitter;
   if (drawn) *drawn = d;
@@ -115,6 +125,7 @@ MonteCarloResult run_montecarlo(const Scene& nominal, const Perturbations& p, in
   }
   // Bad perturbations or scenes fail here, before any thread starts.
   perturb(nominal, p, seed, 0);
+  require_friction(nominal);
 
   // One setup per controller, shared read-only by the workers (the plan is simulated once).
   std::vector<std::unique_ptr<const LoopSetup>> setups;
@@ -149,7 +160,11 @@ MonteCarloResult run_montecarlo(const Scene& nominal, const Perturbations& p, in
         const Scene truth = perturb(nominal, p, seed, run, &rec.drawn);
         const SyntheticResult r = run_synthetic(*setups[ci], truth);
         rec.success = r.success;
+        rec.outcome = r.outcome;
         rec.failure = r.failure;
+        rec.slide_s = r.mode_time[static_cast<int>(sim::ContactMode::kSliding)];
+        rec.flight_s = r.mode_time[static_cast<int>(sim::ContactMode::kFlight)];
+        rec.impacts = r.impacts;
         rec.duration_s = r.loop.duration_s;
         rec.s_end = r.s_end;
         rec.fn_min_ratio = r.fn_min_ratio;

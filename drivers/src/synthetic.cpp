@@ -34,53 +34,144 @@ double hermite(double y0, double d0, double y1, double d1, double h, double u) {
 
 }  // namespace
 
+void require_friction(const Scene& scene) {
+  if (!scene.sim.contact.mu)
+    throw std::invalid_argument(
+        scene.origin +
+        ": contact.mu: a synthetic experiment needs the friction coefficient between the disk and "
+        "the hand (the world slides where the motion needs more); the bundled air-table scenes "
+        "say which values they assume and why");
+}
+
+std::string to_string(Outcome o) {
+  switch (o) {
+    case Outcome::kSuccess:
+      return "success";
+    case Outcome::kDropped:
+      return "dropped";
+    case Outcome::kSlidOff:
+      return "slid_off";
+    case Outcome::kWrongWell:
+      return "wrong_well";
+    case Outcome::kNotSettled:
+      return "not_settled";
+    case Outcome::kSafeStop:
+      return "safe_stop";
+    case Outcome::kNotFinished:
+      return "not_finished";
+  }
+  return "?";
+}
+
 SimWorld::SimWorld(const Scene& truth, double t_start)
     : scene_(truth), dt_(1.0 / truth.joint.rate), t_start_(t_start), t_(t_start) {
   if (truth.sim.object.kind != sim::ObjectSpec::Kind::kDisk)
     throw std::invalid_argument(truth.origin +
                                 ": object: the closed loop rolls a disk (object.type: disk)");
-  const auto base = sim::build_problem(truth.sim);
-  // The reaction torque is evaluated with explicit kinematics; the motion here is never used.
-  auto fixed = std::make_shared<sim::RollingProblem>(*base);
-  fixed->motion = std::make_shared<sim::FixedHand>(0.0);
-  problem_ = fixed;
-  rolling_ = std::make_unique<sim::ReducedDiskRolling>(problem_);
-
-  step_options_ = sim::run_options(truth.sim);
+  require_friction(truth);
+  // The world is the hybrid model whatever the scene's contact.model: it slides, flies and is
+  // caught again where the real table would.
+  sim::SimulationSpec spec = truth.sim;
+  spec.run.model = sim::ContactModel::kHybrid;
+  problem_ = sim::build_problem(spec);
+  step_options_ = sim::run_options(spec);
   step_options_.formulation = sim::Formulation::kReduced;
   step_options_.record = false;
-  step_options_.events.s_h_bounds = std::make_pair(-3.0, 3.0);
+  step_options_.stop_at_transition = true;  // the joint's load changes there
+  step_options_.hand_inertia = truth.joint.inertia;  // an impact kicks the hand too
+  step_options_.events.s_h_bounds.reset();
 
-  const sim::HandKinematics h0 = base->motion->at(0.0);
-  theta_ = h0.angle;
+  theta_ = problem_->motion->at(0.0).angle;
   theta_ref_ = theta_;
-  const sim::InitialContact& init = truth.sim.initial;
-  s_h_ = init.s_h;
-  sdot_h_ = init.sdot_h;
-  const auto y0 = rolling_->initial_state(init);
-  disk_angle_ = y0[1];
+  sim::InitialContact init = truth.sim.initial;
+  init.t0 = t_start;
+  const auto resting = held(t_start, 0.0);
+  disk_ = sim::hybrid_state(*resting, init);
+  const sim::Sample s = sim::sample_state(resting, disk_);
+  disk_.position = s.object_position;
+  disk_.velocity = s.object_velocity;
+  disk_.angular_velocity = s.object_angular_velocity;
   const double q = 2.0 * M_PI / static_cast<double>(truth.joint.encoder_counts);
   encoder_ = std::round(theta_ / q) * q;
   history_.reserve(8192);
   history_.push_back(sample_now(0.0, 0.0));
 }
 
-double SimWorld::reaction_torque(const WorldSample& w, double alpha) const {
-  sim::HandKinematics h;
-  h.angle = w.theta;
-  h.angular_velocity = w.theta_dot;
-  h.angular_acceleration = alpha;
-  const int piece = problem_->hand->piece_at(w.s_h, w.sdot_h >= 0 ? +1 : -1);
-  sim::ReducedDiskRolling::State y;
-  y << w.s_h, w.disk_angle, w.sdot_h;
-  const sim::Sample s = rolling_->sample_with(h, w.t, y, piece);
-  const sim::CurveGeometry g = problem_->hand->geometry(w.s_h, piece);
-  const Eigen::Matrix2d R = rotation(w.theta);
+std::shared_ptr<const sim::RollingProblem> SimWorld::held(double t, double alpha) const {
+  auto pb = std::make_shared<sim::RollingProblem>(*problem_);
+  pb->motion = std::make_shared<sim::HeldAcceleration>(t, theta_, theta_dot_, alpha);
+  return pb;
+}
+
+double SimWorld::reaction_torque(double t, double alpha) const {
+  if (failure_ || disk_.mode == sim::ContactMode::kFlight) return 0.0;
+  sim::HybridState x = disk_;
+  x.t = t;
+  const sim::Sample s = sim::sample_state(held(t, alpha), x);
+  const sim::CurveGeometry g = problem_->hand->geometry(x.s_h, x.hand_piece);
+  const Eigen::Matrix2d R = rotation(theta_);
   const sim::Vec2 force_on_disk =
       s.force_normal * (R * g.normal) + s.force_tangential * (R * g.tangent);
   const sim::Vec2 contact = R * g.point;  // from the pivot
   // The disk pushes back on the hand with -force_on_disk at the contact point.
   return -(contact.x() * force_on_disk.y() - contact.y() * force_on_disk.x());
+}
+
+double SimWorld::joint_acceleration(double t, double t_end, double tau, bool& stops) const {
+  const JointSpec& j = scene_.joint;
+  stops = false;
+  // The disk's reaction is affine in the hand's acceleration: tau_disk = r0 + r1 alpha (it adds
+  // inertia while in contact; in flight, or once dropped, the joint moves alone).
+  const double r0 = reaction_torque(t, 0.0);
+  const double r1 = reaction_torque(t, 1.0) - r0;
+  const double drive = tau - j.viscous * theta_dot_ + r0;
+  if (theta_dot_ == 0.0 && std::abs(drive) <= j.coulomb) return 0.0;  // stiction holds
+  const double direction =
+      theta_dot_ != 0.0 ? (theta_dot_ > 0 ? 1.0 : -1.0) : (drive > 0 ? 1.0 : -1.0);
+  const double alpha = (drive - j.coulomb * direction) / (j.inertia - r1);
+  const double next_rate = theta_dot_ + alpha * (t_end - t);
+  if (theta_dot_ != 0.0 && next_rate * theta_dot_ < 0 && std::abs(drive) <= j.coulomb) {
+    // Dry friction brings the joint to rest within this period rather than reversing it.
+    stops = true;
+    return -theta_dot_ / (t_end - t);
+  }
+  return alpha;
+}
+
+double SimWorld::step_disk(double t, double t_end, double alpha) {
+  if (failure_) {
+    // Out of the hand's reach for good: it flies on (and out of the camera's view).
+    disk_ = sim::fly(*problem_, disk_, t_end);
+    mode_time_[static_cast<int>(sim::ContactMode::kFlight)] += t_end - t;
+    return t_end;
+  }
+  sim::RunOptions opt = step_options_;
+  opt.t_end = t_end;
+  disk_.t = t;
+  if (disk_.mode != sim::ContactMode::kFlight) last_contact_mode_ = disk_.mode;
+  const sim::RunResult r = sim::simulate_hybrid(held(t, alpha), disk_, opt);
+  for (int m = 0; m < 4; ++m) mode_time_[m] += r.stats.mode_time[m];
+  impacts_ += r.stats.impacts;
+  mode_changes_ += r.stats.mode_changes;
+  disk_ = *r.final_state;
+  for (const sim::RecordedEvent& e : r.events) {
+    if (e.kind != sim::EventKind::kJunction && e.kind != sim::EventKind::kApex)
+      events_.push_back(e);
+    if (e.kind == sim::EventKind::kImpact) theta_dot_kick_ += e.hand_rate_change;
+    if (e.kind == sim::EventKind::kSlipStart || e.kind == sim::EventKind::kStick ||
+        e.kind == sim::EventKind::kRest || e.kind == sim::EventKind::kRelease)
+      last_contact_mode_ = disk_.mode;
+  }
+  if (r.reason == sim::StopReason::kDropped) {
+    failure_ = last_contact_mode_ == sim::ContactMode::kSliding ? Outcome::kSlidOff
+                                                                 : Outcome::kDropped;
+    failure_detail_ = std::string(last_contact_mode_ == sim::ContactMode::kSliding
+                                      ? "the disk slid off the hand"
+                                      : "the disk lost contact") +
+                      " and was not caught (out of the hand's reach at t = " + fmt(disk_.t) +
+                      " s)";
+  }
+  return disk_.t;
 }
 
 WorldSample SimWorld::sample_now(double alpha, double torque) const {
@@ -89,95 +180,63 @@ WorldSample SimWorld::sample_now(double alpha, double torque) const {
   w.theta = theta_;
   w.theta_dot = theta_dot_;
   w.theta_ddot = alpha;
-  w.s_h = s_h_;
-  w.sdot_h = sdot_h_;
-  w.disk_angle = disk_angle_;
   w.theta_ref = theta_ref_;
   w.torque = torque;
-  if (failure_) return w;  // the disk has left the hand: no contact forces
-  sim::HandKinematics h;
-  h.angle = theta_;
-  h.angular_velocity = theta_dot_;
-  h.angular_acceleration = alpha;
-  const int piece = problem_->hand->piece_at(s_h_, sdot_h_ >= 0 ? +1 : -1);
-  sim::ReducedDiskRolling::State y;
-  y << s_h_, disk_angle_, sdot_h_;
-  const sim::Sample s = rolling_->sample_with(h, t_, y, piece);
+  sim::HybridState x = disk_;
+  x.t = t_;
+  const sim::Sample s = sim::sample_state(held(t_, alpha), x);
+  w.mode = disk_.mode;
+  w.s_h = s.s_h;
+  w.sdot_h = s.sdot_h;
+  w.disk_position = s.object_position;
+  w.disk_velocity = s.object_velocity;
+  w.disk_angle = s.object_angle;
+  w.disk_rate = s.object_angular_velocity;
   w.fn_ratio = s.fn_ratio;
   w.ft_ratio = s.ft_ratio;
   w.mu_required = s.mu_required;
-  w.disk_rate = s.object_angular_velocity;
   return w;
-}
-
-void SimWorld::step_disk(double alpha) {
-  // The disk over this period, by the exact rolling dynamics under the held acceleration.
-  auto problem = std::make_shared<sim::RollingProblem>(*problem_);
-  problem->motion = std::make_shared<sim::HeldAcceleration>(t_, theta_, theta_dot_, alpha);
-  sim::InitialContact init;
-  init.t0 = t_;
-  init.s_h = s_h_;
-  init.sdot_h = sdot_h_;
-  init.object_angle = disk_angle_;
-  sim::RunOptions opt = step_options_;
-  opt.t_end = t_ + dt_;
-  const sim::RunResult r = sim::simulate(problem, init, opt);
-  s_h_ = r.final.s_h;
-  sdot_h_ = r.final.sdot_h;
-  disk_angle_ = r.final.object_angle;
-  if (r.reason != sim::StopReason::kEndTime) {
-    failure_ = (r.reason == sim::StopReason::kContactLost ? "contact lost"
-                : r.reason == sim::StopReason::kSlip      ? "slip (at mu = " +
-                                                           fmt(problem_->contact.mu_static()) + ")"
-                                                     : "disk rolled off the hand") +
-               std::string(" at t = ") + fmt(r.final.t) + " s, s_h = " + fmt(r.final.s_h);
-    failure_time_ = r.final.t;
-    fn_min_ = std::min(fn_min_, r.final.fn_ratio);
-  }
 }
 
 void SimWorld::servo_step() {
   const JointSpec& j = scene_.joint;
-  const WorldSample& now = history_.back();
-
   // The drive: feedforward of the commanded acceleration on the nominal inertia, PD on the
-  // reference, saturated.
+  // reference, saturated; held over the period.
   const double tau_cmd = j.inertia * command_ + j.kp * (theta_ref_ - encoder_) +
                          j.kd * (theta_dot_ref_ - velocity_estimate_);
   const double tau = std::clamp(tau_cmd, -j.torque_limit, j.torque_limit);
-  // The disk's reaction is affine in the hand's acceleration: tau_disk = r0 + r1 alpha. Once
-  // the disk has left the hand (a failure), the joint moves alone.
-  const double r0 = failure_ ? 0.0 : reaction_torque(now, 0.0);
-  const double r1 = failure_ ? 0.0 : reaction_torque(now, 1.0) - r0;
-  const double drive = tau - j.viscous * theta_dot_ + r0;
-  double alpha = 0;
-  bool stop_at_end = false;
-  if (theta_dot_ == 0.0 && std::abs(drive) <= j.coulomb) {
-    alpha = 0;  // stiction holds
-  } else {
-    const double direction = theta_dot_ != 0.0 ? (theta_dot_ > 0 ? 1.0 : -1.0)
-                                               : (drive > 0 ? 1.0 : -1.0);
-    alpha = (drive - j.coulomb * direction) / (j.inertia - r1);
-    const double next_rate = theta_dot_ + alpha * dt_;
-    if (theta_dot_ != 0.0 && next_rate * theta_dot_ < 0 && std::abs(drive) <= j.coulomb) {
-      // Dry friction brings the joint to rest within this period rather than reversing it.
-      alpha = -theta_dot_ / dt_;
-      stop_at_end = true;
+  const double t_end = t_start_ + static_cast<double>(tick_ + 1) * dt_;
+  double t = t_, alpha = 0;
+  // The period in pieces: where the contact changes mode, the disk's load on the joint changes,
+  // and so does the hand's acceleration; an impact changes the hand's rate at once.
+  for (int piece = 0; t < t_end; ++piece) {
+    if (piece > 1000)
+      throw std::runtime_error("world: the contact changes mode more than 1000 times within one "
+                               "servo period at t = " + fmt(t) + " s");
+    bool stops = false;
+    alpha = joint_acceleration(t, t_end, tau, stops);
+    if (!failure_ && disk_.mode != sim::ContactMode::kFlight) {
+      // The forces right after the acceleration was set (it jumps at ticks and at changes of
+      // mode, and the forces with it).
+      sim::HybridState x = disk_;
+      x.t = t;
+      const sim::Sample s = sim::sample_state(held(t, alpha), x);
+      fn_min_ = std::min(fn_min_, s.fn_ratio);
+      if (disk_.mode != sim::ContactMode::kSliding && std::isfinite(s.mu_required))
+        mu_max_ = std::max(mu_max_, s.mu_required);
     }
+    theta_dot_kick_ = 0;
+    const double t1 = step_disk(t, t_end, alpha);
+    const double tau_step = t1 - t;
+    theta_ += tau_step * (theta_dot_ + 0.5 * tau_step * alpha);
+    theta_dot_ = stops && t1 >= t_end ? 0.0 : theta_dot_ + alpha * tau_step;
+    theta_dot_ += theta_dot_kick_;
+    t = t1;
   }
-  if (!failure_) {
-    // The forces just after this tick (the acceleration jumps at ticks, and the force with it).
-    const WorldSample start = sample_now(alpha, tau);
-    fn_min_ = std::min(fn_min_, start.fn_ratio);
-    if (std::isfinite(start.mu_required)) mu_max_ = std::max(mu_max_, start.mu_required);
-    step_disk(alpha);
-  }
-
-  theta_ += dt_ * (theta_dot_ + 0.5 * dt_ * alpha);
-  theta_dot_ = stop_at_end ? 0.0 : theta_dot_ + alpha * dt_;
   theta_ref_ += dt_ * (theta_dot_ref_ + 0.5 * dt_ * command_);
   theta_dot_ref_ += dt_ * command_;
-  t_ = t_start_ + static_cast<double>(++tick_) * dt_;
+  t_ = t_end;
+  ++tick_;
 
   // The encoder and the drive's velocity estimate (filtered difference of encoder readings).
   const double q = 2.0 * M_PI / static_cast<double>(j.encoder_counts);
@@ -218,6 +277,10 @@ WorldSample SimWorld::state_at(double t) const {
   w.theta_dot = a.theta_dot + u * (b.theta_dot - a.theta_dot);
   w.s_h = hermite(a.s_h, a.sdot_h, b.s_h, b.sdot_h, h, u);
   w.sdot_h = a.sdot_h + u * (b.sdot_h - a.sdot_h);
+  for (int k = 0; k < 2; ++k)
+    w.disk_position[k] = hermite(a.disk_position[k], a.disk_velocity[k], b.disk_position[k],
+                                 b.disk_velocity[k], h, u);
+  w.disk_velocity = a.disk_velocity + u * (b.disk_velocity - a.disk_velocity);
   w.disk_angle = hermite(a.disk_angle, a.disk_rate, b.disk_angle, b.disk_rate, h, u);
   w.fn_ratio = a.fn_ratio + u * (b.fn_ratio - a.fn_ratio);
   w.ft_ratio = a.ft_ratio + u * (b.ft_ratio - a.ft_ratio);
@@ -226,67 +289,69 @@ WorldSample SimWorld::state_at(double t) const {
 
 render::SceneState SimWorld::scene_state_at(double t) const {
   const WorldSample w = state_at(t);
-  const sim::CurveGeometry g =
-      problem_->hand->geometry(w.s_h, problem_->hand->piece_at(w.s_h, +1));
-  const double r = *problem_->object.disk_radius;
-  const sim::Vec2 c = rotation(w.theta) * (g.point + r * g.normal);
   render::SceneState s;
   s.t = t;
   s.hand_angle = w.theta;
-  s.disk_center = {c.x(), c.y()};
-  // After the disk left the hand its free flight is not simulated: it is drawn off the table.
-  if (failure_ && t > failure_time_) s.disk_center = {1e3, 1e3};
+  s.disk_center = {w.disk_position.x(), w.disk_position.y()};
   s.disk_angle = w.disk_angle;
   s.s_h = w.s_h;
   s.force_normal_ratio = w.fn_ratio;
   s.force_tangential_ratio = w.ft_ratio;
+  s.mode = w.mode;
   return s;
 }
 
 GoalCheck SimWorld::goal_check() const {
   GoalCheck out;
-  out.s_h = s_h_;
+  out.mode = disk_.mode;
+  const sim::HandKinematics h = [&] {
+    sim::HandKinematics k;
+    k.angle = theta_;
+    return k;
+  }();
   const sim::Curve& hand = *problem_->hand;
   const double r = *problem_->object.disk_radius;
+  out.s_h = disk_.mode == sim::ContactMode::kFlight
+                ? sim::disk_gap(*problem_, h, disk_.position).s_h
+                : disk_.s_h;
   const Eigen::Matrix2d R = rotation(theta_);
   const auto height = [&](double s) {
     const sim::CurveGeometry g = hand.geometry(s, hand.piece_at(s, +1));
     return (R * (g.point + r * g.normal)).y();
   };
   // Walk downhill from the disk to the bottom of its well, then uphill both ways to the rims.
-  constexpr double kStep = 1e-3, kLimit = 2.95;
-  double s = std::clamp(s_h_, -kLimit, kLimit);
+  constexpr double kStep = 1e-3, kPeriod = 4.0;
+  double s = std::remainder(out.s_h - 1.0, kPeriod) + 1.0;  // into [-1, 3): the closed outline
   const double dir = height(s + kStep) < height(s - kStep) ? +kStep : -kStep;
-  while (std::abs(s + dir) < kLimit && height(s + dir) < height(s)) s += dir;
-  out.well_bottom = s;
+  for (int i = 0; i < 4000 && height(s + dir) < height(s); ++i) s += dir;
+  out.well_bottom = std::remainder(s - 1.0, kPeriod) + 1.0;
   double left = s, right = s;
-  while (left - kStep > -kLimit && height(left - kStep) >= height(left)) left -= kStep;
-  while (right + kStep < kLimit && height(right + kStep) >= height(right)) right += kStep;
+  for (int i = 0; i < 4000 && height(left - kStep) >= height(left); ++i) left -= kStep;
+  for (int i = 0; i < 4000 && height(right + kStep) >= height(right); ++i) right += kStep;
   out.rim_left = left;
   out.rim_right = right;
-  // The disk's energy with the hand at rest where it is now (kinetic from the exact sample).
-  sim::HandKinematics h;
-  h.angle = theta_;
-  h.angular_velocity = theta_dot_;
-  sim::ReducedDiskRolling::State y;
-  y << s_h_, disk_angle_, sdot_h_;
-  const sim::Sample smp =
-      rolling_->sample_with(h, t_, y, hand.piece_at(s_h_, sdot_h_ >= 0 ? +1 : -1));
+  // The disk's energy in the table plane.
   const double m = problem_->object.mass, g = problem_->gravity;
-  const double energy = 0.5 * m * smp.object_velocity.squaredNorm() +
-                        0.5 * problem_->object.inertia * smp.object_angular_velocity *
-                            smp.object_angular_velocity +
-                        m * g * smp.object_position.y();
+  const double energy = 0.5 * m * disk_.velocity.squaredNorm() +
+                        0.5 * problem_->object.inertia * disk_.angular_velocity *
+                            disk_.angular_velocity +
+                        m * g * disk_.position.y();
   const double rim = std::min(height(left), height(right));
   out.energy_margin = m * g * rim - energy;
+  const double theta_goal = problem_->motion->at(1e9).angle;
   if (failure_) {
-    out.reason = *failure_;
+    out.reason = failure_detail_;
+  } else if (disk_.mode == sim::ContactMode::kFlight) {
+    out.reason = "the disk is still in flight";
   } else if (!(out.well_bottom > 0.5 && out.well_bottom < 1.5)) {
-    out.reason = "disk at s_h = " + fmt(s_h_) + " settles in the well whose bottom is at s_h = " +
+    out.reason = "disk at s_h = " + fmt(out.s_h) + " settles in the well whose bottom is at s_h = " +
                  fmt(out.well_bottom) + ", not the goal well (bottom near s_h = +1)";
   } else if (!(out.energy_margin > 0)) {
     out.reason = "disk can still leave the goal well (energy " + fmt(-out.energy_margin) +
                  " J above its lower rim)";
+  } else if (!(std::abs(theta_ - theta_goal) < 0.05)) {
+    out.reason = "the hand is at " + fmt(theta_) + " rad, not at its goal " + fmt(theta_goal) +
+                 " rad";
   } else {
     out.in_goal = true;
   }

@@ -501,6 +501,7 @@ SceneState SceneState::from_sample(const sim::Sample& s) {
   st.s_h = s.s_h;
   st.force_normal_ratio = s.fn_ratio;
   st.force_tangential_ratio = s.ft_ratio;
+  st.mode = s.mode;
   return st;
 }
 

@@ -673,6 +673,62 @@ void Hybrid::run(HybridState x) {
 
 }  // namespace
 
+std::vector<FlightReport> flight_reports(const RunResult& run) {
+  return flight_reports(run.events, run.initial);
+}
+
+std::vector<FlightReport> flight_reports(const std::vector<RecordedEvent>& all,
+                                         const Sample& initial) {
+  std::vector<FlightReport> out;
+  std::vector<const RecordedEvent*> events;
+  for (const RecordedEvent& e : all) events.push_back(&e);
+  std::stable_sort(events.begin(), events.end(),
+                   [](const RecordedEvent* a, const RecordedEvent* b) { return a->t < b->t; });
+  FlightReport* open = nullptr;
+  const auto begin = [&](double t, double s_h) {
+    out.push_back({});
+    open = &out.back();
+    open->t_lift_off = t;
+    open->s_lift_off = s_h;
+  };
+  if (initial.mode == ContactMode::kFlight) begin(initial.t, initial.s_h);
+  for (const RecordedEvent* e : events) {
+    if (e->kind == EventKind::kLiftOff) {
+      begin(e->t, e->s_h);
+      continue;
+    }
+    if (e->kind == EventKind::kImpact) {
+      if (!open) begin(e->t, e->s_h);  // (an impact always follows a flight)
+      if (!open->t_landing) {
+        open->t_landing = e->t;
+        open->s_landing = e->s_h;
+        open->landing_position = e->position;
+        if (e->impact) {
+          open->impulse_normal = e->impact->impulse_normal;
+          open->impulse_tangential = e->impact->impulse_tangential;
+        }
+      }
+      if (e->caught) {
+        open->t_caught = e->t;
+        open = nullptr;
+      } else {
+        ++open->bounces;
+      }
+      continue;
+    }
+    if (e->kind == EventKind::kDropped && open) {
+      open->dropped = true;
+      open = nullptr;
+    }
+  }
+  return out;
+}
+
+HybridState fly(const RollingProblem& problem, const HybridState& x, double t) {
+  if (x.mode != ContactMode::kFlight) throw std::logic_error("fly: the object is not in flight");
+  return Flight(problem, x).state(t);
+}
+
 HandGap disk_gap(const RollingProblem& problem, const HandKinematics& h, const Vec2& centre) {
   if (!problem.object.disk_radius) throw std::invalid_argument("disk_gap: the object is no disk");
   const HandPoint hp = hand_point(problem, h, centre);

@@ -173,10 +173,12 @@ SolveReport evaluate(const SimulationSpec& spec, double period, double k) {
   // it onto itself, so its second half repeats the first. Forces are therefore taken over
   // [0, T], where they are well conditioned; integrating a slow, nearly balanced roll on to 2T
   // amplifies rounding exponentially (s_end shows it).
-  const Extrema x = find_extrema(r, s.initial.t0, std::min(T, r.final.t), o.events.time_tolerance);
+  const Extrema x = find_extrema(r, s.initial.t0, std::min(T, r.final.t), o.events.time_tolerance,
+                                 s.contact.mu);
   rep.fn_apex_ratio = r.final.t >= T ? r.trajectory.sample(T).fn_ratio : kNaN;
   rep.fn_min_ratio = x.fn_min_ratio;
   rep.mu_required = x.mu_required;
+  rep.friction_margin = x.friction_margin;
   rep.simulations += 1;
   rep.rhs_evals += r.stats.rhs_evals;
   return rep;
@@ -329,6 +331,10 @@ SurfaceResult surface(const SimulationSpec& spec, double k_lo, double k_hi, int 
   return res;
 }
 
+std::string to_string(SpeedLimit l) {
+  return l == SpeedLimit::kFriction ? "friction" : "normal_force";
+}
+
 TimeOptimalReport time_optimal(const SimulationSpec& spec, double lo, double hi,
                                double period_tolerance, const SearchSettings& set) {
   check_period(lo);
@@ -337,26 +343,36 @@ TimeOptimalReport time_optimal(const SimulationSpec& spec, double lo, double hi,
   SimulationSpec s = paper_model(spec);
   s.motion.kind = MotionSpec::Kind::kButterfly;
   const auto base = build_problem(s);
+  const bool friction = s.contact.mu.has_value();
   TimeOptimalReport rep;
   double k0 = spec.motion.k;
+  // The binding constraint: the normal force and, with mu, the friction to spare (both in
+  // units of the weight), each rising with 2T.
+  const auto limit = [&](const SolveReport& r) {
+    return friction ? std::min(r.fn_min_ratio, r.friction_margin) : r.fn_min_ratio;
+  };
   auto g = [&](double period) {
     ++rep.solves;
     SolveReport r = solve_k_from(s, base, period, k0, set);
     k0 = r.k;
-    return r.fn_min_ratio;
+    return limit(r);
   };
   const double glo = g(lo), ghi = g(hi);
+  const std::string what = friction ? "minimum of the normal force ratio and the friction margin"
+                                    : "minimum normal force ratio";
   if (!(glo < 0 && ghi > 0))
     throw std::runtime_error("time-optimal: [" + num(lo) + ", " + num(hi) +
-                             "] s does not bracket the fastest contact-keeping solution (minimum "
-                             "normal force ratio " +
-                             num(glo) + " at 2T = " + num(lo) + " s, " + num(ghi) + " at " +
+                             "] s does not bracket the fastest admissible solution (" + what +
+                             " " + num(glo) + " at 2T = " + num(lo) + " s, " + num(ghi) + " at " +
                              num(hi) + " s; it must go from < 0 to > 0)");
   const RootResult root = brent_root(g, lo, hi, glo, ghi, period_tolerance, set.max_evaluations);
   rep.solution = solve_k_from(s, base, root.x, k0, set);
   rep.period = root.x;
   rep.k = rep.solution.k;
   rep.fn_min_ratio = rep.solution.fn_min_ratio;
+  rep.friction_margin = rep.solution.friction_margin;
+  rep.limit = friction && rep.friction_margin < rep.fn_min_ratio ? SpeedLimit::kFriction
+                                                                  : SpeedLimit::kNormalForce;
   return rep;
 }
 

@@ -225,7 +225,8 @@ bool needs_friction(const Sample& s) {
 }
 }  // namespace
 
-Extrema find_extrema(const RunResult& run, double t_from, double t_to, double time_tolerance) {
+Extrema find_extrema(const RunResult& run, double t_from, double t_to, double time_tolerance,
+                     std::optional<double> mu) {
   const auto& S = run.steps;
   const Trajectory& tr = run.trajectory;
   if (S.empty() || tr.empty()) throw std::logic_error("find_extrema: the run was not recorded");
@@ -277,9 +278,24 @@ Extrema find_extrema(const RunResult& run, double t_from, double t_to, double ti
     x.mu_required = std::numeric_limits<double>::infinity();
     x.t_mu_required = x.t_fn_min;
   } else if (imu) {
-    const auto mu = refine(*imu, mu_key);
-    x.t_mu_required = mu.first;
-    x.mu_required = -mu.second;
+    const auto worst = refine(*imu, mu_key);
+    x.t_mu_required = worst.first;
+    x.mu_required = -worst.second;
+  }
+  if (mu && std::isfinite(*mu)) {
+    const double m = *mu;
+    const auto margin_key = [m](const Sample& s) {
+      return needs_friction(s) ? m * s.fn_ratio - std::abs(s.ft_ratio) : kOutside;
+    };
+    std::optional<std::size_t> imargin;
+    for (std::size_t i = 0; i < n; ++i)
+      if (needs_friction(pts[i]) && (!imargin || margin_key(pts[i]) < margin_key(pts[*imargin])))
+        imargin = i;
+    if (imargin) {
+      const auto margin = refine(*imargin, margin_key);
+      x.t_friction_margin = margin.first;
+      x.friction_margin = margin.second;
+    }
   }
   return x;
 }
@@ -288,6 +304,14 @@ void finish_run(RunResult& res, const RunOptions& opt) {
   bool flew = false;
   for (const RecordedEvent& e : res.events) flew = flew || e.kind == EventKind::kLiftOff;
   if (!opt.record || res.steps.size() < 2) {
+    // A run that stopped where it started: the forces of its one state.
+    const Sample& s = res.final;
+    if (opt.record && res.steps.size() == 1 && s.mode != ContactMode::kFlight) {
+      res.fn_min_ratio = s.fn_ratio;
+      res.t_fn_min = s.t;
+      res.mu_required = s.mu_required;
+      res.t_mu_required = s.t;
+    }
     res.contact_lost = res.reason == StopReason::kContactLost || flew;
     return;
   }

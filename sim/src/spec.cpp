@@ -45,6 +45,13 @@ std::shared_ptr<const RollingProblem> build_problem(const SimulationSpec& spec) 
   pb->gravity = spec.effective_gravity();
   spec.contact.validate();
   pb->contact = spec.contact;
+  const ContactLaw& law = spec.contact;
+  if (law.rolling_resistance > 0 && pb->object.disk_radius && law.mu &&
+      !(law.rolling_resistance < law.kinetic() * *pb->object.disk_radius))
+    throw std::invalid_argument(
+        "contact.rolling_resistance: must be below mu_kinetic x object.radius (" +
+        std::to_string(law.kinetic() * *pb->object.disk_radius) +
+        " m): a larger couple than friction's could hold a sliding disk's rotation");
   if (spec.run.model == ContactModel::kRolling && spec.contact.has_losses())
     throw std::invalid_argument(
         "contact.model: the losses (rolling_resistance, drag, drag_angular) need model: hybrid "

@@ -45,13 +45,14 @@ struct TickLog {
   double theta_plan = 0;  ///< the plan's angle for the estimated s_h (stage 2) or time
   // Truth (synthetic runs only; NaN otherwise).
   double s_true = 0, sdot_true = 0, theta_true = 0, fn_ratio = 0, mu_required = 0, nees = 0;
+  sim::ContactMode mode_true = sim::ContactMode::kRolling;  ///< the contact's mode (synthetic)
 };
 
 struct LoopOptions {
   double t_start = -0.25;  ///< s; the hand waits until t = 0 while the estimator locks on
   std::optional<long> max_ticks;  ///< replay: stop after the recorded number of ticks
   Recorder* recorder = nullptr;
-  /// Synthetic runs: the world's truth and its failure (contact lost, slip).
+  /// Synthetic runs: the world's truth and its failure (the disk dropped).
   const SimWorld* world = nullptr;
   /// Called for each frame the loop receives, with what the tracker made of it.
   std::function<void(const CameraFrame&, const vision::TrackResult&,
@@ -92,10 +93,18 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
 /// A whole synthetic experiment: the world obeys `truth`, the loop assumes `setup.scene`.
 struct SyntheticResult {
   LoopResult loop;
-  bool success = false;
-  std::string failure;  ///< why not (contact lost, slip, not in the goal well, safe stop)
+  /// Success: the disk rests in the back well with the hand at pi, judged in the hybrid world
+  /// (it may have slipped, flown and been caught on the way).
+  Outcome outcome = Outcome::kNotFinished;
+  bool success = false;  ///< outcome == kSuccess
+  std::string failure;   ///< why not, in words (empty on success)
   double s_end = 0;
+  /// The smallest normal force ratio in contact, the largest friction coefficient needed while
+  /// rolling (at most the world's mu: beyond it the disk slides).
   double fn_min_ratio = 0, mu_max = 0;
+  std::array<double, 4> mode_time{0, 0, 0, 0};  ///< s in each sim::ContactMode
+  int impacts = 0, mode_changes = 0;
+  std::vector<sim::RecordedEvent> contact_events;  ///< SimWorld::events()
   GoalCheck goal;
   long frames_rendered = 0, frames_dropped = 0;
   double nees_mean = 0;  ///< over frame-arrival ticks

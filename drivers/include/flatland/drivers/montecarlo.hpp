@@ -5,6 +5,7 @@
 // (paper section 5: feedback makes the roll robust).
 #pragma once
 
+#include "flatland/drivers/synthetic.hpp"
 #include "flatland/scene/scene.hpp"
 
 #include <cstdint>
@@ -25,10 +26,13 @@ struct Perturbations {
   double latency_jitter = 0.005;  ///< s, half-width of its uniform spread (set)
   double drop = 0.02;             ///< probability of a dropped frame (set)
   double friction_rel = 0.2;  ///< joint viscous and Coulomb friction, relative, one factor for both
+  /// The contact's friction coefficients (mu, mu_kinetic: one factor) and its losses (rolling
+  /// resistance, drag: another factor), relative: the table's assumed values are not known well.
+  double contact_rel = 0.2;
 };
 
 /// std::invalid_argument naming the field ("perturbations.drop: ...") for negative or non-finite
-/// values, drop >= 1, radius_rel or friction_rel >= 1, latency_jitter > latency.
+/// values, drop >= 1, radius_rel, friction_rel or contact_rel >= 1, latency_jitter > latency.
 void validate(const Perturbations& p);
 
 /// The values one run drew (the truth it was run against).
@@ -38,6 +42,8 @@ struct DrawnPerturbation {
   double radius = 0;          ///< m
   double friction_scale = 1;  ///< factor on joint.viscous and joint.coulomb
   std::uint64_t effects_seed = 0;
+  double mu_scale = 1;    ///< factor on contact.mu and contact.mu_kinetic
+  double loss_scale = 1;  ///< factor on contact.rolling_resistance, drag, drag_angular
 };
 
 /// The truth scene of run `run`: uniform draws from a std::mt19937_64 seeded from (seed, run)
@@ -60,7 +66,10 @@ struct RunRecord {
   int run = 0;
   std::string controller;  ///< "open-loop" or "feedback"
   bool success = false;
+  Outcome outcome = Outcome::kNotFinished;
   std::string failure;  ///< empty on success
+  double slide_s = 0, flight_s = 0;  ///< time the disk spent sliding and flying
+  int impacts = 0;
   double duration_s = 0, s_end = 0, fn_min_ratio = 0, mu_max = 0;
   bool safe_stop = false;
   long frames = 0, frames_lost = 0;

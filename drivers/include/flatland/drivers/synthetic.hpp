@@ -7,8 +7,9 @@
 #include "flatland/drivers/interfaces.hpp"
 #include "flatland/render/renderer.hpp"
 #include "flatland/scene/scene.hpp"
-#include "flatland/sim/rolling.hpp"
+#include "flatland/sim/hybrid.hpp"
 
+#include <array>
 #include <deque>
 #include <memory>
 #include <optional>
@@ -22,28 +23,52 @@ namespace flatland::drivers {
 struct WorldSample {
   double t = 0;
   double theta = 0, theta_dot = 0, theta_ddot = 0;  ///< hand, rad
+  /// Hand contact parameter and its rate; in flight those of the outline's point nearest to the
+  /// disk.
   double s_h = 0, sdot_h = 0;
+  sim::ContactMode mode = sim::ContactMode::kRolling;
+  sim::Vec2 disk_position = sim::Vec2::Zero(), disk_velocity = sim::Vec2::Zero();  ///< m, m/s
   double disk_angle = 0, disk_rate = 0;  ///< rad, rad/s
   double fn_ratio = 0, ft_ratio = 0, mu_required = 0;
   double torque = 0;     ///< N m, the drive's torque
   double theta_ref = 0;  ///< rad, the drive's reference
 };
 
-/// Whether the disk ended in the goal well (the back well, s_h near +1) with too little energy to
-/// leave it: the energy (kinetic + potential in the table plane) below the lower of the well's rims.
+/// Where the disk ended: in the goal well (the back well, s_h near +1) with too little energy to
+/// leave it (its energy, kinetic + potential in the table plane, below the lower of the well's
+/// rims), so that the losses settle it there.
 struct GoalCheck {
   bool in_goal = false;
   double s_h = 0;
-  double well_bottom = 0;           ///< s_h of the well's lowest point
+  double well_bottom = 0;              ///< s_h of the well's lowest point
   double rim_left = 0, rim_right = 0;  ///< s_h of its rims
   double energy_margin = 0;  ///< J: (lowest rim's potential) - (disk's energy); > 0 to stay
-  std::string reason;        ///< why not, when not
+  sim::ContactMode mode = sim::ContactMode::kRolling;
+  std::string reason;  ///< why not, when not
 };
+
+/// How a synthetic experiment ended.
+enum class Outcome {
+  kSuccess,      ///< the disk rests in the back well, the hand at pi
+  kDropped,      ///< the disk lost contact and was not caught again
+  kSlidOff,      ///< the disk slid off the hand (lost contact while sliding) and was not caught
+  kWrongWell,    ///< the disk settled in another well
+  kNotSettled,   ///< the disk can still leave the back well, or is still in flight
+  kSafeStop,     ///< the controller stopped the hand (lost vision, implausible innovations, ...)
+  kNotFinished,  ///< the motion did not finish
+};
+std::string to_string(Outcome o);
+
+/// std::invalid_argument naming contact.mu unless the scene sets it: a synthetic world counts
+/// friction always (unlimited friction would hide slips).
+void require_friction(const Scene& scene);
 
 class SimWorld {
  public:
-  /// `truth` is the scene the world obeys (perhaps perturbed from what the controller assumes).
-  /// Needs a disk. The hand rests at its motion's angle at t = 0; time starts at t_start.
+  /// `truth` is the scene the world obeys (perhaps perturbed from what the controller assumes):
+  /// the hybrid contact model with its friction, restitution and losses, whatever the scene's
+  /// contact.model says. Needs a disk. The hand rests at its motion's angle at t = 0; time starts
+  /// at t_start.
   SimWorld(const Scene& truth, double t_start);
 
   double t() const { return t_; }
@@ -61,23 +86,38 @@ class SimWorld {
   /// What the renderer needs at time t.
   render::SceneState scene_state_at(double t) const;
 
-  /// Set when the disk lost contact, slipped (at the scene's mu) or rolled off the hand. The disk
-  /// is no longer simulated from there (nor drawn); the joint keeps moving, unloaded.
-  const std::optional<std::string>& failure() const { return failure_; }
-  double fn_min_ratio() const { return fn_min_; }
-  double mu_max() const { return mu_max_; }
+  /// Set when the disk left the hand's reach for good (it flew off or slid off and was not
+  /// caught); the joint keeps moving, unloaded, and the disk flies on.
+  std::optional<Outcome> failure() const { return failure_; }
+  /// The failure in words (time and place).
+  const std::string& failure_detail() const { return failure_detail_; }
+  double fn_min_ratio() const { return fn_min_; }   ///< smallest f_n / (m g sin tilt) in contact
+  double mu_max() const { return mu_max_; }         ///< largest |f_t| / f_n needed while rolling
+  /// Counts of what the contact did: seconds in each mode, impacts, changes of mode.
+  const std::array<double, 4>& mode_time() const { return mode_time_; }
+  int impacts() const { return impacts_; }
+  /// What the contact did, in time order: lift-offs, slips, sticks, rests, impacts (with their
+  /// impulses), the drop (junction crossings left out).
+  const std::vector<sim::RecordedEvent>& events() const { return events_; }
+  int mode_changes() const { return mode_changes_; }
   GoalCheck goal_check() const;
   const sim::RollingProblem& problem() const { return *problem_; }
 
  private:
   void servo_step();
-  void step_disk(double alpha);
-  double reaction_torque(const WorldSample& s, double alpha) const;
+  /// The disk's reaction torque on the hand at its current state, for a hand acceleration alpha.
+  double reaction_torque(double t, double alpha) const;
+  /// The hand's acceleration over the rest of the tick under the drive's torque, the disk's
+  /// load and the joint's friction; `stops` when dry friction brings it to rest by `t_end`.
+  double joint_acceleration(double t, double t_end, double tau, bool& stops) const;
+  /// Advance the disk from t to at most t_end under the held acceleration alpha (one segment of
+  /// the hybrid model: it stops at a change of mode). Returns the time reached.
+  double step_disk(double t, double t_end, double alpha);
   WorldSample sample_now(double alpha, double torque) const;
+  std::shared_ptr<const sim::RollingProblem> held(double t, double alpha) const;
 
   Scene scene_;
   std::shared_ptr<const sim::RollingProblem> problem_;
-  std::unique_ptr<sim::ReducedDiskRolling> rolling_;
   sim::RunOptions step_options_;
   double dt_ = 1e-3;
   long tick_ = 0;
@@ -85,14 +125,19 @@ class SimWorld {
   double command_ = 0;
   // Plant state.
   double theta_ = 0, theta_dot_ = 0;
-  double s_h_ = 0, sdot_h_ = 0, disk_angle_ = 0;
+  sim::HybridState disk_;
+  sim::ContactMode last_contact_mode_ = sim::ContactMode::kRolling;
   // Drive state.
   double theta_ref_ = 0, theta_dot_ref_ = 0;
   double encoder_ = 0, velocity_estimate_ = 0;
   std::vector<WorldSample> history_;
-  std::optional<std::string> failure_;
-  double failure_time_ = 0;
+  std::optional<Outcome> failure_;
+  std::string failure_detail_;
   double fn_min_ = 1e300, mu_max_ = 0;
+  double theta_dot_kick_ = 0;  ///< the hand's rate change by an impact within a step
+  std::array<double, 4> mode_time_{0, 0, 0, 0};
+  int impacts_ = 0, mode_changes_ = 0;
+  std::vector<sim::RecordedEvent> events_;
 };
 
 /// The clock of a synthetic experiment: simulated time; sleeping advances the world.

@@ -26,6 +26,7 @@ struct SceneState {
   double disk_angle = 0;                                      ///< rad
   double s_h = 0;                                             ///< for truth and overlays
   double force_normal_ratio = 0, force_tangential_ratio = 0;  ///< overlays
+  sim::ContactMode mode = sim::ContactMode::kRolling;          ///< overlays
   static SceneState from_sample(const sim::Sample& s);
 };
 

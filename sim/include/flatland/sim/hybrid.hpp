@@ -16,6 +16,8 @@
 #include "flatland/sim/simulate.hpp"
 
 #include <memory>
+#include <optional>
+#include <vector>
 
 namespace flatland::sim {
 
@@ -35,6 +37,28 @@ HybridState hybrid_state(const RollingProblem& problem, const InitialContact& in
 /// (kAuto: reduced for a disk); the hand's kinematics from the problem's motion.
 Sample sample_state(std::shared_ptr<const RollingProblem> problem, const HybridState& x,
                     Formulation formulation = Formulation::kAuto);
+
+/// The free object at time t from a state in flight (closed form, drag included; no contact is
+/// looked for): for an object known to be out of the hand's reach.
+HybridState fly(const RollingProblem& problem, const HybridState& x, double t);
+
+/// One flight of a hybrid run, from its events: where the object left the hand, where it first
+/// came down, what the impact did, and how it ended.
+struct FlightReport {
+  double t_lift_off = 0;
+  double s_lift_off = 0;
+  std::optional<double> t_landing;     ///< the first impact
+  double s_landing = 0;                ///< hand parameter there
+  Vec2 landing_position = Vec2::Zero();  ///< object centre, world, m
+  double impulse_normal = 0, impulse_tangential = 0;  ///< N s, of the first impact
+  int bounces = 0;                     ///< impacts after which it flew on
+  std::optional<double> t_caught;      ///< the impact after which it stayed in contact
+  bool dropped = false;                ///< it left the hand's reach
+};
+std::vector<FlightReport> flight_reports(const RunResult& run);
+/// The same from a list of events (in any order) of a run that started at `initial`.
+std::vector<FlightReport> flight_reports(const std::vector<RecordedEvent>& events,
+                                         const Sample& initial);
 
 /// The hybrid model from an initial contact or from a state a previous run ended in
 /// (RunResult::final_state). Called by simulate() for options.model == kHybrid.

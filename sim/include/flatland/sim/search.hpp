@@ -10,6 +10,8 @@
 #include "flatland/sim/spec.hpp"
 
 #include <functional>
+#include <limits>
+#include <string>
 #include <vector>
 
 namespace flatland::sim {
@@ -33,6 +35,9 @@ struct SolveReport {
   double fn_apex_ratio = 0;  ///< normal force / weight at t = T (the apex of a solution)
   double fn_min_ratio = 0;   ///< minimum over [0, T]
   double mu_required = 0;    ///< max |f_t| / f_n over [0, T] (inf if f_n <= 0 somewhere)
+  /// With the spec's contact.mu: min (mu f_n - |f_t|) / (m g sin tilt) over [0, T], the friction
+  /// to spare (< 0: the motion needs more than mu somewhere); NaN without mu.
+  double friction_margin = std::numeric_limits<double>::quiet_NaN();
   int simulations = 0;       ///< runs the search made
   long rhs_evals = 0;        ///< right-hand-side evaluations over all of them
   RunResult run;             ///< the full recorded run of the solution
@@ -64,13 +69,24 @@ struct SurfaceResult {
 SurfaceResult surface(const SimulationSpec& spec, double k_lo, double k_hi, int nk, double p_lo,
                       double p_hi, int np, int threads = 0, const Progress& progress = {});
 
+/// What limits the fastest motion.
+enum class SpeedLimit {
+  kNormalForce,  ///< the normal force reaches 0 (the hand would throw the disk)
+  kFriction,     ///< the friction needed reaches contact.mu (the disk would slip)
+};
+std::string to_string(SpeedLimit l);
+
 struct TimeOptimalReport {
   double period = 0, k = 0, fn_min_ratio = 0;
+  double friction_margin = std::numeric_limits<double>::quiet_NaN();  ///< as in SolveReport
+  SpeedLimit limit = SpeedLimit::kNormalForce;
   int solves = 0;
   SolveReport solution;
 };
-/// The fastest 2T in [lo, hi] whose solution keeps f_n >= 0 throughout (its minimum normal force
-/// crosses zero there). Throws std::runtime_error if [lo, hi] does not bracket it.
+/// The fastest 2T in [lo, hi] whose solution keeps f_n >= 0 and, when the spec has contact.mu,
+/// |f_t| <= mu f_n throughout [0, T] (the smaller of the minimum normal force ratio and the
+/// friction margin crosses zero there). Throws std::runtime_error if [lo, hi] does not bracket
+/// it.
 TimeOptimalReport time_optimal(const SimulationSpec& spec, double lo, double hi,
                                double period_tolerance = 1e-7, const SearchSettings& s = {});
 

@@ -207,11 +207,16 @@ struct Extrema {
   double t_fn_min = std::numeric_limits<double>::quiet_NaN();
   double mu_required = std::numeric_limits<double>::quiet_NaN();  ///< inf if f_n <= 0 somewhere
   double t_mu_required = std::numeric_limits<double>::quiet_NaN();
+  /// With a friction coefficient mu: the smallest friction to spare while rolling,
+  /// min (mu f_n - |f_t|) / (m g sin tilt) (< 0 where rolling needs more than mu); NaN without.
+  double friction_margin = std::numeric_limits<double>::quiet_NaN();
+  double t_friction_margin = std::numeric_limits<double>::quiet_NaN();
   long evaluations = 0;
 };
 /// Minimum normal force ratio and maximum required friction over [t_from, t_to] of a recorded
-/// run, located on the dense output to `time_tolerance`.
-Extrema find_extrema(const RunResult& run, double t_from, double t_to, double time_tolerance);
+/// run, located on the dense output to `time_tolerance`; with `mu`, the friction margin too.
+Extrema find_extrema(const RunResult& run, double t_from, double t_to, double time_tolerance,
+                     std::optional<double> mu = std::nullopt);
 
 /// The formulation a problem will use under `requested`; throws if kReduced is impossible.
 Formulation resolve_formulation(const RollingProblem& problem, Formulation requested);
