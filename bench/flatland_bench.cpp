@@ -115,6 +115,52 @@ void Surface100(benchmark::State& state) {
   state.counters["rhs_evals"] = benchmark::Counter(static_cast<double>(result.rhs_evals));
 }
 
+// The throw and the catch (assets/scenes/throw-catch.yaml): the air table at 5 deg, a butterfly
+// faster than the fastest that keeps contact (2T = 3.556 s = kappa x 1.05 s); the disk slips,
+// flies over the tip, lands on the back, bounces and is caught. Its contact law and losses are
+// the air-table scenes'.
+sim::SimulationSpec throw_catch_spec(sim::ContactModel model) {
+  sim::SimulationSpec spec;
+  spec.tilt = 5.0 * M_PI / 180.0;
+  spec.motion.period = 3.556;
+  spec.motion.k = -1.155794;
+  spec.duration = 5.0;
+  spec.run.model = model;
+  if (model == sim::ContactModel::kHybrid) {
+    spec.contact.mu = 0.8;
+    spec.contact.mu_kinetic = 0.6;
+    spec.contact.restitution = 0.4;
+    spec.contact.drag = 0.015;
+    spec.contact.drag_angular = 2e-5;
+    spec.contact.rolling_resistance = 5e-5;
+  } else {
+    spec.run.events.stop_on_contact_loss = false;  // the reference: rolling enforced throughout
+  }
+  return spec;
+}
+
+// One run of the throw and the catch in the hybrid model, against the same motion with rolling
+// enforced (no events) in the same process: the cost of the modes, the flight and the impacts.
+void ThrowCatch(benchmark::State& state, sim::ContactModel model, bool record) {
+  sim::SimulationSpec spec = throw_catch_spec(model);
+  spec.run.record = record;
+  const auto problem = sim::build_problem(spec);
+  const sim::RunOptions options = sim::run_options(spec);
+  sim::RunResult result;
+  for (auto _ : state) {
+    result = sim::simulate(problem, spec.initial, options);
+    benchmark::DoNotOptimize(result);
+  }
+  const sim::RunStats& st = result.stats;
+  state.counters["steps"] = benchmark::Counter(static_cast<double>(st.steps));
+  state.counters["rhs_evals"] = benchmark::Counter(static_cast<double>(st.rhs_evals));
+  state.counters["event_evals"] = benchmark::Counter(static_cast<double>(st.event_evals));
+  state.counters["gap_evals"] = benchmark::Counter(static_cast<double>(st.gap_evals));
+  state.counters["impacts"] = benchmark::Counter(st.impacts);
+  state.counters["mode_changes"] = benchmark::Counter(st.mode_changes);
+  state.counters["flight_s"] = benchmark::Counter(st.mode_time[3]);
+}
+
 std::string tolerance_name(double rtol) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "rtol:%.0e", rtol);
@@ -131,6 +177,15 @@ void register_all() {
             ->Unit(benchmark::kMillisecond);
       }
     }
+  }
+  for (const bool record : {false, true}) {
+    const std::string suffix = std::string("/record:") + (record ? "1" : "0");
+    benchmark::RegisterBenchmark(("BM_ThrowCatch/hybrid" + suffix).c_str(), ThrowCatch,
+                                 sim::ContactModel::kHybrid, record)
+        ->Unit(benchmark::kMillisecond);
+    benchmark::RegisterBenchmark(("BM_ThrowCatch/rolling_enforced" + suffix).c_str(), ThrowCatch,
+                                 sim::ContactModel::kRolling, record)
+        ->Unit(benchmark::kMillisecond);
   }
   benchmark::RegisterBenchmark("BM_Rhs/general", Rhs<sim::GeneralRolling>);
   benchmark::RegisterBenchmark("BM_Rhs/reduced", Rhs<sim::ReducedDiskRolling>);

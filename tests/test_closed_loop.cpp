@@ -132,6 +132,35 @@ TEST(ClosedLoop, PaperRunSucceedsWithFeedback) {
   }
 }
 
+// The outcome says where the disk ended, in the hybrid world. On a slippery hand (mu = 0.05, far
+// below the 0.3 the plan needs) the played plan makes the disk slide, and it leaves the hand for
+// good; the friction it needed while rolling never exceeds mu (beyond, it slides), and the world
+// counts the time it slid and flew.
+TEST(ClosedLoop, OutcomeSaysWhereTheDiskEnded) {
+  Scene scene = feedback_scene();
+  scene.controller.mode = "open-loop";
+  const drivers::LoopSetup setup(scene);
+  Scene slippery = scene;
+  slippery.sim.contact.mu = 0.05;
+  slippery.sim.contact.mu_kinetic = 0.04;
+  slippery.sim.contact.rolling_resistance = 1e-5;  // below mu_k r
+  const drivers::SyntheticResult r = drivers::run_synthetic(setup, slippery);
+  EXPECT_FALSE(r.success);
+  EXPECT_TRUE(r.outcome == drivers::Outcome::kSlidOff || r.outcome == drivers::Outcome::kDropped)
+      << drivers::to_string(r.outcome) << ": " << r.failure;
+  EXPECT_LE(r.mu_max, 0.05);
+  EXPECT_GT(r.mode_time[static_cast<int>(sim::ContactMode::kSliding)], 0.0);
+  EXPECT_GT(r.mode_time[static_cast<int>(sim::ContactMode::kFlight)], 0.0);
+  ASSERT_FALSE(r.contact_events.empty());
+  EXPECT_EQ(r.contact_events.back().kind, sim::EventKind::kDropped);
+  // The nominal world succeeds open loop, and the disk is trapped in the back well.
+  const drivers::SyntheticResult ok = drivers::run_synthetic(setup, scene);
+  EXPECT_EQ(ok.outcome, drivers::Outcome::kSuccess) << ok.failure;
+  EXPECT_TRUE(ok.goal.trapped);
+  EXPECT_TRUE(ok.goal.well_faces_up);
+  EXPECT_NEAR(ok.goal.well_bottom, 1.0, 0.1);
+}
+
 // Open-loop playback drives the joint along the plan: the joint model (reference integration,
 // PD torque loop, friction, the disk's load) tracks it closely and ends on the plan's final angle.
 TEST(ClosedLoop, OpenLoopPlaybackTracksThePlan) {

@@ -16,6 +16,8 @@ namespace flatland::drivers {
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+// s: how long the world runs on after the loop for the disk to be trapped in a well or gone.
+constexpr double kSettleLimit = 10.0;
 
 std::string fmt(double v) {
   std::ostringstream s;
@@ -276,6 +278,9 @@ SyntheticResult run_synthetic(const LoopSetup& setup, const Scene& truth,
 
   SyntheticResult r;
   r.loop = run_loop(setup, clock, camera, joint, lo);
+  // The outcome is where the disk ends up: the world runs on, the hand held, until the disk is
+  // trapped in a well (the losses then settle it there) or gone.
+  if (r.loop.finished || r.loop.safe_stop) r.settle_s = world.settle(kSettleLimit);
   r.gl = camera.gl_description();
   r.frames_rendered = camera.rendered();
   r.frames_dropped = camera.dropped();
@@ -305,7 +310,7 @@ SyntheticResult run_synthetic(const LoopSetup& setup, const Scene& truth,
     r.failure = "the motion did not finish";
   } else if (!r.goal.in_goal) {
     const bool other_well = !(r.goal.well_bottom > 0.5 && r.goal.well_bottom < 1.5) &&
-                            r.goal.mode != sim::ContactMode::kFlight;
+                            r.goal.trapped;
     r.outcome = other_well ? Outcome::kWrongWell : Outcome::kNotSettled;
     r.failure = r.goal.reason;
   } else {

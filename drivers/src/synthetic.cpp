@@ -222,7 +222,9 @@ void SimWorld::servo_step() {
       x.t = t;
       const sim::Sample s = sim::sample_state(held(t, alpha), x);
       fn_min_ = std::min(fn_min_, s.fn_ratio);
-      if (disk_.mode != sim::ContactMode::kSliding && std::isfinite(s.mu_required))
+      // The friction needed while rolling: beyond mu the disk slides from this instant on.
+      if (disk_.mode != sim::ContactMode::kSliding && std::isfinite(s.mu_required) &&
+          s.mu_required <= problem_->contact.mu_static())
         mu_max_ = std::max(mu_max_, s.mu_required);
     }
     theta_dot_kick_ = 0;
@@ -250,6 +252,15 @@ void SimWorld::servo_step() {
 
 void SimWorld::advance_to(double t) {
   while (t_ + 0.5 * dt_ <= t) servo_step();
+}
+
+double SimWorld::settle(double max_time) {
+  const double t0 = t_;
+  // Checked every 10 ms: trapped (the losses settle it in that well) or gone.
+  const long per_check = std::max(1L, std::lround(0.01 / dt_));
+  while (t_ - t0 < max_time && !failure_ && !goal_check().trapped)
+    for (long i = 0; i < per_check; ++i) servo_step();
+  return t_ - t0;
 }
 
 control::JointReading SimWorld::read_encoder() const {
@@ -338,11 +349,20 @@ GoalCheck SimWorld::goal_check() const {
                         m * g * disk_.position.y();
   const double rim = std::min(height(left), height(right));
   out.energy_margin = m * g * rim - energy;
+  // A well holds the disk only where the hand faces up at its bottom (elsewhere the lowest point
+  // of the outline is where the disk falls off).
+  const sim::CurveGeometry bottom = hand.geometry(s, hand.piece_at(s, +1));
+  out.well_faces_up = (R * bottom.normal).y() > 0;
+  out.trapped = disk_.mode != sim::ContactMode::kFlight && !failure_ && out.well_faces_up &&
+                out.energy_margin > 0;
   const double theta_goal = problem_->motion->at(1e9).angle;
   if (failure_) {
     out.reason = failure_detail_;
   } else if (disk_.mode == sim::ContactMode::kFlight) {
     out.reason = "the disk is still in flight";
+  } else if (!out.well_faces_up) {
+    out.reason = "the disk at s_h = " + fmt(out.s_h) +
+                 " is rolling off the hand (the hand faces down where it is heading)";
   } else if (!(out.well_bottom > 0.5 && out.well_bottom < 1.5)) {
     out.reason = "disk at s_h = " + fmt(out.s_h) + " settles in the well whose bottom is at s_h = " +
                  fmt(out.well_bottom) + ", not the goal well (bottom near s_h = +1)";

@@ -1,5 +1,6 @@
 #include "flatland/sim/curve.hpp"
 
+#include <array>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -88,12 +89,38 @@ PolynomialHand::PolynomialHand(double a, double b, double c, double d)
     outline_.push_back(jet(s, piece_at(s, +1)).c);
     reach_ = std::max(reach_, outline_.back().norm());
   }
+  // The longest chord between neighbouring coarse samples (nearest()).
+  for (int i = 0; i < kOutlineSamples; i += 8)
+    coarse_spacing_ =
+        std::max(coarse_spacing_, (outline_[(i + 8) % kOutlineSamples] - outline_[i]).norm());
 }
 
 double PolynomialHand::nearest(const Vec2& p) const {
+  // Coarse to fine: every 8th sample first; the true nearest point lies within half a coarse
+  // spacing of a coarse sample no farther than the nearest coarse one plus that half spacing, so
+  // only around those is the fine outline scanned; then Newton on the curve itself.
+  constexpr int kStride = 8;
+  const int n = static_cast<int>(outline_.size());
+  double best_coarse = std::numeric_limits<double>::infinity();  // squared distances
+  std::array<double, kOutlineSamples / kStride> d2{};
+  for (int i = 0; i < n; i += kStride) {
+    d2[i / kStride] = (outline_[i] - p).squaredNorm();
+    best_coarse = std::min(best_coarse, d2[i / kStride]);
+  }
+  const double reach = std::sqrt(best_coarse) + 0.5 * coarse_spacing_;
+  const double reach2 = reach * reach;
+  int best = 0;
+  double best_d2 = std::numeric_limits<double>::infinity();
+  for (int c = 0; c < n / kStride; ++c) {
+    if (d2[c] > reach2) continue;
+    for (int k = -kStride; k <= kStride; ++k) {
+      const int i = ((c * kStride + k) % n + n) % n;
+      const double e = (outline_[i] - p).squaredNorm();
+      if (e < best_d2) best_d2 = e, best = i;
+    }
+  }
   const double spacing = 4.0 / kOutlineSamples;
-  const double s0 = -1.0 + spacing * static_cast<double>(nearest_sample(outline_, p));
-  const double s = refine_nearest(*this, p, s0, spacing);
+  const double s = refine_nearest(*this, p, -1.0 + spacing * best, spacing);
   return std::remainder(s - 1.0, 4.0) + 1.0;  // into [-1, 3)
 }
 

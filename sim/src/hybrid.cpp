@@ -265,6 +265,13 @@ HybridState Hybrid::settle(HybridState x) {
   const double delta = pb().contact.rolling_resistance;
   const double tol_f = 1e-12 * weight_;
   const double radius = pb().object.disk_radius ? *pb().object.disk_radius : 1.0;
+  // Not sliding, the disk slides now if it needs more than the static friction.
+  const auto slips = [&](const Sample& s) {
+    if (!(std::abs(s.force_tangential) > mu * s.force_normal + tol_f)) return false;
+    x = from_sample(s, x.mode, x.sign, x.hand_piece);
+    change_mode(x, ContactMode::kSliding, s.force_tangential > 0 ? -1 : +1, EventKind::kSlipStart);
+    return true;
+  };
   // A sliding state given without its slip's sign: any sign samples the slip velocity, and the
   // sliding branch below sets it.
   if (x.mode == ContactMode::kSliding && x.sign == 0) x.sign = 1;
@@ -279,12 +286,7 @@ HybridState Hybrid::settle(HybridState x) {
     }
     switch (x.mode) {
       case ContactMode::kRolling:
-        if (std::abs(s.force_tangential) > mu * s.force_normal + tol_f) {
-          x = from_sample(s, x.mode, x.sign, x.hand_piece);
-          change_mode(x, ContactMode::kSliding, s.force_tangential > 0 ? -1 : +1,
-                      EventKind::kSlipStart);
-          continue;
-        }
+        if (slips(s)) continue;
         if (delta > 0) {
           if (x.sdot_h != 0) {
             x.sign = x.sdot_h > 0 ? +1 : -1;
@@ -302,12 +304,7 @@ HybridState Hybrid::settle(HybridState x) {
         }
         return x;
       case ContactMode::kRest:
-        if (std::abs(s.force_tangential) > mu * s.force_normal + tol_f) {
-          x = from_sample(s, x.mode, x.sign, x.hand_piece);
-          change_mode(x, ContactMode::kSliding, s.force_tangential > 0 ? -1 : +1,
-                      EventKind::kSlipStart);
-          continue;
-        }
+        if (slips(s)) continue;
         if (std::abs(s.rolling_couple) > delta * s.force_normal + tol_f * radius) {
           change_mode(x, ContactMode::kRolling, static_cast<int>(side_ * sgn(s.rolling_couple)),
                       EventKind::kRelease);
@@ -488,51 +485,63 @@ bool Hybrid::flight(HybridState& x) {
   const double r = *pb.object.disk_radius;
   const double reach = pb.hand->reach() + r;
   long& gap_evals = res_.stats.gap_evals;
-  const auto gap_at = [&](double t) {
+  // The disk and the hand at one time.
+  struct Probe {
+    double t;
+    HandKinematics h;
+    Vec2 p, v;
+  };
+  const auto probe = [&](double t) {
+    return Probe{t, pb.motion->at(t), f.position(t), f.velocity(t)};
+  };
+  const auto gap_of = [&](const Probe& q) {
     ++gap_evals;
-    return hand_point(pb, pb.motion->at(t), f.position(t)).distance;
+    return hand_point(pb, q.h, q.p).distance;
   };
   // An upper bound of the speed at which the gap can close: the disk's speed plus that of the
   // fastest hand point that can reach it.
-  const auto closing_speed = [&](double t) {
-    const HandKinematics h = pb.motion->at(t);
-    const double turning = h.angular_velocity == 0 ? 0.0 : std::abs(h.angular_velocity) * reach;
-    return f.velocity(t).norm() + h.velocity.norm() + turning;
+  const auto closing_speed = [&](const Probe& q) {
+    const double turning = q.h.angular_velocity == 0 ? 0.0 : std::abs(q.h.angular_velocity) * reach;
+    return q.v.norm() + q.h.velocity.norm() + turning;
   };
   const double t0 = x.t;
-  double t = x.t;
-  double gap = gap_at(t);
+  Probe q = probe(x.t);
+  double gap = gap_of(q);
   bool ended = false, dropped = false;
   std::optional<double> t_contact;
-  if (opt_.record) res_.steps.push_back(flight_sample(pb, f, t, &gap_evals));
+  if (opt_.record) res_.steps.push_back(flight_sample(pb, f, q.t, &gap_evals));
   while (!ended) {
-    double dt = kFlightMaxStep;
-    for (int i = 0; i < 2; ++i) {
-      const double speed = 1.1 * std::max(closing_speed(t), closing_speed(t + dt)) + 1e-9;
-      dt = std::clamp(gap / speed, kFlightMinStep, kFlightMaxStep);
+    // As far as the gap cannot close, checked with the speeds at both ends of the step.
+    const double speed0 = closing_speed(q);
+    double dt = std::clamp(gap / (1.1 * speed0 + 1e-9), kFlightMinStep, kFlightMaxStep);
+    Probe q1 = probe(std::min(q.t + dt, opt_.t_end));
+    const double speed1 = closing_speed(q1);
+    if (speed1 > speed0) {
+      dt = std::clamp(gap / (1.1 * speed1 + 1e-9), kFlightMinStep, kFlightMaxStep);
+      q1 = probe(std::min(q.t + dt, opt_.t_end));
     }
-    const double t1 = std::min(t + dt, opt_.t_end);
-    const double gap1 = gap_at(t1);
+    const double gap1 = gap_of(q1);
     if (gap1 < -kGapTolerance) {
       if (gap <= 0) {
-        t_contact = t;
+        t_contact = q.t;
       } else {
-        t_contact = brent_root(gap_at, t, t1, gap, gap1, opt_.events.time_tolerance).x;
+        t_contact = brent_root([&](double tt) { return gap_of(probe(tt)); }, q.t, q1.t, gap, gap1,
+                               opt_.events.time_tolerance)
+                        .x;
       }
       break;
     }
-    t = t1;
+    q = q1;
     gap = gap1;
-    if (opt_.record) res_.steps.push_back(flight_sample(pb, f, t, &gap_evals));
+    if (opt_.record) res_.steps.push_back(flight_sample(pb, f, q.t, &gap_evals));
     // Out of reach and moving away with gravity pulling away too: it cannot come back.
-    const HandKinematics h = pb.motion->at(t);
-    if (h.velocity.norm() == 0 && h.acceleration.norm() == 0) {
-      const Vec2 d = f.position(t) - h.position;
-      if (d.norm() > reach && d.dot(f.velocity(t)) >= 0 && d.dot(pb.gravity_vector()) >= 0)
-        dropped = true;
+    if (q.h.velocity.norm() == 0 && q.h.acceleration.norm() == 0) {
+      const Vec2 d = q.p - q.h.position;
+      if (d.norm() > reach && d.dot(q.v) >= 0 && d.dot(pb.gravity_vector()) >= 0) dropped = true;
     }
-    ended = dropped || t >= opt_.t_end;
+    ended = dropped || q.t >= opt_.t_end;
   }
+  double t = q.t;
   const double t_last = t_contact ? *t_contact : t;
   res_.stats.mode_time[static_cast<int>(ContactMode::kFlight)] += t_last - t0;
   if (opt_.record) {

@@ -43,6 +43,9 @@ struct GoalCheck {
   double well_bottom = 0;              ///< s_h of the well's lowest point
   double rim_left = 0, rim_right = 0;  ///< s_h of its rims
   double energy_margin = 0;  ///< J: (lowest rim's potential) - (disk's energy); > 0 to stay
+  bool well_faces_up = false;  ///< the hand faces up at the well's bottom (it can hold the disk)
+  /// In contact in a well that holds it, below its rims: it cannot leave that well.
+  bool trapped = false;
   sim::ContactMode mode = sim::ContactMode::kRolling;
   std::string reason;  ///< why not, when not
 };
@@ -77,6 +80,9 @@ class SimWorld {
   void command(double theta_ddot) { command_ = theta_ddot; }
   /// Advance by whole servo periods to the last tick <= t (+ half a period of slack).
   void advance_to(double t);
+  /// After the loop: run on (the joint holding its last command) until the disk is trapped in a
+  /// well, has left the hand's reach, or `max_time` has passed. Returns the time run on.
+  double settle(double max_time);
   /// The encoder's angle (quantised) and the drive's velocity estimate at the current tick.
   control::JointReading read_encoder() const;
 

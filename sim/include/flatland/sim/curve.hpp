@@ -114,6 +114,7 @@ class PolynomialHand final : public Curve {
   /// The closed outline sampled evenly in s over [-1, 3) (the start of the nearest-point search).
   std::vector<Vec2> outline_;
   double reach_ = 0;
+  double coarse_spacing_ = 0;
 };
 
 /// A straight line through `origin` along unit `direction`, s in metres. Outward normal is the

@@ -47,13 +47,13 @@ HybridState fly(const RollingProblem& problem, const HybridState& x, double t);
 struct FlightReport {
   double t_lift_off = 0;
   double s_lift_off = 0;
-  std::optional<double> t_landing;     ///< the first impact
-  double s_landing = 0;                ///< hand parameter there
-  Vec2 landing_position = Vec2::Zero();  ///< object centre, world, m
+  std::optional<double> t_landing;                    ///< the first impact
+  double s_landing = 0;                               ///< hand parameter there
+  Vec2 landing_position = Vec2::Zero();               ///< object centre, world, m
   double impulse_normal = 0, impulse_tangential = 0;  ///< N s, of the first impact
-  int bounces = 0;                     ///< impacts after which it flew on
-  std::optional<double> t_caught;      ///< the impact after which it stayed in contact
-  bool dropped = false;                ///< it left the hand's reach
+  int bounces = 0;                                    ///< impacts after which it flew on
+  std::optional<double> t_caught;  ///< the impact after which it stayed in contact
+  bool dropped = false;            ///< it left the hand's reach
 };
 std::vector<FlightReport> flight_reports(const RunResult& run);
 /// The same from a list of events (in any order) of a run that started at `initial`.
