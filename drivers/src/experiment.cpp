@@ -278,9 +278,10 @@ SyntheticResult run_synthetic(const LoopSetup& setup, const Scene& truth,
 
   SyntheticResult r;
   r.loop = run_loop(setup, clock, camera, joint, lo);
-  // The outcome is where the disk ends up: the world runs on, the hand held, until the disk is
-  // trapped in a well (the losses then settle it there) or gone.
-  if (r.loop.finished || r.loop.safe_stop) r.settle_s = world.settle(kSettleLimit);
+  const std::optional<Outcome> failed_in_loop = world.failure();
+  // After a finished motion the outcome is where the disk ends up: the world runs on, the hand
+  // held, until the disk is trapped in a well (the losses then settle it there) or gone.
+  if (r.loop.finished && !failed_in_loop) r.settle_s = world.settle(kSettleLimit);
   r.gl = camera.gl_description();
   r.frames_rendered = camera.rendered();
   r.frames_dropped = camera.dropped();
@@ -299,8 +300,10 @@ SyntheticResult run_synthetic(const LoopSetup& setup, const Scene& truth,
   r.impacts = world.impacts();
   r.mode_changes = world.mode_changes();
   r.contact_events = world.events();
-  if (world.failure()) {
-    r.outcome = *world.failure();
+  // The first thing that went wrong: the disk lost during the loop (the loop then stops
+  // safely), a safe stop of the loop's own, an unfinished motion, the disk lost afterwards.
+  if (failed_in_loop) {
+    r.outcome = *failed_in_loop;
     r.failure = world.failure_detail();
   } else if (r.loop.safe_stop) {
     r.outcome = Outcome::kSafeStop;
@@ -308,6 +311,9 @@ SyntheticResult run_synthetic(const LoopSetup& setup, const Scene& truth,
   } else if (!r.loop.finished) {
     r.outcome = Outcome::kNotFinished;
     r.failure = "the motion did not finish";
+  } else if (world.failure()) {
+    r.outcome = *world.failure();
+    r.failure = world.failure_detail();
   } else if (!r.goal.in_goal) {
     const bool other_well = !(r.goal.well_bottom > 0.5 && r.goal.well_bottom < 1.5) &&
                             r.goal.trapped;

@@ -105,8 +105,8 @@ struct SyntheticResult {
   std::array<double, 4> mode_time{0, 0, 0, 0};  ///< s in each sim::ContactMode
   int impacts = 0, mode_changes = 0;
   std::vector<sim::RecordedEvent> contact_events;  ///< SimWorld::events()
-  /// s the world ran on after the loop (hand held) until the disk was trapped in a well or gone
-  /// (at most 10 s): the outcome is where the disk ends up.
+  /// s the world ran on after a finished motion (hand held) until the disk was trapped in a well
+  /// or gone (at most 10 s): the outcome is where the disk ends up.
   double settle_s = 0;
   GoalCheck goal;
   long frames_rendered = 0, frames_dropped = 0;
