@@ -4,6 +4,7 @@
 // straight down, never against the program's own numbers.
 #include "cli_support.hpp"
 
+#include <Eigen/Dense>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -292,6 +293,53 @@ TEST_F(CliRenderTest, RendersPngFramesWithTruthAndMetadata) {
   EXPECT_TRUE(meta.contains("effects"));
   EXPECT_TRUE(meta.contains("gl"));
   EXPECT_EQ(meta.value("frames", -1), 7);
+}
+
+// The throw and the catch (assets/scenes/throw-catch.yaml, at 160 x 120 px): the metadata reports
+// the flight, and the frames' truth in it is the free disk's parabola in the tilted plane: x
+// linear in t, y with the curvature -g sin 5 deg / 2 (the air drag bends it by well under 1 %).
+TEST_F(CliRenderTest, TheThrowAndCatchSceneShowsTheFlight) {
+  std::string text = read_text(fs::path(FLATLAND_ASSET_DIR) / "scenes" / "throw-catch.yaml");
+  for (const auto& [from, to] :
+       std::vector<std::pair<std::string, std::string>>{{"width: 640 ", "width: 160 "},
+                                                         {"height: 480 ", "height: 120 "},
+                                                         {"fx: 900 ", "fx: 225 "},
+                                                         {"fy: 900 ", "fy: 225 "},
+                                                         {"cx: 319.5 ", "cx: 79.5 "},
+                                                         {"cy: 239.5 ", "cy: 59.5 "},
+                                                         {"supersample: 2 ", "supersample: 1 "}}) {
+    const auto pos = text.find(from);
+    ASSERT_NE(pos, std::string::npos) << from;
+    text.replace(pos, from.size(), to);
+  }
+  write_text(dir_ / "throw.yaml", text);
+  const Result r = run("render --scene throw.yaml --overlay --out frames --duration 2.5 --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const json meta = json::parse(read_text(dir_ / "frames" / "meta.json"));
+  EXPECT_EQ(meta.value("model", ""), "hybrid");
+  ASSERT_EQ(meta["contact"]["flights"].size(), 1u) << meta["contact"].dump(2);
+  const json& f = meta["contact"]["flights"][0];
+  const double t0 = f["t_lift_off"], t1 = f["t_landing"];
+  ASSERT_LT(t0, t1);
+  // The frames within the flight, and a least-squares quadratic through their centres.
+  const auto rows = check_truth(dir_ / "frames" / "truth.csv", 76, 30.0, 225.0, 79.5, 59.5, 1.2);
+  std::vector<std::vector<double>> flight;
+  for (const auto& row : rows)
+    if (row[1] > t0 + 1e-9 && row[1] < t1 - 1e-9) flight.push_back(row);
+  ASSERT_GE(flight.size(), 8u);
+  Eigen::MatrixXd A(flight.size(), 3);
+  Eigen::VectorXd x(flight.size()), y(flight.size());
+  for (std::size_t i = 0; i < flight.size(); ++i) {
+    const double t = flight[i][1] - t0;
+    A.row(static_cast<Eigen::Index>(i)) << 1.0, t, t * t;
+    x[static_cast<Eigen::Index>(i)] = flight[i][5];
+    y[static_cast<Eigen::Index>(i)] = flight[i][6];
+  }
+  const Eigen::Vector3d cx = A.colPivHouseholderQr().solve(x);
+  const Eigen::Vector3d cy = A.colPivHouseholderQr().solve(y);
+  const double g = 9.8 * std::sin(5.0 * M_PI / 180.0);
+  EXPECT_NEAR(cy[2] / (-0.5 * g) - 1.0, 0.0, 0.01);
+  EXPECT_NEAR(cx[2], 0.0, 0.01 * 0.5 * g);
 }
 
 TEST_F(CliRenderTest, TheDiskIsWhereTheTruthSaysIfFfmpegCanDecodeTheFrame) {
