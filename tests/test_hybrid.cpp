@@ -409,6 +409,25 @@ TEST(Hybrid, ImpactLawNeverCreatesEnergy) {
   }
 }
 
+// Flight is modelled for a disk: another object's hybrid run slides as a disk's does, but stops
+// where it would lift off (contact_lost), saying so instead of flying it wrongly.
+TEST(Hybrid, NonDiskObjectStopsWhereItWouldFly) {
+  SimulationSpec spec;
+  spec.object.kind = ObjectSpec::Kind::kEllipse;
+  spec.object.semi_axis_x = 0.05;
+  spec.object.semi_axis_y = 0.045;
+  spec.motion.period = 0.9;  // far faster than any motion that keeps contact
+  spec.run.model = ContactModel::kHybrid;
+  spec.contact.mu = 1.0;
+  const RunResult r = run_spec(spec);
+  EXPECT_EQ(r.formulation, Formulation::kGeneral);
+  EXPECT_EQ(r.reason, StopReason::kContactLost);
+  ASSERT_FALSE(r.events.empty());
+  EXPECT_FALSE(events_of(r, EventKind::kContactLost).empty());
+  EXPECT_NEAR(r.final.force_normal, 0.0, 1e-6 * kG);
+  EXPECT_LT(r.final.t, 0.9);
+}
+
 TEST(Hybrid, BadContactLawsNameTheField) {
   const auto message = [](const ContactLaw& law) {
     try {
