@@ -70,7 +70,13 @@ class CliRenderTest : public flatland_test::CliTestBase {
   /// A copy of the bundled camera scene with each `from` replaced by its `to` (which must occur).
   fs::path camera_scene_with(const std::string& name,
                              const std::vector<std::pair<std::string, std::string>>& edits) const {
-    std::string text = read_text(camera_scene());
+    return scene_with(camera_scene(), name, edits);
+  }
+
+  /// A copy of `source` with each `from` replaced by its `to` (which must occur).
+  fs::path scene_with(const fs::path& source, const std::string& name,
+                      const std::vector<std::pair<std::string, std::string>>& edits) const {
+    std::string text = read_text(source);
     for (const auto& [from, to] : edits) {
       const auto pos = text.find(from);
       EXPECT_NE(pos, std::string::npos) << "the bundled scene no longer contains '" << from << "'";
@@ -299,20 +305,14 @@ TEST_F(CliRenderTest, RendersPngFramesWithTruthAndMetadata) {
 // the flight, and the frames' truth in it is the free disk's parabola in the tilted plane: x
 // linear in t, y with the curvature -g sin 5 deg / 2 (the air drag bends it by well under 1 %).
 TEST_F(CliRenderTest, TheThrowAndCatchSceneShowsTheFlight) {
-  std::string text = read_text(fs::path(FLATLAND_ASSET_DIR) / "scenes" / "throw-catch.yaml");
-  for (const auto& [from, to] :
-       std::vector<std::pair<std::string, std::string>>{{"width: 640 ", "width: 160 "},
-                                                         {"height: 480 ", "height: 120 "},
-                                                         {"fx: 900 ", "fx: 225 "},
-                                                         {"fy: 900 ", "fy: 225 "},
-                                                         {"cx: 319.5 ", "cx: 79.5 "},
-                                                         {"cy: 239.5 ", "cy: 59.5 "},
-                                                         {"supersample: 2 ", "supersample: 1 "}}) {
-    const auto pos = text.find(from);
-    ASSERT_NE(pos, std::string::npos) << from;
-    text.replace(pos, from.size(), to);
-  }
-  write_text(dir_ / "throw.yaml", text);
+  scene_with(fs::path(FLATLAND_ASSET_DIR) / "scenes" / "throw-catch.yaml", "throw.yaml",
+             {{"width: 640 ", "width: 160 "},
+              {"height: 480 ", "height: 120 "},
+              {"fx: 900 ", "fx: 225 "},
+              {"fy: 900 ", "fy: 225 "},
+              {"cx: 319.5 ", "cx: 79.5 "},
+              {"cy: 239.5 ", "cy: 59.5 "},
+              {"supersample: 2 ", "supersample: 1 "}});
   const Result r = run("render --scene throw.yaml --overlay --out frames --duration 2.5 --json");
   ASSERT_EQ(r.code, 0) << r.err;
   const json meta = json::parse(read_text(dir_ / "frames" / "meta.json"));

@@ -1,5 +1,7 @@
 #include "flatland/sim/contact.hpp"
 
+#include "text.hpp"
+
 #include <Eigen/Cholesky>
 
 #include <cmath>
@@ -12,12 +14,7 @@ namespace flatland::sim {
 namespace {
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-std::string fmt(double v) {
-  std::ostringstream os;
-  os.precision(6);
-  os << v;
-  return os.str();
-}
+using detail::fmt;
 
 void require(bool ok, const std::string& field, const std::string& what, double v) {
   if (!ok) throw std::invalid_argument("contact." + field + ": " + what + ", got " + fmt(v));

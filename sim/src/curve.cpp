@@ -1,5 +1,7 @@
 #include "flatland/sim/curve.hpp"
 
+#include "text.hpp"
+
 #include <array>
 #include <cmath>
 #include <limits>
@@ -12,12 +14,7 @@ namespace flatland::sim {
 namespace {
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-std::string fmt(double v) {
-  std::ostringstream os;
-  os.precision(6);
-  os << v;
-  return os.str();
-}
+using detail::fmt;
 
 // Newton's method on f(s) = (c(s) - p) . c'(s) = 0 from s, each step at most `max_step`, the
 // piece re-chosen at each iterate: the nearest point of a smooth curve from a good start.

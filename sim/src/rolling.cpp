@@ -529,22 +529,42 @@ Pieces ReducedDiskSliding::pieces_for(const State& y, int direction) const {
   return {problem_->hand->piece_at(y[0], direction), 0, 0};
 }
 
+namespace {
+
+/// The sliding disk's contact forces and accelerations at one state (s', omega).
+struct SlidingDynamics {
+  DiskTerms terms;
+  double f_n = 0, f_t = 0, couple = 0, sddot = 0, omega_dot = 0;
+};
+
+SlidingDynamics sliding_dynamics(const RollingProblem& pb, double r, double side,
+                                 const ContactPhase& phase, const HandKinematics& h,
+                                 const CurveGeometry& g, double sdot, double omega) {
+  SlidingDynamics out{disk_terms(pb, r, side, h, g, sdot)};
+  const DiskTerms& d = out.terms;
+  out.f_n = normal_force(pb, d);
+  out.f_t = -pb.contact.kinetic() * phase.sign * out.f_n;
+  out.couple = -pb.contact.rolling_resistance * phase.turn * out.f_n;
+  out.sddot = ((out.f_t - pb.contact.drag * d.velocity.dot(d.T)) / pb.object.mass - d.along -
+               d.sigma_ds * sdot * sdot) /
+              d.sigma;
+  out.omega_dot =
+      (side * r * out.f_t + out.couple - pb.contact.drag_angular * omega) / pb.object.inertia;
+  return out;
+}
+
+}  // namespace
+
 void ReducedDiskSliding::derivative(double t, const State& y, const Pieces& p, State& dy) const {
   const RollingProblem& pb = *problem_;
   const HandKinematics h = pb.motion->at(t, p.motion);
-  const CurveGeometry g = pb.hand->geometry(y[0], p.hand);
-  const DiskTerms d = disk_terms(pb, r_, side_, h, g, y[2]);
-  if (!(d.sigma > 0)) check_fits(pb, r_, t, y[0], d.sigma, p, "sliding");
-  const double m = pb.object.mass;
-  const double f_n = normal_force(pb, d);
-  const double f_t = -pb.contact.kinetic() * phase_.sign * f_n;
-  const double couple = -pb.contact.rolling_resistance * phase_.turn * f_n;
+  const SlidingDynamics a =
+      sliding_dynamics(pb, r_, side_, phase_, h, pb.hand->geometry(y[0], p.hand), y[2], y[3]);
+  if (!(a.terms.sigma > 0)) check_fits(pb, r_, t, y[0], a.terms.sigma, p, "sliding");
   dy[0] = y[2];
   dy[1] = y[3];
-  dy[2] = ((f_t - pb.contact.drag * d.velocity.dot(d.T)) / m - d.along -
-           d.sigma_ds * y[2] * y[2]) /
-          d.sigma;
-  dy[3] = (side_ * r_ * f_t + couple - pb.contact.drag_angular * y[3]) / pb.object.inertia;
+  dy[2] = a.sddot;
+  dy[3] = a.omega_dot;
 }
 
 Sample ReducedDiskSliding::sample(double t, const State& y, const Pieces& p) const {
@@ -555,18 +575,13 @@ Sample ReducedDiskSliding::sample_with(const HandKinematics& h, double t, const 
                                        int hand_piece) const {
   const RollingProblem& pb = *problem_;
   const CurveGeometry g = pb.hand->geometry(y[0], hand_piece);
-  const DiskTerms d = disk_terms(pb, r_, side_, h, g, y[2]);
-  const double m = pb.object.mass;
-  const double f_n = normal_force(pb, d);
-  const double f_t = -pb.contact.kinetic() * phase_.sign * f_n;
-  const double sdd =
-      ((f_t - pb.contact.drag * d.velocity.dot(d.T)) / m - d.along - d.sigma_ds * y[2] * y[2]) /
-      d.sigma;
+  const SlidingDynamics a = sliding_dynamics(pb, r_, side_, phase_, h, g, y[2], y[3]);
+  const DiskTerms& d = a.terms;
   Sample out;
   fill_hand(out, t, h);
   out.s_h = y[0];
   out.sdot_h = y[2];
-  out.sddot_h = sdd;
+  out.sddot_h = a.sddot;
   out.object_angle = y[1];
   out.s_o = wrap_pi(angle_of(-d.N) - y[1]);
   // The contact point moves over the disk at the rate the normal turns relative to it.
@@ -574,12 +589,11 @@ Sample ReducedDiskSliding::sample_with(const HandKinematics& h, double t, const 
   out.object_position = h.position + d.R * d.q;
   out.object_velocity = d.velocity;
   out.object_angular_velocity = y[3];
-  fill_forces(out, pb, centre_acceleration(h, g, d, y[2], sdd), d.N, d.T, d.velocity);
+  out.object_angular_acceleration = a.omega_dot;
+  fill_forces(out, pb, centre_acceleration(h, g, d, y[2], a.sddot), d.N, d.T, d.velocity);
   out.mode = ContactMode::kSliding;
   out.slip_velocity = d.sigma * y[2] + side_ * r_ * (y[3] - h.angular_velocity);
-  out.rolling_couple = -pb.contact.rolling_resistance * phase_.turn * f_n;
-  out.object_angular_acceleration =
-      (side_ * r_ * f_t + out.rolling_couple - pb.contact.drag_angular * y[3]) / pb.object.inertia;
+  out.rolling_couple = a.couple;
   return out;
 }
 
