@@ -35,7 +35,9 @@ void run_locus(const LocusOptions& o) {
   require_positive("--from", o.from, "2T in s");
   require_positive("--to", o.to, "2T in s");
   require_increasing("--from", o.from, "--to", o.to);
-  if (o.n < 1) throw UsageError("--n: must be at least 1, got " + std::to_string(o.n));
+  if (o.n < 1 || o.n > 10000)
+    throw UsageError("--n: must be in [1, 10000] (each is a solve of ~10 simulations), got " +
+                     std::to_string(o.n));
   require_positive("--tolerance", o.tolerance, "");
   apply_mu_option(o.mu, spec);
   spec.motion.period = o.from;
@@ -148,7 +150,7 @@ Command add_locus_command(CLI::App& app) {
                 "else none reported");
   cmd->add_option("--from", o->from, "Shortest duration 2T, s (> 0). Default: 1.1 s");
   cmd->add_option("--to", o->to, "Longest duration 2T, s (> FROM). Default: 3.0 s");
-  cmd->add_option("--n", o->n, "Number of durations (>= 1; 1 solves at FROM only). Default: 20");
+  cmd->add_option("--n", o->n, "Number of durations (1 to 10000; 1 solves at FROM only). Default: 20");
   cmd->add_option("--tolerance", o->tolerance,
                   "Root bracket width in k (dimensionless, > 0). Default: 1e-9");
   return {cmd, [o] { run_locus(*o); }};

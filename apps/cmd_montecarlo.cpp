@@ -19,7 +19,7 @@ namespace {
 struct MonteCarloOptions {
   CommonOptions common;
   int n = 100;
-  std::uint64_t seed = 1;
+  std::int64_t seed = 1;  // read signed: a negative seed is refused, not wrapped around
   std::vector<std::string> controllers = {"open-loop", "feedback"};
   unsigned threads = 0;
   drivers::Perturbations p;
@@ -75,7 +75,12 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
   CommonOptions common = o.common;
   if (common.scene.empty()) common.scene = default_experiment_scene();
   const Scene scene = load_scene_with_overrides(common);
-  if (o.n < 1) throw UsageError("--n: must be at least 1, got " + std::to_string(o.n));
+  if (o.n < 1 || o.n > 1000000)
+    throw UsageError("--n: must be in [1, 1000000], got " + std::to_string(o.n));
+  if (o.seed < 0) throw UsageError("--seed: must be >= 0, got " + std::to_string(o.seed));
+  if (o.threads > 1024)
+    throw UsageError("--threads: must be in [0, 1024] (0 = all cores), got " +
+                     std::to_string(o.threads));
   const struct {
     const char* option;
     double value;
@@ -122,7 +127,8 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
   drivers::MonteCarloResult r;
   {
     ProgressBar bar("montecarlo");
-    r = drivers::run_montecarlo(scene, o.p, o.n, o.seed, o.controllers, threads, bar.callback());
+    r = drivers::run_montecarlo(scene, o.p, o.n, static_cast<std::uint64_t>(o.seed), o.controllers,
+                                threads, bar.callback());
   }
   const double per_second = r.seconds > 0 ? static_cast<double>(experiments) / r.seconds : 0;
 
@@ -215,10 +221,10 @@ Command add_montecarlo_command(CLI::App& app) {
       "Scene file (YAML, SI units; schema in docs/SCENE.md). Default: the bundled closed-loop "
       "scene, " +
       default_experiment_scene());
-  cmd->add_option("--n", o->n, "Runs (perturbed worlds) per controller (>= 1). Default: 100");
+  cmd->add_option("--n", o->n, "Runs (perturbed worlds) per controller (1 to 1000000). Default: 100");
   cmd->add_option("--seed", o->seed,
-                  "Seed of the draws (with the run number: run i is the same world whatever N "
-                  "and --threads are). Default: 1");
+                  "Seed of the draws, 0 to 2^63 - 1 (with the run number: run i is the same world "
+                  "whatever N and --threads are). Default: 1");
   cmd->add_option("--controller", o->controllers,
                   "Controllers to compare, comma-separated: open-loop, feedback. Default: "
                   "open-loop,feedback")

@@ -163,6 +163,10 @@ Json camera_json(const render::CameraModel& m, const CameraSpec& spec) {
   return j;
 }
 
+// One run writes at most this many frames (an hour at 30 fps is 108 000), at this rate at most.
+constexpr long kMaxRenderFrames = 200000;
+constexpr double kMaxRenderFps = 1000;
+
 void run_render(const RenderOptions& o) {
   // ---- everything that can be bad input, before anything is computed or written
   Scene scene = load_scene_with_overrides(o.common);
@@ -179,6 +183,9 @@ void run_render(const RenderOptions& o) {
   CameraSpec& camera = *scene.camera;
   if (o.fps_opt->count()) {
     require_positive("--fps", o.fps, "frames per s");
+    if (o.fps > kMaxRenderFps)
+      throw UsageError("--fps: at most " + format_number(kMaxRenderFps) + " frames per s, got " +
+                       format_number(o.fps));
     if (camera.exposure > 1.0 / o.fps)
       throw UsageError("--fps: the frame interval 1/" + format_number(o.fps) +
                        " s is shorter than camera.exposure (" + format_number(camera.exposure) +
@@ -191,6 +198,12 @@ void run_render(const RenderOptions& o) {
   const render::GlBackend backend = render::parse_backend(scene.render.backend);
   build_problem_checked(spec, {});
   sim::resolve_formulation(*sim::build_problem(spec), spec.run.formulation);
+  // The frames the run will write, known before it runs: bounded, like every output.
+  const double frames_wanted = std::floor((spec.end_time() - spec.initial.t0) * camera.fps) + 1;
+  if (frames_wanted > kMaxRenderFrames)
+    throw UsageError("--fps/--duration: " + format_number(frames_wanted) +
+                     " frames; at most " + std::to_string(kMaxRenderFrames) +
+                     " are rendered in one run (lower the duration or the rate)");
 
   const std::string out_text = o.common.out;
   if (out_text.empty()) throw UsageError("--out: required (FILE.mp4 or a directory)");

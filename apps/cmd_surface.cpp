@@ -51,10 +51,18 @@ void run_surface(const SurfaceOptions& o) {
   require_positive("--period-from", o.p_from, "2T in s");
   require_positive("--period-to", o.p_to, "2T in s");
   require_increasing("--period-from", o.p_from, "--period-to", o.p_to);
-  if (o.nk < 2) throw UsageError("--nk: must be at least 2, got " + std::to_string(o.nk));
-  if (o.np < 2) throw UsageError("--np: must be at least 2, got " + std::to_string(o.np));
-  if (o.threads < 0)
-    throw UsageError("--threads: must be >= 0 (0 = all cores), got " + std::to_string(o.threads));
+  // Each grid point is one simulation (~0.1 ms to 1 ms): a million points is minutes.
+  constexpr long kMaxSide = 10000, kMaxPoints = 1000000;
+  if (o.nk < 2 || o.nk > kMaxSide)
+    throw UsageError("--nk: must be in [2, 10000], got " + std::to_string(o.nk));
+  if (o.np < 2 || o.np > kMaxSide)
+    throw UsageError("--np: must be in [2, 10000], got " + std::to_string(o.np));
+  if (static_cast<long>(o.nk) * o.np > kMaxPoints)
+    throw UsageError("--nk/--np: " + std::to_string(static_cast<long>(o.nk) * o.np) +
+                     " grid points; at most 1000000 in one run");
+  if (o.threads < 0 || o.threads > 1024)
+    throw UsageError("--threads: must be in [0, 1024] (0 = all cores), got " +
+                     std::to_string(o.threads));
   spec.motion.period = o.p_from;
   spec.motion.k = o.k_from;
   sim::build_problem(spec);
@@ -149,10 +157,10 @@ Command add_surface_command(CLI::App& app) {
   cmd->add_option("--k-from", o->k_from, "Smallest k (dimensionless). Default: -1.6");
   cmd->add_option("--k-to", o->k_to,
                   "Largest k (> K-FROM; the range must not contain -2). Default: -0.8");
-  cmd->add_option("--nk", o->nk, "Grid points in k (>= 2). Default: 50");
+  cmd->add_option("--nk", o->nk, "Grid points in k (2 to 10000; nk x np at most 1000000). Default: 50");
   cmd->add_option("--period-from", o->p_from, "Shortest duration 2T, s (> 0). Default: 0.8 s");
   cmd->add_option("--period-to", o->p_to, "Longest duration 2T, s (> PERIOD-FROM). Default: 2.0 s");
-  cmd->add_option("--np", o->np, "Grid points in 2T (>= 2). Default: 50");
+  cmd->add_option("--np", o->np, "Grid points in 2T (2 to 10000). Default: 50");
   cmd->add_option("--threads", o->threads, "Worker threads (>= 0; 0 = all cores). Default: 0");
   return {cmd, [o] { run_surface(*o); }};
 }

@@ -53,13 +53,33 @@ struct EncoderLog {
   }
 };
 
+// An encoder log of an hour at 1 kHz is ~3.6 M rows of ~30 bytes; a row is a few numbers.
+constexpr std::size_t kMaxEncoderBytes = std::size_t{512} << 20;
+constexpr std::size_t kMaxEncoderLine = 4096;
+
 EncoderLog read_encoder(const std::string& path) {
   std::ifstream in(path);
-  if (!in) throw UsageError("--encoder: cannot read " + path);
+  if (!in || std::filesystem::is_directory(path))
+    throw UsageError("--encoder: cannot read " + path);
   EncoderLog log;
   std::string line;
   int line_no = 0;
-  while (std::getline(in, line)) {
+  std::size_t bytes = 0;
+  // Reads line by line with a bound on each line and on the whole file, so that a device or a
+  // binary file is refused without being read into memory.
+  while (true) {
+    line.clear();
+    int c = 0;
+    while ((c = in.get()) != EOF && c != '\n') {
+      if (line.size() >= kMaxEncoderLine)
+        throw UsageError("--encoder: " + path + ":" + std::to_string(line_no + 1) +
+                         ": a line longer than 4096 bytes (expected rows t,theta)");
+      line += static_cast<char>(c);
+    }
+    if (c == EOF && line.empty()) break;
+    bytes += line.size() + 1;
+    if (bytes > kMaxEncoderBytes)
+      throw UsageError("--encoder: " + path + " is larger than 512 MiB (expected rows t,theta)");
     ++line_no;
     if (line.empty() || line[0] == '#') continue;
     std::replace(line.begin(), line.end(), ',', ' ');

@@ -68,6 +68,10 @@ int main(int argc, char** argv) {
     return 0;
   } catch (const std::invalid_argument& e) {  // SceneError, UsageError, sim's input checks
     return fail(2, e.what());
+  } catch (const std::bad_alloc&) {
+    // Every input is bounded, so this is the machine's memory, not an input's size.
+    return fail(1, "out of memory: this run needs more memory than the machine could give "
+                   "(lower the resolution, supersampling, grid or number of runs)");
   } catch (const std::exception& e) {  // std::runtime_error: numerical or I/O failure
     return fail(1, e.what());
   }

@@ -2,6 +2,7 @@
 // and check exit codes, stdout JSON, stderr messages and the files it leaves behind. Reference
 // numbers come from the paper (section 4.3), never from the program's own output.
 #include "cli_support.hpp"
+#include "test_scale.hpp"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -45,8 +46,8 @@ class CliFixture : public flatland_test::CliTestBase {
   // Bad input: exit 2, one line "flatland: error: ..." naming `field`, nothing on stdout, and
   // `out` (relative to the working directory) not created.
   void expect_bad_input(const std::string& args, const std::string& field,
-                        const std::string& out) const {
-    const Result r = run(args);
+                        const std::string& out, const std::string& env = "") const {
+    const Result r = run(args, env);
     EXPECT_EQ(r.code, 2) << args << "\nstderr: " << r.err;
     const auto err = lines_of(r.err);
     ASSERT_EQ(err.size(), 1u) << args << "\nstderr: " << r.err;
@@ -414,6 +415,44 @@ TEST_F(CliBadInput, ContactOptionsAndScene) {
              "model: hybrid\n  mu: 0.1\n  rolling_resistance: 0.01");
   expect_bad_input("simulate --scene rr.yaml --out out/run.csv", "contact.rolling_resistance",
                    "out");
+}
+
+// Inputs that once ran without limit: each is refused at once, in little memory (1 GB of address
+// space, where the sanitizers allow a limit) and bounded time (a 20 s watchdog; they take ~0.2 s).
+TEST_F(CliBadInput, UnboundedInputsAreRefused) {
+  const std::string env = std::string(flatland::test::short_tests() ? "" : "ulimit -v 1048576; ") +
+                          "timeout 20";
+  const std::string camera = std::string(FLATLAND_ASSET_DIR) + "/scenes/butterfly-camera.yaml";
+  expect_bad_input("simulate --scene /dev/zero --out out/run.csv", "/dev/zero", "out", env);
+  expect_bad_input("render --scene " + camera + " --fps 1e6 --out out", "--fps", "out", env);
+  expect_bad_input("render --scene " + camera + " --fps 999 --duration 1000 --out out",
+                   "--fps/--duration", "out", env);
+  expect_bad_input("surface --nk 100000 --np 100000 --out out", "--nk", "out", env);
+  expect_bad_input("surface --nk 2000 --np 2000 --out out", "--nk/--np", "out", env);
+  expect_bad_input("locus --n 1000000000 --out out", "--n", "out", env);
+  expect_bad_input("montecarlo --seed -1 --out out", "--seed", "out", env);
+  expect_bad_input("montecarlo --n 100000000 --out out", "--n", "out", env);
+  // A camera the schema once allowed, and a supersampled frame beyond the bound.
+  std::string text = read_text(camera);
+  text.replace(text.find("width: 640 "), 11, "width: 16384 ");
+  text.replace(text.find("height: 480 "), 12, "height: 16384 ");
+  write_text(dir_ / "huge.yaml", text);
+  expect_bad_input("render --scene huge.yaml --out out", "camera.width", "out", env);
+  text = read_text(camera);
+  text.replace(text.find("width: 640 "), 11, "width: 4096 ");
+  text.replace(text.find("height: 480 "), 12, "height: 3072 ");
+  text.replace(text.find("supersample: 2 "), 15, "supersample: 8 ");
+  write_text(dir_ / "supersampled.yaml", text);
+  expect_bad_input("render --scene supersampled.yaml --out out", "effects.supersample", "out", env);
+  // Files read with a bound: a device that never ends.
+  fs::create_directories(dir_ / "frames");
+  ASSERT_EQ(run("render --scene " + camera + " --duration 0.05 --out frames --force").code, 0);
+  expect_bad_input("track --images 'frames/frame_*.png' --camera /dev/zero --out out/t.csv",
+                   "/dev/zero", "out", env);
+  expect_bad_input("track --images 'frames/frame_*.png' --camera " +
+                       std::string(FLATLAND_FUZZ_DIR) +
+                       "/camera_file/full-flatland.yaml --encoder /dev/zero --out out/t.csv",
+                   "--encoder", "out", env);
 }
 
 TEST_F(CliBadInput, UnknownCommandAndOption) {

@@ -444,6 +444,11 @@ TEST(SceneTest, OutOfRangeValues) {
                      "contact.event_tolerance", "positive");
 }
 
+// A scene is a few kB: over 1 MiB it is refused before it is parsed.
+TEST(SceneTest, OversizedSceneIsRefused) {
+  expect_field_error(std::string((1 << 20) + 1, '#'), "(document)", "larger than 1 MiB");
+}
+
 // The hybrid model's contact law and losses.
 TEST(SceneTest, HybridContactSection) {
   const std::string hybrid = "contact:\n  model: hybrid\n  mu: 0.8\n  mu_kinetic: 0.6\n"

@@ -319,9 +319,10 @@ CameraFile read_camera_file(const std::string& path) {
     std::ifstream in(path, std::ios::binary);
     if (!in.is_open() || std::filesystem::is_directory(path))
       Reader(path).fail("(file)", "cannot read camera file");
-    std::ostringstream ss;
-    ss << in.rdbuf();
-    text = ss.str();
+    // At most one byte past the limit: /dev/zero or a huge file costs no more than that.
+    text.resize(kMaxCameraFileBytes + 1);
+    in.read(text.data(), static_cast<std::streamsize>(text.size()));
+    text.resize(static_cast<std::size_t>(in.gcount()));
   }
   return parse_camera_file(text, path);
 }
@@ -329,8 +330,7 @@ CameraFile read_camera_file(const std::string& path) {
 CameraFile parse_camera_file(const std::string& text, const std::string& origin) {
   const Reader rd(origin);
   if (text.size() > kMaxCameraFileBytes)
-    rd.fail("(document)", "larger than 1 MiB (" + std::to_string(text.size()) +
-                              " bytes); a camera file is a few kB");
+    rd.fail("(document)", "larger than 1 MiB; a camera file is a few kB");
   // yaml-cpp, not OpenCV's FileStorage, reads the file: OpenCV 4.6's YAML reader loops forever on
   // some malformed text (" s:1\n: [-\n " and " -g\nar -\n ", found by fuzzing: tests/fuzz/
   // regressions/camera_file/opencv-*-hang.yaml), reads out of bounds on an empty key

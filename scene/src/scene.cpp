@@ -31,6 +31,11 @@ namespace flatland {
 namespace {
 
 constexpr double kDegToRad = std::numbers::pi / 180.0;
+// Scene files are refused above this size, before they are parsed.
+constexpr std::size_t kMaxSceneBytes = 1 << 20;
+// A camera image and a supersampled frame: a frame of a few float images must fit in memory.
+constexpr long long kMaxCameraPixels = 40000000;
+constexpr long long kMaxRenderSamples = 67108864;  // 2^26, e.g. 4096 x 4096 at 2 x 2
 
 /// what() must stay one line even when the input contains newlines (in keys, values or the path).
 std::string one_line(std::string s) {
@@ -470,6 +475,12 @@ void read_camera(const MapReader& root, Scene& scene) {
   constexpr long long kMaxSide = 16384;  // px; beyond any GL framebuffer this renders into
   cam.width = static_cast<int>(c->integer_or("width", 1, kMaxSide, cam.width));
   cam.height = static_cast<int>(c->integer_or("height", 1, kMaxSide, cam.height));
+  // The renderer keeps a few float images of the frame: bounded, so that a frame fits in memory.
+  if (static_cast<long long>(cam.width) * cam.height > kMaxCameraPixels)
+    c->fail_at("width", "width x height = " +
+                            std::to_string(static_cast<long long>(cam.width) * cam.height) +
+                            " px; at most " + std::to_string(kMaxCameraPixels) +
+                            " (8K, 7680 x 4320, is 33177600)");
   cam.fx = c->positive_or("fx", cam.fx);
   cam.fy = c->positive_or("fy", cam.fy);
   cam.cx = c->number_or("cx", 0.5 * (cam.width - 1));
@@ -519,6 +530,14 @@ void read_effects(const MapReader& root, Scene& scene) {
   if (!e) return;
   EffectsSpec& fx = scene.effects;
   fx.supersample = static_cast<int>(e->integer_or("supersample", 1, 8, fx.supersample));
+  if (scene.camera && static_cast<long long>(scene.camera->width) * scene.camera->height *
+                              fx.supersample * fx.supersample >
+                          kMaxRenderSamples)
+    e->fail_at("supersample",
+               std::to_string(fx.supersample) + " x " + std::to_string(fx.supersample) +
+                   " samples per pixel of a " + std::to_string(scene.camera->width) + " x " +
+                   std::to_string(scene.camera->height) + " camera exceed " +
+                   std::to_string(kMaxRenderSamples) + " rendered samples per frame");
   fx.blur_subframes = static_cast<int>(e->integer_or("blur_subframes", 1, 64, fx.blur_subframes));
   // Sub-frames spread over a zero exposure would all be the same image.
   if (fx.blur_subframes > 1 && !(scene.camera && scene.camera->exposure > 0))
@@ -719,6 +738,8 @@ int count_documents_up_to_two(const std::string& text) {
 }  // namespace
 
 Scene parse_scene(const std::string& yaml_text, const std::string& origin) {
+  if (yaml_text.size() > kMaxSceneBytes)
+    fail(origin, "(document)", "larger than 1 MiB; a scene is a few kB");
   std::vector<YAML::Node> docs;
   try {
     const int count = count_documents_up_to_two(yaml_text);
@@ -782,12 +803,16 @@ Scene load_scene(const std::string& path) {
   std::string text;
   char buf[8192];
   std::size_t n;
-  while ((n = std::fread(buf, 1, sizeof buf, f)) > 0) text.append(buf, n);
+  // A scene is a few kB; reading stops past the limit, so /dev/zero or a huge file costs no more.
+  while (text.size() <= kMaxSceneBytes && (n = std::fread(buf, 1, sizeof buf, f)) > 0)
+    text.append(buf, n);
   // A directory opens fine on Linux and only fails here, with EISDIR.
   const bool bad = std::ferror(f);
   const int err = errno;
   std::fclose(f);
   if (bad) throw unreadable(err);
+  if (text.size() > kMaxSceneBytes)
+    throw SceneError(one_line(path + ": (document): larger than 1 MiB; a scene is a few kB"));
   return parse_scene(text, path);
 }
 
