@@ -14,6 +14,7 @@
 #include <cstdio>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <sstream>
 
 namespace flatland::app {
@@ -31,6 +32,45 @@ const char* kParamNames[9] = {"fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k
 
 void warn(const std::string& message) { std::cerr << "flatland: warning: " << message << "\n"; }
 
+std::string describe(const calibration::BoardSpec& b) {
+  const cv::Size p = b.pattern_size();
+  const std::string inner = std::to_string(p.width) + "x" + std::to_string(p.height);
+  const std::string squares = std::to_string(b.squares_x) + "x" + std::to_string(b.squares_y);
+  return b.kind == calibration::BoardSpec::Kind::kChessboard
+             ? "a chessboard of " + inner + " inner corners (" + squares + " squares)"
+             : "a ChArUco board of " + squares + " squares (" + inner + " inner corners)";
+}
+
+// Searching every image again would double a failure that already took a while; a miscounted
+// board shows in the first few.
+constexpr std::size_t kHintImages = 3;
+
+// The board was found nowhere: say what was searched for and, if the same numbers in the other
+// count find a board, say so (people count a chessboard's squares, or a ChArUco board's corners).
+std::string board_found_nowhere(const calibration::BoardSpec& board,
+                                const std::vector<std::string>& readable) {
+  std::string message = "board found in no image (" + std::to_string(readable.size()) +
+                        " images searched for " + describe(board) + ", --board " +
+                        board.notation() + ")";
+  const std::optional<calibration::BoardSpec> other = board.other_count();
+  if (!other) return message;
+  std::size_t tried = 0, found = 0;
+  for (const std::string& f : readable) {
+    if (tried == kHintImages) break;
+    std::string why;
+    const cv::Mat image = vision::read_image_file(f, cv::IMREAD_GRAYSCALE, why);
+    ++tried;
+    if (!image.empty() && calibration::detect_board(image, *other, f)) ++found;
+  }
+  if (found == 0) return message;
+  const bool chessboard = board.kind == calibration::BoardSpec::Kind::kChessboard;
+  return message + "; but " + describe(*other) + " is in " + std::to_string(found) +
+         " of the first " + std::to_string(tried) + ": flatland counts " +
+         (chessboard ? "a chessboard by its inner corners, as OpenCV's patternSize does"
+                     : "a ChArUco board by its squares, as cv::aruco::CharucoBoard does") +
+         "; try --board " + other->notation();
+}
+
 void run_calibrate(const CalibrateOptions& o) {
   // ---- bad input first: options, then the images themselves
   const calibration::BoardSpec board = calibration::BoardSpec::parse(o.board);
@@ -46,7 +86,7 @@ void run_calibrate(const CalibrateOptions& o) {
   std::vector<std::string> not_found;
   std::string first_sized;
   cv::Size size;
-  int readable = 0;
+  std::vector<std::string> readable;
   for (const std::string& f : files) {
     std::string why;
     const cv::Mat image = vision::read_image_file(f, cv::IMREAD_GRAYSCALE, why);
@@ -54,7 +94,7 @@ void run_calibrate(const CalibrateOptions& o) {
       warn("skipping " + f + ": " + why);
       continue;
     }
-    ++readable;
+    readable.push_back(f);
     if (first_sized.empty()) {
       first_sized = f;
       size = image.size();
@@ -70,15 +110,13 @@ void run_calibrate(const CalibrateOptions& o) {
       not_found.push_back(f + ": board not found");
     }
   }
-  if (readable == 0)
+  if (readable.empty())
     throw UsageError("--images: none of the " + std::to_string(files.size()) +
                      " files is a readable image");
-  if (views.empty())
-    throw UsageError("board found in no image (" + std::to_string(readable) +
-                     " images searched for " + o.board + ")");
+  if (views.empty()) throw UsageError(board_found_nowhere(board, readable));
   if (views.size() < 3)
     throw UsageError("fewer than 3 usable views: the board was found in " +
-                     std::to_string(views.size()) + " of " + std::to_string(readable) +
+                     std::to_string(views.size()) + " of " + std::to_string(readable.size()) +
                      " images; calibration needs at least 3");
 
   const calibration::IntrinsicsResult r = calibration::calibrate_intrinsics(views);
@@ -149,8 +187,11 @@ Command add_calibrate_command(CLI::App& app) {
       ->required()
       ->type_name("GLOB");
   cmd->add_option("--board", o->board,
-                  "The board, squares and metres: chessboard:COLSxROWS:SQUARE_M or "
-                  "charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT] (default DICT_4X4_50)")
+                  "The board, counted as OpenCV counts it, sizes in metres: "
+                  "chessboard:COLSxROWS:SQUARE_M counts inner corners (OpenCV's patternSize, "
+                  "ROS camera_calibration --size; its sample board is chessboard:9x6:0.025), "
+                  "charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT] counts squares "
+                  "(cv::aruco::CharucoBoard; DICT default DICT_4X4_50)")
       ->required()
       ->type_name("SPEC");
   cmd->add_option("--out", o->out, "Camera file to write (YAML)")->required()->type_name("FILE");

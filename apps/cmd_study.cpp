@@ -295,9 +295,9 @@ struct CalibTruth {
   cv::Size size{640, 480};
 };
 
-/// `n` views of a 9 x 6 chessboard (25 mm squares) at random poses (0.35-0.8 m away, tilted
-/// 15-45 deg), every corner at least 10 px inside the image, projected through the truth with
-/// cv::projectPoints and perturbed by Gaussian noise of `sigma` px per coordinate.
+/// `n` views of a chessboard of 9 x 6 inner corners (25 mm squares) at random poses (0.35-0.8 m
+/// away, tilted 15-45 deg), every corner at least 10 px inside the image, projected through the
+/// truth with cv::projectPoints and perturbed by Gaussian noise of `sigma` px per coordinate.
 std::vector<calibration::BoardView> synthetic_views(const CalibTruth& truth, int n, double sigma,
                                                     std::mt19937_64& rng) {
   std::vector<cv::Point3f> board;

@@ -32,7 +32,7 @@ const std::vector<BoardView>& views() {
     cam.distortion = {-0.2, 0.08, 0.001, -0.0005, 0.0};
     cam.position = {0.0, 0.0, 1.0};
     const render::CameraModel model = render::CameraModel::from_spec(cam);
-    const BoardSpec board = BoardSpec::parse("chessboard:16x12:0.025");
+    const BoardSpec board = BoardSpec::parse("chessboard:15x11:0.025");
     std::mt19937_64 rng(7);
     std::uniform_real_distribution<double> U(0.0, 1.0);
     std::vector<BoardView> out;
@@ -56,8 +56,8 @@ const std::vector<BoardView>& views() {
         }
       if (!inside) continue;
       TargetSpec t;
-      t.cols = 16;
-      t.rows = 12;
+      t.squares_x = 16;
+      t.squares_y = 12;
       t.square = 0.025;
       cv::Vec3d rv;
       cv::Rodrigues(R, rv);
@@ -112,8 +112,8 @@ void BM_DetectChessboard(benchmark::State& state) {
   cam.fx = cam.fy = 800;
   cam.position = {0.0, 0.0, 1.0};
   TargetSpec t;
-  t.cols = 16;
-  t.rows = 12;
+  t.squares_x = 16;
+  t.squares_y = 12;
   t.square = 0.025;
   t.position = {-0.2, -0.15, 0.1};
   t.rotation = {0.3, 0.2, 0.05};
@@ -125,7 +125,7 @@ void BM_DetectChessboard(benchmark::State& state) {
   render::SceneState st;
   st.disk_center = {5.0, 5.0};
   const cv::Mat image = r.render_8u(st);
-  const BoardSpec board = BoardSpec::parse("chessboard:16x12:0.025");
+  const BoardSpec board = BoardSpec::parse("chessboard:15x11:0.025");
   for (auto _ : state) benchmark::DoNotOptimize(detect_board(image, board));
 }
 BENCHMARK(BM_DetectChessboard)->Unit(benchmark::kMillisecond);

@@ -225,7 +225,7 @@ TEST_F(BadMedia, CalibrateSkipsDamagedImagesAndReadsOtherDepthsAndChannelCounts)
   cv::imwrite((dir_ / "imgs/f-blank.png").string(),
               cv::Mat(board.size(), CV_8UC3, cv::Scalar::all(128)));
   const flatland_test::Result r =
-      run("calibrate --images 'imgs/*' --board chessboard:10x7:0.02 --out out.yaml");
+      run("calibrate --images 'imgs/*' --board chessboard:9x6:0.02 --out out.yaml");
   // Both boards are found (16-bit and RGBA read as 8-bit grey), the blank image is searched,
   // the damaged files are skipped: two views are too few, which is bad input.
   EXPECT_EQ(r.code, 2) << r.err;
@@ -244,7 +244,7 @@ TEST_F(BadMedia, CalibrateSkipsDamagedImagesAndReadsOtherDepthsAndChannelCounts)
   fs::remove(dir_ / "imgs/b-rgba.png");
   fs::remove(dir_ / "imgs/f-blank.png");
   const flatland_test::Result none =
-      run("calibrate --images 'imgs/*' --board chessboard:10x7:0.02 --out out.yaml");
+      run("calibrate --images 'imgs/*' --board chessboard:9x6:0.02 --out out.yaml");
   EXPECT_EQ(none.code, 2) << none.err;
   EXPECT_EQ(lines_of(none.err).back(),
             "flatland: error: --images: none of the 3 files is a readable image");

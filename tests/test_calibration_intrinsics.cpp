@@ -62,8 +62,8 @@ RenderedViews render_views(const TargetSpec& board_template, const BoardSpec& bo
   std::uniform_real_distribution<double> U(0.0, 1.0);
   const CameraSpec cam = truth_camera();
   const render::CameraModel model = render::CameraModel::from_spec(cam);
-  const double w = board_template.cols * board_template.square;
-  const double h = board_template.rows * board_template.square;
+  const double w = board_template.squares_x * board_template.square;
+  const double h = board_template.squares_y * board_template.square;
   const double m = board_template.kind == TargetSpec::Kind::kChessboard ? board_template.square : 0;
   while (static_cast<int>(out.targets.size()) < n) {
     const double z = 0.05 + 0.25 * U(rng);
@@ -114,15 +114,15 @@ RenderedViews render_views(const TargetSpec& board_template, const BoardSpec& bo
 
 TargetSpec chessboard_target() {
   TargetSpec t;
-  t.cols = 16;
-  t.rows = 12;
+  t.squares_x = 16;
+  t.squares_y = 12;
   t.square = 0.025;
   return t;
 }
 
 // Rendered once for every test that needs them.
 const BoardSpec& chessboard_spec() {
-  static const BoardSpec b = BoardSpec::parse("chessboard:16x12:0.025");
+  static const BoardSpec b = BoardSpec::parse("chessboard:15x11:0.025");
   return b;
 }
 
@@ -189,22 +189,87 @@ std::string expect_invalid(const std::vector<BoardView>& views) {
 }  // namespace
 
 TEST(CalibrationIntrinsics, BoardSpecParsing) {
+  // A chessboard counts inner corners (OpenCV's patternSize), so 9x6 is 10 x 7 squares.
   const BoardSpec c = BoardSpec::parse("chessboard:9x6:0.02");
   EXPECT_EQ(c.kind, BoardSpec::Kind::kChessboard);
-  EXPECT_EQ(c.cols, 9);
-  EXPECT_EQ(c.rows, 6);
+  EXPECT_EQ(c.squares_x, 10);
+  EXPECT_EQ(c.squares_y, 7);
+  EXPECT_EQ(c.pattern_size(), cv::Size(9, 6));
   EXPECT_DOUBLE_EQ(c.square, 0.02);
-  EXPECT_EQ(c.corners().size(), 40u);
+  EXPECT_EQ(c.corners().size(), 54u);
+  EXPECT_EQ(c.notation(), "chessboard:9x6:0.02");
+  EXPECT_EQ(BoardSpec::parse("chessboard:3x3:0.5").corners().size(), 9u);
+  // A ChArUco board counts squares (cv::aruco::CharucoBoard), so 7x5 has 6 x 4 inner corners.
   const BoardSpec a = BoardSpec::parse("charuco:7x5:0.04:0.03:DICT_5X5_100");
   EXPECT_EQ(a.kind, BoardSpec::Kind::kCharuco);
+  EXPECT_EQ(a.squares_x, 7);
+  EXPECT_EQ(a.squares_y, 5);
+  EXPECT_EQ(a.corners().size(), 24u);
+  EXPECT_EQ(a.notation(), "charuco:7x5:0.04:0.03:DICT_5X5_100");
   EXPECT_DOUBLE_EQ(a.marker, 0.03);
   EXPECT_EQ(a.dictionary, "DICT_5X5_100");
   EXPECT_EQ(BoardSpec::parse("charuco:7x5:0.04:0.03").dictionary, "DICT_4X4_50");
   for (const char* bad :
        {"chess:9x6:0.02", "chessboard:9x6", "chessboard:9by6:0.02", "chessboard:9x6:-1",
-        "chessboard:1x6:0.02", "charuco:7x5:0.04", "charuco:7x5:0.04:0.05",
+        "chessboard:1x6:0.02", "chessboard:2x6:0.02", "chessboard:9x1000:0.02",
+        "charuco:1x5:0.04:0.03", "charuco:7x5:0.04", "charuco:7x5:0.04:0.05",
         "charuco:7x5:0.04:0.03:DICT_9X9_1", "chessboard:9x6:abc"})
     EXPECT_THROW(BoardSpec::parse(bad), std::invalid_argument) << bad;
+}
+
+// The other count reads the same numbers the other way: a chessboard's as squares, a ChArUco
+// board's as inner corners.
+TEST(CalibrationIntrinsics, BoardOtherCount) {
+  const auto chess = BoardSpec::parse("chessboard:10x7:0.025").other_count();
+  ASSERT_TRUE(chess.has_value());
+  EXPECT_EQ(chess->notation(), "chessboard:9x6:0.025");
+  EXPECT_FALSE(BoardSpec::parse("chessboard:3x5:0.025").other_count().has_value());
+  const auto charuco = BoardSpec::parse("charuco:6x4:0.04:0.03").other_count();
+  ASSERT_TRUE(charuco.has_value());
+  EXPECT_EQ(charuco->notation(), "charuco:7x5:0.04:0.03:DICT_4X4_50");
+}
+
+// A chessboard is counted as OpenCV's patternSize counts it. A scene's `cols: 9, rows: 6`
+// chessboard, rendered, is what cv::findChessboardCorners finds with patternSize 9x6 (and not with
+// 10x7, its squares), and `chessboard:9x6` hands detect_board that patternSize: 54 corners, each
+// where the camera projects the scene's corner.
+TEST(CalibrationIntrinsics, ChessboardNotationIsOpenCvsPatternSize) {
+  const std::string board_yaml =
+      "targets:\n  - type: chessboard\n    cols: 9\n    rows: 6\n    square: 0.02\n"
+      "    position: [-0.1, 0.09, 0.05]\n    rotation: [0.3, 0.2, 0.1]\n";
+  const Scene parsed = parse_scene(
+      flatland_test::read_text(fs::path(FLATLAND_ASSET_DIR) / "scenes" / "butterfly.yaml") +
+      board_yaml);
+  ASSERT_EQ(parsed.targets.size(), 1u);
+  Scene s;
+  s.camera = truth_camera();
+  s.effects.supersample = 2;
+  s.targets = parsed.targets;
+  render::Renderer r(s);
+  render::SceneState state;
+  state.disk_center = {5.0, 5.0};  // the disk out of view
+  const cv::Mat image = r.render_8u(state);
+  cv::Mat gray;
+  cv::cvtColor(image, gray, cv::COLOR_BGR2GRAY);
+  std::vector<cv::Point2f> found;
+  EXPECT_TRUE(cv::findChessboardCorners(gray, cv::Size(9, 6), found));
+  EXPECT_FALSE(cv::findChessboardCorners(gray, cv::Size(10, 7), found));
+
+  const BoardSpec board = BoardSpec::parse("chessboard:9x6:0.02");
+  EXPECT_EQ(board.pattern_size(), cv::Size(9, 6));
+  const std::optional<BoardView> view = detect_board(image, board, "rendered");
+  ASSERT_TRUE(view.has_value());
+  ASSERT_EQ(view->image_points.size(), 54u);
+  const std::vector<cv::Point2d> truth =
+      render::CameraModel::from_spec(truth_camera()).project(render::target_corners(s.targets[0]));
+  ASSERT_EQ(truth.size(), 54u);
+  // OpenCV may list the grid from either end: match each true corner to its nearest detection.
+  for (const cv::Point2d& t : truth) {
+    double best = 1e9;
+    for (const cv::Point2f& f : view->image_points)
+      best = std::min(best, std::hypot(f.x - t.x, f.y - t.y));
+    EXPECT_LT(best, 0.3) << "corner at " << t;
+  }
 }
 
 TEST(CalibrationIntrinsics, RenderedChessboardViewsRecoverTheTruth) {
@@ -310,8 +375,8 @@ TEST(CalibrationIntrinsics, BoardNotFoundInABlankImage) {
 TEST(CalibrationIntrinsics, RenderedCharucoViewsCalibrate) {
   TargetSpec t;
   t.kind = TargetSpec::Kind::kCharuco;
-  t.cols = 7;
-  t.rows = 5;
+  t.squares_x = 7;
+  t.squares_y = 5;
   t.square = 0.05;
   t.marker = 0.037;
   const BoardSpec board = BoardSpec::parse("charuco:7x5:0.05:0.037");
@@ -370,7 +435,7 @@ class CalibrateCli : public flatland_test::CliTestBase {
       if (e.is_regular_file() && e.path().extension() != ".png") return false;
     return true;
   }
-  static constexpr const char* kBoard = "--board chessboard:16x12:0.025";
+  static constexpr const char* kBoard = "--board chessboard:15x11:0.025";
 };
 
 }  // namespace
@@ -425,6 +490,34 @@ TEST_F(CalibrateCli, BadInputExitsTwoAndWritesNothing) {
   EXPECT_NE(r.err.find("--board"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(dir_ / "camera.yaml"));
   EXPECT_TRUE(only_stdio_files_left());
+}
+
+// Found nowhere, the error names the board searched for; when the same numbers in the other
+// count find it (a chessboard counted by its squares), it says so and gives the --board to use.
+TEST_F(CalibrateCli, MiscountedBoardGetsAHint) {
+  write_views(3);
+  Result r =
+      run("calibrate --images 'imgs/*.png' --board chessboard:16x12:0.025 --out camera.yaml");
+  EXPECT_EQ(r.code, 2);
+  const std::vector<std::string> lines = flatland_test::lines_of(r.err);
+  ASSERT_FALSE(lines.empty());
+  const std::string& error = lines.back();
+  EXPECT_EQ(error.rfind("flatland: error: board found in no image (3 images searched for a "
+                        "chessboard of 16x12 inner corners (17x13 squares)",
+                        0),
+            0u)
+      << error;
+  EXPECT_NE(error.find("but a chessboard of 15x11 inner corners (16x12 squares) is in 3 of the "
+                       "first 3: flatland counts a chessboard by its inner corners"),
+            std::string::npos)
+      << error;
+  EXPECT_NE(error.find("try --board chessboard:15x11:0.025"), std::string::npos) << error;
+  // No hint when the other count finds nothing either.
+  r = run("calibrate --images 'imgs/*.png' --board chessboard:7x7:0.04 --out camera.yaml");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("board found in no image"), std::string::npos) << r.err;
+  EXPECT_EQ(r.err.find("try --board"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "camera.yaml"));
 }
 
 TEST_F(CalibrateCli, FrontoParallelImagesExitTwo) {

@@ -156,8 +156,8 @@ namespace {
 TargetSpec board_at(double x, double y, double rot_z) {
   TargetSpec board;
   board.kind = TargetSpec::Kind::kChessboard;
-  board.cols = 9;
-  board.rows = 6;  // 9 + 6 odd: not half-turn symmetric, so its corners can be ordered
+  board.squares_x = 9;
+  board.squares_y = 6;  // 9 + 6 odd: not half-turn symmetric, so its corners can be ordered
   board.square = 0.02;
   board.position = {x, y, 0.001};
   board.rotation = {0, 0, rot_z};
@@ -256,13 +256,18 @@ TEST(JointCalibration, BadInputThrows) {
       },
       "image 0: measure_hand_pose: no hand found");
   TargetSpec symmetric;
-  symmetric.cols = 8;
-  symmetric.rows = 6;
+  symmetric.squares_x = 8;
+  symmetric.squares_y = 6;
   expect_one_line_throw(
-      [&] { calibration::estimate_table_pose(table, symmetric, cam.K, cam.dist); }, "half turn");
-  TargetSpec board;  // 9 x 6, but there is none in the image
+      [&] { calibration::estimate_table_pose(table, symmetric, cam.K, cam.dist); },
+      "a chessboard of 7x5 inner corners looks the same turned by a half turn");
+  TargetSpec small;
+  small.squares_x = 3;
+  expect_one_line_throw([&] { calibration::estimate_table_pose(table, small, cam.K, cam.dist); },
+                        "at least 3x3 inner corners");
+  TargetSpec board;  // 9 x 6 inner corners, but there is none in the image
   expect_one_line_throw([&] { calibration::estimate_table_pose(table, board, cam.K, cam.dist); },
-                        "no 8x5 inner-corner chessboard found");
+                        "no 9x6 inner-corner chessboard found");
   expect_one_line_throw(
       [&] {
         calibration::estimate_table_pose(std::vector<cv::Mat>{table, table},

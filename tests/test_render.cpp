@@ -65,7 +65,7 @@ double corner_rms(const cv::Mat& bgr, const TargetSpec& board, const CameraModel
   cv::Mat gray;
   cv::cvtColor(bgr, gray, cv::COLOR_BGR2GRAY);
   std::vector<cv::Point2f> found;
-  const cv::Size pattern(board.cols - 1, board.rows - 1);
+  const cv::Size pattern(board.squares_x - 1, board.squares_y - 1);
   if (!cv::findChessboardCorners(gray, pattern, found,
                                  cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE))
     return -1;
@@ -125,8 +125,8 @@ TEST(Render, ChessboardCornersMatchProjectionEvenThroughStrongDistortion) {
     scene.camera->look_at = {0.02, 0.02, 0.0};
     scene.camera->distortion = {k1, k1 == 0 ? 0.0 : 0.08, 0.0, 0.0, 0.0};
     TargetSpec board;
-    board.cols = 9;
-    board.rows = 6;
+    board.squares_x = 9;
+    board.squares_y = 6;
     board.square = 0.03;
     board.position = {-0.12, -0.06, 0.03};  // above the hand
     board.rotation = {0.25, -0.15, 0.1};
@@ -231,8 +231,8 @@ TEST(Render, CharucoBoardIsDetectedWhereItIs) {
   scene.camera->look_at = {0.0, 0.0, 0.0};
   TargetSpec board;
   board.kind = TargetSpec::Kind::kCharuco;
-  board.cols = 7;
-  board.rows = 5;
+  board.squares_x = 7;
+  board.squares_y = 5;
   board.square = 0.04;
   board.marker = 0.03;
   board.dictionary = "DICT_4X4_50";
@@ -243,7 +243,8 @@ TEST(Render, CharucoBoardIsDetectedWhereItIs) {
   cv::Mat gray;
   cv::cvtColor(r.render_8u(disk_at(5.0, 5.0, 0.0)), gray, cv::COLOR_BGR2GRAY);
   const auto dict = cv::aruco::getPredefinedDictionary(cv::aruco::DICT_4X4_50);
-  const auto cv_board = cv::aruco::CharucoBoard::create(board.cols, board.rows, 0.04f, 0.03f, dict);
+  const auto cv_board =
+      cv::aruco::CharucoBoard::create(board.squares_x, board.squares_y, 0.04f, 0.03f, dict);
   std::vector<std::vector<cv::Point2f>> marker_corners;
   std::vector<int> marker_ids;
   cv::aruco::detectMarkers(gray, dict, marker_corners, marker_ids);

@@ -671,28 +671,39 @@ TEST(SceneRenderSections, GivenValuesAreLoaded) {
   ASSERT_EQ(s.targets.size(), 3u);
   const flatland::TargetSpec& board = s.targets[0];
   EXPECT_EQ(board.kind, flatland::TargetSpec::Kind::kChessboard);
-  EXPECT_EQ(board.cols, 7);
-  EXPECT_EQ(board.rows, 5);
+  // A chessboard is counted by its inner corners, as OpenCV's patternSize: 7 x 5 is 8 x 6 squares.
+  EXPECT_EQ(board.squares_x, 8);
+  EXPECT_EQ(board.squares_y, 6);
   EXPECT_DOUBLE_EQ(board.square, 0.03);
   EXPECT_EQ(board.position, (std::array<double, 3>{0.1, 0.2, 0.001}));
   EXPECT_DOUBLE_EQ(board.rotation[2], kPi / 2);
   const flatland::TargetSpec& charuco = s.targets[1];
   EXPECT_EQ(charuco.kind, flatland::TargetSpec::Kind::kCharuco);
-  EXPECT_EQ(charuco.cols, 5);
-  EXPECT_EQ(charuco.rows, 4);
+  // A ChArUco board is counted by its squares, as cv::aruco::CharucoBoard.
+  EXPECT_EQ(charuco.squares_x, 5);
+  EXPECT_EQ(charuco.squares_y, 4);
   EXPECT_DOUBLE_EQ(charuco.square, 0.04);
   EXPECT_DOUBLE_EQ(charuco.marker, 0.03);
   EXPECT_EQ(charuco.dictionary, "DICT_5X5_100");
   // Defaults: 9 x 6 squares of 0.02 m, 0.015 m markers, DICT_4X4_50, at the origin.
   const flatland::TargetSpec& plain = s.targets[2];
   EXPECT_EQ(plain.kind, flatland::TargetSpec::Kind::kCharuco);
-  EXPECT_EQ(plain.cols, 9);
-  EXPECT_EQ(plain.rows, 6);
+  EXPECT_EQ(plain.squares_x, 9);
+  EXPECT_EQ(plain.squares_y, 6);
   EXPECT_DOUBLE_EQ(plain.square, 0.02);
   EXPECT_DOUBLE_EQ(plain.marker, 0.015);
   EXPECT_EQ(plain.dictionary, "DICT_4X4_50");
   EXPECT_EQ(plain.position, (std::array<double, 3>{0, 0, 0}));
   EXPECT_EQ(plain.rotation, (std::array<double, 3>{0, 0, 0}));
+}
+
+// The default chessboard is OpenCV's sample board: 9 x 6 inner corners, so 10 x 7 squares, whose
+// corners render::target_corners lists as cv::findChessboardCorners does.
+TEST(SceneRenderSections, DefaultChessboardIsOpenCvsSampleBoard) {
+  const Scene s = parse_scene(kMinimal + "targets:\n  - type: chessboard\n");
+  ASSERT_EQ(s.targets.size(), 1u);
+  EXPECT_EQ(s.targets[0].squares_x, 10);
+  EXPECT_EQ(s.targets[0].squares_y, 7);
 }
 
 TEST(SceneRenderSections, EmptyTargetListAndCharucoMarkerDefault) {
@@ -778,7 +789,8 @@ TEST(SceneRenderSections, BadValuesNameTheField) {
   // targets
   bad("  - type: chessboard\n", "  - type: circles\n", "targets[0].type",
       "(allowed: chessboard, charuco)");
-  bad("cols: 7", "cols: 1", "targets[0].cols", "[2, 1000]");
+  bad("cols: 7", "cols: 0", "targets[0].cols", "[1, 999]");
+  bad("cols: 5", "cols: 1", "targets[1].cols", "[2, 1000]");
   bad("rows: 5", "rows: 1.5", "targets[0].rows", "expected an integer");
   bad("square: 0.03", "square: 0", "targets[0].square", "positive");
   bad("square: 0.03", "square: 0.03\n    marker: 0.02", "targets[0].marker", "charuco");

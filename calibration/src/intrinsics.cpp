@@ -209,18 +209,27 @@ BoardSpec BoardSpec::parse(const std::string& text) {
     throw std::invalid_argument("--board: unknown board type '" + f[0] +
                                 "' (chessboard or charuco)");
   }
+  // Counted as OpenCV counts them: a chessboard by its inner corners (the patternSize of
+  // cv::findChessboardCorners and ROS camera_calibration's --size), a ChArUco board by its squares
+  // (cv::aruco::CharucoBoard's squaresX, squaresY).
+  const bool chessboard = b.kind == Kind::kChessboard;
+  const char* unit = chessboard ? "inner corners" : "squares";
   const std::vector<std::string> dims = split(f[1], 'x');
   if (dims.size() != 2)
-    throw std::invalid_argument("--board: expected COLSxROWS (squares), got '" + f[1] + "'");
-  b.cols = parse_int(dims[0], "COLS");
-  b.rows = parse_int(dims[1], "ROWS");
-  if (b.cols < 2 || b.rows < 2 || (b.kind == Kind::kChessboard && b.cols * b.rows < 6))
-    throw std::invalid_argument("--board: COLSxROWS counts squares and must be at least 2x2, got " +
-                                f[1]);
-  // A chessboard with 3x3 squares or fewer has too few inner corners to calibrate anything.
-  if (b.kind == Kind::kChessboard && (b.cols - 1) * (b.rows - 1) < 6)
-    throw std::invalid_argument("--board: a " + f[1] +
-                                " chessboard has fewer than 6 inner corners");
+    throw std::invalid_argument(std::string("--board: expected COLSxROWS (") + unit + "), got '" +
+                                f[1] + "'");
+  const int cols = parse_int(dims[0], "COLS");
+  const int rows = parse_int(dims[1], "ROWS");
+  // cv::findChessboardCorners refuses a pattern narrower than 3 corners; a ChArUco board needs
+  // 2x2 squares for one inner corner.
+  const int least = chessboard ? 3 : 2;
+  constexpr int kMost = 999;
+  if (cols < least || rows < least || cols > kMost || rows > kMost)
+    throw std::invalid_argument("--board: COLSxROWS counts " + std::string(unit) + " and must be " +
+                                std::to_string(least) + " to " + std::to_string(kMost) +
+                                " each, got " + f[1]);
+  b.squares_x = chessboard ? cols + 1 : cols;
+  b.squares_y = chessboard ? rows + 1 : rows;
   b.square = parse_double(f[2], "SQUARE_M");
   if (!(b.square > 0)) throw std::invalid_argument("--board: SQUARE_M must be positive (m)");
   if (b.kind == Kind::kCharuco) {
@@ -235,12 +244,30 @@ BoardSpec BoardSpec::parse(const std::string& text) {
   return b;
 }
 
+std::string BoardSpec::notation() const {
+  const cv::Size n = kind == Kind::kChessboard ? pattern_size() : cv::Size(squares_x, squares_y);
+  std::string s = std::string(kind == Kind::kChessboard ? "chessboard:" : "charuco:") +
+                  size_text(n) + ":" + fmt(square, 6);
+  if (kind == Kind::kCharuco) s += ":" + fmt(marker, 6) + ":" + dictionary;
+  return s;
+}
+
+std::optional<BoardSpec> BoardSpec::other_count() const {
+  BoardSpec b = *this;
+  const int step = kind == Kind::kChessboard ? -1 : 1;
+  b.squares_x += step;
+  b.squares_y += step;
+  const int least_squares = kind == Kind::kChessboard ? 4 : 2;
+  if (b.squares_x < least_squares || b.squares_y < least_squares) return std::nullopt;
+  return b;
+}
+
 std::vector<cv::Point3f> BoardSpec::corners() const {
   // As cv::aruco::CharucoBoard::chessboardCorners: inner corner (c, r) at ((c+1), (r+1)) squares
   // from the printed top-left outer corner, rows running down the print.
   std::vector<cv::Point3f> out;
-  for (int r = 0; r < rows - 1; ++r)
-    for (int c = 0; c < cols - 1; ++c)
+  for (int r = 0; r < squares_y - 1; ++r)
+    for (int c = 0; c < squares_x - 1; ++c)
       out.emplace_back(static_cast<float>((c + 1) * square), static_cast<float>((r + 1) * square),
                        0.0f);
   return out;
@@ -266,7 +293,7 @@ std::optional<BoardView> detect_board(const cv::Mat& image, const BoardSpec& boa
   const std::vector<cv::Point3f> all = board.corners();
   std::vector<int> ids;
   if (board.kind == BoardSpec::Kind::kChessboard) {
-    const cv::Size pattern(board.cols - 1, board.rows - 1);
+    const cv::Size pattern = board.pattern_size();
     if (!cv::findChessboardCorners(gray, pattern, view.image_points,
                                    cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE))
       return std::nullopt;
@@ -274,9 +301,9 @@ std::optional<BoardView> detect_board(const cv::Mat& image, const BoardSpec& boa
   } else {
     const auto dict = cv::aruco::getPredefinedDictionary(
         cv::aruco::PREDEFINED_DICTIONARY_NAME(dictionary_id(board.dictionary)));
-    const auto cv_board =
-        cv::aruco::CharucoBoard::create(board.cols, board.rows, static_cast<float>(board.square),
-                                        static_cast<float>(board.marker), dict);
+    const auto cv_board = cv::aruco::CharucoBoard::create(board.squares_x, board.squares_y,
+                                                          static_cast<float>(board.square),
+                                                          static_cast<float>(board.marker), dict);
     std::vector<std::vector<cv::Point2f>> marker_corners;
     std::vector<int> marker_ids;
     cv::aruco::detectMarkers(gray, dict, marker_corners, marker_ids);

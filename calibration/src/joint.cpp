@@ -49,12 +49,17 @@ std::vector<cv::Point2f> find_board_corners(const cv::Mat& image, const TargetSp
                                             const std::string& who) {
   if (board.kind != TargetSpec::Kind::kChessboard)
     throw std::invalid_argument(who + "only chessboards are supported");
-  if (board.cols < 2 || board.rows < 2 || !(board.square > 0))
-    throw std::invalid_argument(who + "board needs cols, rows >= 2 and square > 0");
-  if ((board.cols + board.rows) % 2 == 0)
-    throw std::invalid_argument(who + "a " + std::to_string(board.cols) + "x" +
-                                std::to_string(board.rows) +
-                                " board looks the same turned by a half turn; use cols + rows odd");
+  // Messages count inner corners, as the scene file and --board do (OpenCV's patternSize).
+  const int n = board.squares_x - 1, m = board.squares_y - 1;  // inner corners per row, rows
+  const std::string pattern = std::to_string(n) + "x" + std::to_string(m);
+  // cv::findChessboardCorners refuses fewer than 3 inner corners either way.
+  if (n < 3 || m < 3 || !(board.square > 0))
+    throw std::invalid_argument(
+        who + "a chessboard needs at least 3x3 inner corners and square > 0, got " + pattern);
+  if ((n + m) % 2 == 0)
+    throw std::invalid_argument(who + "a chessboard of " + pattern +
+                                " inner corners looks the same turned by a half turn; use an odd "
+                                "sum, e.g. 9x6");
   if (image.empty()) throw std::invalid_argument(who + "empty image");
   cv::Mat gray;
   if (image.channels() == 3)
@@ -63,7 +68,6 @@ std::vector<cv::Point2f> find_board_corners(const cv::Mat& image, const TargetSp
     gray = image;
   if (gray.depth() != CV_8U) gray.convertTo(gray, CV_8U);
 
-  const int n = board.cols - 1, m = board.rows - 1;  // inner corners per row, rows of corners
   std::vector<cv::Point2f> found;
   if (!cv::findChessboardCorners(gray, cv::Size(n, m), found,
                                  cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE))
@@ -75,13 +79,11 @@ std::vector<cv::Point2f> find_board_corners(const cv::Mat& image, const TargetSp
   // OpenCV may list the grid from either end. The board is not half-turn symmetric, so the colour
   // of the first square (between corners 0, 1, n, n + 1) tells which: in OpenCV's order it is our
   // square (column 1, row rows - 2), black when (1 + rows - 2) is even.
-  const bool first_black = (board.rows - 1) % 2 == 0;
+  const bool first_black = (board.squares_y - 1) % 2 == 0;
   auto square_centre = [&](int r, int c) {
     const auto at = [&](int rr, int cc) { return found[static_cast<std::size_t>(rr * n + cc)]; };
     return 0.25f * (at(r, c) + at(r, c + 1) + at(r + 1, c) + at(r + 1, c + 1));
   };
-  if (n < 2 || m < 2)
-    throw std::invalid_argument(who + "board too small to tell its orientation (need 3x3 squares)");
   // Compare with the neighbouring square (the other colour) rather than with a fixed level.
   const double first = grey_at(gray, square_centre(0, 0));
   const double other =

@@ -429,16 +429,17 @@ Mesh table_mesh(double extent) {
 Mesh chessboard_background(const TargetSpec& t) {
   Mesh m;
   const double s = t.square;
-  add_quad(m, {-s, -s, 0}, {(t.cols + 1) * s, -s, 0}, {(t.cols + 1) * s, (t.rows + 1) * s, 0},
-           {-s, (t.rows + 1) * s, 0}, {0, 0, 1}, cv::Vec3f(0.95f, 0.95f, 0.95f));
+  add_quad(m, {-s, -s, 0}, {(t.squares_x + 1) * s, -s, 0},
+           {(t.squares_x + 1) * s, (t.squares_y + 1) * s, 0}, {-s, (t.squares_y + 1) * s, 0},
+           {0, 0, 1}, cv::Vec3f(0.95f, 0.95f, 0.95f));
   return m;
 }
 
 Mesh chessboard_squares(const TargetSpec& t) {
   Mesh m;
   const double s = t.square;
-  for (int r = 0; r < t.rows; ++r)
-    for (int c = 0; c < t.cols; ++c)
+  for (int r = 0; r < t.squares_y; ++r)
+    for (int c = 0; c < t.squares_x; ++c)
       if ((r + c) % 2 == 0)
         add_quad(m, {c * s, r * s, 0}, {(c + 1) * s, r * s, 0}, {(c + 1) * s, (r + 1) * s, 0},
                  {c * s, (r + 1) * s, 0}, {0, 0, 1}, cv::Vec3f(0.04f, 0.04f, 0.04f));
@@ -484,9 +485,9 @@ std::vector<cv::Point3d> target_corners(const TargetSpec& t) {
   std::vector<cv::Point3d> out;
   // OpenCV's board frame (object points, ChArUco corner ids) runs y down the printed board with
   // z into it; ours is seen from +z with y up: (x, y)_opencv = (x, rows * square - y)_ours.
-  for (int r = 1; r < t.rows; ++r)
-    for (int c = 1; c < t.cols; ++c) {
-      const cv::Vec3d q = R * cv::Vec3d(c * t.square, (t.rows - r) * t.square, 0) + p;
+  for (int r = 1; r < t.squares_y; ++r)
+    for (int c = 1; c < t.squares_x; ++c) {
+      const cv::Vec3d q = R * cv::Vec3d(c * t.square, (t.squares_y - r) * t.square, 0) + p;
       out.emplace_back(q[0], q[1], q[2]);
     }
   return out;
@@ -711,13 +712,13 @@ struct Renderer::Impl {
     const int px_per_square = 40;
     const auto dict = cv::aruco::getPredefinedDictionary(
         cv::aruco::PREDEFINED_DICTIONARY_NAME(dictionary_id(t.dictionary)));
-    const auto board = cv::aruco::CharucoBoard::create(t.cols, t.rows, static_cast<float>(t.square),
-                                                       static_cast<float>(t.marker), dict);
+    const auto board = cv::aruco::CharucoBoard::create(
+        t.squares_x, t.squares_y, static_cast<float>(t.square), static_cast<float>(t.marker), dict);
     cv::Mat image;
-    board->draw(cv::Size(t.cols * px_per_square, t.rows * px_per_square), image, 0, 1);
+    board->draw(cv::Size(t.squares_x * px_per_square, t.squares_y * px_per_square), image, 0, 1);
     cv::Mat rgba;
     cv::cvtColor(image, rgba, cv::COLOR_GRAY2RGBA);
-    Drawable d = upload(textured_quad(t.cols * t.square, t.rows * t.square));
+    Drawable d = upload(textured_quad(t.squares_x * t.square, t.squares_y * t.square));
     gl->glGenTextures(1, &d.texture);
     gl->glBindTexture(GL_TEXTURE_2D, d.texture);
     gl->glPixelStorei(GL_UNPACK_ALIGNMENT, 1);

@@ -671,9 +671,14 @@ void read_targets(const MapReader& root, Scene& scene) {
     TargetSpec t;
     const bool charuco = m.choice("type", {"chessboard", "charuco"}) == "charuco";
     t.kind = charuco ? TargetSpec::Kind::kCharuco : TargetSpec::Kind::kChessboard;
+    // Counted as OpenCV counts them: a chessboard by its inner corners (cv::findChessboardCorners'
+    // patternSize), a ChArUco board by its squares (cv::aruco::CharucoBoard). Either way 9 x 6.
     constexpr long long kMaxSquares = 1000;
-    t.cols = static_cast<int>(m.integer_or("cols", 2, kMaxSquares, t.cols));
-    t.rows = static_cast<int>(m.integer_or("rows", 2, kMaxSquares, t.rows));
+    const int corner_count = charuco ? 0 : 1;  // squares = count + 1 for a chessboard
+    t.squares_x = corner_count + static_cast<int>(m.integer_or("cols", 2 - corner_count,
+                                                               kMaxSquares - corner_count, 9));
+    t.squares_y = corner_count + static_cast<int>(m.integer_or("rows", 2 - corner_count,
+                                                               kMaxSquares - corner_count, 6));
     t.square = m.positive_or("square", t.square);
     if (charuco) {
       // The default keeps the struct's proportion (0.015 m markers on 0.02 m squares).

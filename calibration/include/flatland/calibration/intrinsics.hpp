@@ -16,21 +16,33 @@
 
 namespace flatland::calibration {
 
-/// A planar calibration board. `cols` x `rows` are squares (as in scene `targets`), so a
-/// chessboard has (cols - 1) x (rows - 1) inner corners.
+/// A planar calibration board. Its size is kept in squares (as cv::aruco::CharucoBoard's
+/// squaresX, squaresY), so it has (squares_x - 1) x (squares_y - 1) inner corners. The notation
+/// counts as OpenCV does: a chessboard by its inner corners (patternSize of
+/// cv::findChessboardCorners, ROS camera_calibration --size), a ChArUco board by its squares.
 struct BoardSpec {
   enum class Kind { kChessboard, kCharuco };
   Kind kind = Kind::kChessboard;
-  int cols = 9, rows = 6;                  ///< squares
+  int squares_x = 10, squares_y = 7;       ///< OpenCV's sample chessboard: 9x6 inner corners
   double square = 0.02;                    ///< m
   double marker = 0.015;                   ///< m (ChArUco marker side)
   std::string dictionary = "DICT_4X4_50";  ///< OpenCV predefined dictionary (ChArUco)
 
-  /// "chessboard:COLSxROWS:SQUARE_M" or "charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT]". Throws
-  /// std::invalid_argument naming what is wrong.
+  /// "chessboard:COLSxROWS:SQUARE_M" (COLS x ROWS inner corners, each at least 3, as
+  /// cv::findChessboardCorners needs) or "charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT]" (squares).
+  /// Throws std::invalid_argument naming what is wrong.
   static BoardSpec parse(const std::string& text);
-  /// Inner corners in the board plane (z = 0), OpenCV's order: corner k = (k % (cols-1),
-  /// k / (cols-1)) * square; for ChArUco corner id k.
+  /// The notation parse() reads, e.g. "chessboard:9x6:0.025".
+  std::string notation() const;
+  /// The board the same notation means in the other count: for a chessboard given in inner
+  /// corners, the one whose squares those are (one corner fewer each way); for a ChArUco board
+  /// given in squares, the one whose inner corners those are (one square more). For the hint when
+  /// a board is found nowhere. nullopt when that board would be too small to detect.
+  std::optional<BoardSpec> other_count() const;
+  /// Inner corners per row and rows of them: cv::findChessboardCorners' patternSize.
+  cv::Size pattern_size() const { return {squares_x - 1, squares_y - 1}; }
+  /// Inner corners in the board plane (z = 0), OpenCV's order: corner k at
+  /// ((k % (squares_x-1)) + 1, (k / (squares_x-1)) + 1) * square; for ChArUco corner id k.
   std::vector<cv::Point3f> corners() const;
 };
 

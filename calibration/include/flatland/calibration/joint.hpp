@@ -23,10 +23,11 @@ struct TablePose {
 };
 
 /// The table pose from one image of a chessboard lying on the table. `board` says what the board
-/// is (type chessboard; cols x rows squares of side `square`) and where it lies in the table frame
-/// (`position`, Rodrigues `rotation`, as a scene's `targets` entry: render::target_corners gives
-/// its inner corners in the table frame). The board must not look the same turned by a half turn
-/// (cols + rows odd), or its corners could be matched the wrong way round. Throws
+/// is (type chessboard; squares_x x squares_y squares of side `square`) and where it lies in the
+/// table frame (`position`, Rodrigues `rotation`, as a scene's `targets` entry:
+/// render::target_corners gives its inner corners in the table frame). The board must not look
+/// the same turned by a half turn (squares_x + squares_y odd, as is inner corners' sum), or its
+/// corners could be matched the wrong way round. Throws
 /// std::invalid_argument (one line) for a ChArUco or symmetric board, bad K, or no board found.
 TablePose estimate_table_pose(const cv::Mat& image, const TargetSpec& board, const cv::Matx33d& K,
                               const cv::Vec<double, 5>& dist);

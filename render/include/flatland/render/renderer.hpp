@@ -47,8 +47,8 @@ struct Frame {
 /// Inner corners of a target's square grid in the table frame (on the board plane), in OpenCV's
 /// order: corner k is OpenCV's object point k (ChArUco corner id k), i.e. row by row from the
 /// board's printed top-left. Our board frame (scene `targets`) is seen from +z with x along the
-/// columns and y up; OpenCV's runs y down the printed board: (x, y)_opencv = (x, rows*square - y).
-/// The truth for chessboard and ChArUco corner detection and calibration.
+/// columns and y up; OpenCV's runs y down the printed board: (x, y)_opencv = (x, squares_y*square -
+/// y). The truth for chessboard and ChArUco corner detection and calibration.
 std::vector<cv::Point3d> target_corners(const TargetSpec& target);
 
 class Renderer {

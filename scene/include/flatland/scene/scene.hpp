@@ -54,7 +54,10 @@ struct EffectsSpec {
 struct TargetSpec {
   enum class Kind { kChessboard, kCharuco };
   Kind kind = Kind::kChessboard;
-  int cols = 9, rows = 6;          ///< squares
+  /// Squares along the board's x and y (as cv::aruco::CharucoBoard's squaresX, squaresY). The
+  /// scene file counts a chessboard by its inner corners (OpenCV's patternSize) and a ChArUco
+  /// board by its squares; the default is OpenCV's sample chessboard, 9x6 inner corners.
+  int squares_x = 10, squares_y = 7;
   double square = 0.02;            ///< m
   double marker = 0.015;           ///< m (ChArUco marker side)
   std::string dictionary = "DICT_4X4_50";
