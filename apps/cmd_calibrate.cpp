@@ -4,6 +4,8 @@
 
 #include "flatland/calibration/camera_file.hpp"
 #include "flatland/calibration/intrinsics.hpp"
+#include "flatland/calibration/joint.hpp"
+#include "flatland/calibration/session.hpp"
 #include "flatland/vision/image_file.hpp"
 
 #include <opencv2/core/utils/logger.hpp>
@@ -14,6 +16,7 @@
 #include <cstdio>
 #include <iostream>
 #include <memory>
+#include <numbers>
 #include <optional>
 #include <sstream>
 
@@ -24,8 +27,10 @@ namespace {
 struct CalibrateOptions {
   std::vector<std::string> images;
   std::string board, out, camera_name = "flatland";
+  std::string camera, table, table_board, joint, scene;
   bool force = false;
   bool json = false;
+  CLI::Option* camera_name_opt = nullptr;
 };
 
 const char* kParamNames[9] = {"fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"};
@@ -71,21 +76,19 @@ std::string board_found_nowhere(const calibration::BoardSpec& board,
          "; try --board " + other->notation();
 }
 
-void run_calibrate(const CalibrateOptions& o) {
-  // ---- bad input first: options, then the images themselves
-  const calibration::BoardSpec board = calibration::BoardSpec::parse(o.board);
-  const fs::path out = o.out;
-  if (o.out.empty() || o.out.back() == '/' || fs::is_directory(out))
-    throw UsageError("--out: must be a file (camera.yaml), got '" + o.out + "'");
-  check_output_file("--out", out, o.force);
-  const std::vector<std::string> files = expand_file_patterns(o.images, "--images");
+// ---- intrinsics: --images and --board
 
-  // libpng/libjpeg complain on stderr about corrupt files; our own warning names the file.
-  cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_ERROR);
+// The readable images and the views in which the board was found; the image size goes to `size`.
+struct DetectedViews {
   std::vector<calibration::BoardView> views;
-  std::vector<std::string> not_found;
-  std::string first_sized;
+  std::vector<std::string> not_found;  // "<file>: board not found"
   cv::Size size;
+};
+
+DetectedViews detect_views(const std::vector<std::string>& files,
+                           const calibration::BoardSpec& board) {
+  DetectedViews d;
+  std::string first_sized;
   std::vector<std::string> readable;
   for (const std::string& f : files) {
     std::string why;
@@ -97,79 +100,283 @@ void run_calibrate(const CalibrateOptions& o) {
     readable.push_back(f);
     if (first_sized.empty()) {
       first_sized = f;
-      size = image.size();
-    } else if (image.size() != size) {
-      throw UsageError("mixed image sizes: " + first_sized + " is " + std::to_string(size.width) +
-                       "x" + std::to_string(size.height) + ", " + f + " is " +
+      d.size = image.size();
+    } else if (image.size() != d.size) {
+      throw UsageError("mixed image sizes: " + first_sized + " is " + std::to_string(d.size.width) +
+                       "x" + std::to_string(d.size.height) + ", " + f + " is " +
                        std::to_string(image.cols) + "x" + std::to_string(image.rows));
     }
     if (auto v = calibration::detect_board(image, board, f)) {
-      views.push_back(std::move(*v));
+      d.views.push_back(std::move(*v));
     } else {
       warn("board not found in " + f + "; skipped");
-      not_found.push_back(f + ": board not found");
+      d.not_found.push_back(f + ": board not found");
     }
   }
   if (readable.empty())
     throw UsageError("--images: none of the " + std::to_string(files.size()) +
                      " files is a readable image");
-  if (views.empty()) throw UsageError(board_found_nowhere(board, readable));
-  if (views.size() < 3)
+  if (d.views.empty()) throw UsageError(board_found_nowhere(board, readable));
+  if (d.views.size() < 3)
     throw UsageError("fewer than 3 usable views: the board was found in " +
-                     std::to_string(views.size()) + " of " + std::to_string(readable.size()) +
+                     std::to_string(d.views.size()) + " of " + std::to_string(readable.size()) +
                      " images; calibration needs at least 3");
+  return d;
+}
 
-  const calibration::IntrinsicsResult r = calibration::calibrate_intrinsics(views);
+// Six significant digits: far below the uncertainties, unlike format_number's round trip.
+std::string g6(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.6g", v);
+  return std::string(buf);
+}
 
-  // ---- write
-  calibration::CameraFile file;
-  file.camera_name = o.camera_name;
+void intrinsics_section(const CalibrateOptions& o, const calibration::BoardSpec& board,
+                        calibration::CameraFile& file, Json& j, std::ostream& os) {
+  const DetectedViews d = detect_views(expand_file_patterns(o.images, "--images"), board);
+  const calibration::IntrinsicsResult r = calibration::calibrate_intrinsics(d.views);
   file.camera = r.camera();
   calibration::CalibrationReport report = r.report();
-  report.views_rejected.insert(report.views_rejected.begin(), not_found.begin(), not_found.end());
+  report.views_rejected.insert(report.views_rejected.begin(), d.not_found.begin(),
+                               d.not_found.end());
   file.report = report;
-  OutputSet outputs(o.force);
-  outputs.ensure_directory(out.parent_path().empty() ? fs::path(".") : out.parent_path());
-  calibration::write_camera_file(outputs.reserve(out).string(), file);
-  outputs.commit();
 
   const std::array<double, 9> p = r.params();
-  if (o.json) {
-    Json j;
-    j["rms_px"] = number(r.rms_px);
-    j["fx"] = p[0];
-    j["fy"] = p[1];
-    j["cx"] = p[2];
-    j["cy"] = p[3];
-    j["dist"] = Json::array();
-    for (int k = 4; k < 9; ++k) j["dist"].push_back(p[k]);
-    j["std"] = Json::object();
-    for (int k = 0; k < 9; ++k) j["std"][kParamNames[k]] = number(r.std[k]);
-    j["views_used"] = r.views_used();
-    j["views_rejected"] = report.views_rejected;
-    j["view_rms_px"] = Json::object();
-    for (std::size_t i = 0; i < views.size(); ++i)
-      if (r.used[i]) j["view_rms_px"][views[i].name] = number(r.view_rms_px[i]);
-    j["out"] = out.string();
-    emit_json(j);
-    return;
-  }
-  // Six significant digits: far below the uncertainties, unlike format_number's round trip.
-  const auto g6 = [](double v) {
-    char buf[32];
-    std::snprintf(buf, sizeof buf, "%.6g", v);
-    return std::string(buf);
-  };
-  std::ostringstream os;
-  os << "flatland calibrate: " << views.size() << " views of " << o.board << ", "
+  j["rms_px"] = number(r.rms_px);
+  j["fx"] = p[0];
+  j["fy"] = p[1];
+  j["cx"] = p[2];
+  j["cy"] = p[3];
+  j["dist"] = Json::array();
+  for (int k = 4; k < 9; ++k) j["dist"].push_back(p[k]);
+  j["std"] = Json::object();
+  for (int k = 0; k < 9; ++k) j["std"][kParamNames[k]] = number(r.std[k]);
+  j["views_used"] = r.views_used();
+  j["views_rejected"] = report.views_rejected;
+  j["view_rms_px"] = Json::object();
+  for (std::size_t i = 0; i < d.views.size(); ++i)
+    if (r.used[i]) j["view_rms_px"][d.views[i].name] = number(r.view_rms_px[i]);
+
+  os << "  intrinsics         " << d.views.size() << " views of " << board.notation() << ", "
      << r.image_size.width << " x " << r.image_size.height << " px\n";
   os << "  rms                " << g6(r.rms_px) << " px over " << r.views_used() << " views\n";
   for (int k = 0; k < 9; ++k)
     os << "  " << kParamNames[k] << std::string(17, ' ') << g6(p[k]) << " +- " << g6(r.std[k])
        << (k < 4 ? " px" : "") << "\n";
   for (const std::string& s : report.views_rejected) os << "  rejected           " << s << "\n";
-  os << "  wrote              " << out.string() << "\n";
-  std::cout << os.str();
+}
+
+// ---- table pose and joint: images listed in a CSV, each the camera's size
+
+cv::Mat read_listed_image(const std::string& option, const std::string& path,
+                          const render::CameraModel& camera) {
+  std::string why;
+  const cv::Mat image = vision::read_image_file(path, cv::IMREAD_COLOR, why);
+  if (image.empty()) throw UsageError(option + ": " + path + ": " + why);
+  if (image.cols != camera.width || image.rows != camera.height)
+    throw UsageError(option + ": " + path + " is " + std::to_string(image.cols) + " x " +
+                     std::to_string(image.rows) + " px but the camera is " +
+                     std::to_string(camera.width) + " x " + std::to_string(camera.height) + " px");
+  return image;
+}
+
+// A library error about image i, told with the image's file name.
+[[noreturn]] void rethrow_for_images(const std::string& option, const std::exception& e) {
+  throw UsageError(option + ": " + e.what());
+}
+
+void table_section(const CalibrateOptions& o, const calibration::BoardSpec& board,
+                   const std::vector<calibration::TablePlacement>& rows,
+                   calibration::CameraFile& file, Json& j, std::ostream& os) {
+  std::vector<cv::Mat> images;
+  std::vector<TargetSpec> boards;
+  for (const calibration::TablePlacement& p : rows) {
+    images.push_back(read_listed_image("--table", p.image, file.camera));
+    boards.push_back(p.target(board));
+  }
+  calibration::TablePose pose;
+  try {
+    pose = calibration::estimate_table_pose(images, boards, file.camera.K, file.camera.dist);
+  } catch (const std::invalid_argument& e) {
+    rethrow_for_images("--table " + o.table, e);
+  }
+  file.camera.R = pose.R;
+  file.camera.t = pose.t;
+  file.has_table_pose = true;
+  file.table_report =
+      calibration::TablePoseReport{pose.rms_px, pose.corners, static_cast<int>(rows.size())};
+  const cv::Vec3d rv = file.camera.rvec(), c = file.camera.position_in_table();
+  j["table"] = {{"rms_px", number(pose.rms_px)},
+                {"corners", pose.corners},
+                {"images", rows.size()},
+                {"rvec", {rv[0], rv[1], rv[2]}},
+                {"tvec", {pose.t[0], pose.t[1], pose.t[2]}},
+                {"camera_in_table", {c[0], c[1], c[2]}}};
+  os << "  table pose         " << rows.size() << " placements of " << board.notation() << ", "
+     << pose.corners << " corners, rms " << g6(pose.rms_px) << " px\n"
+     << "  camera centre      (" << g6(c[0]) << ", " << g6(c[1]) << ", " << g6(c[2])
+     << ") m in the table frame\n";
+}
+
+void joint_section(const CalibrateOptions& o, const Scene& scene,
+                   const std::vector<calibration::JointImage>& rows, calibration::CameraFile& file,
+                   Json& j, std::ostream& os) {
+  std::vector<cv::Mat> images;
+  std::vector<double> encoder;
+  for (const calibration::JointImage& r : rows) {
+    images.push_back(read_listed_image("--joint", r.image, file.camera));
+    encoder.push_back(r.encoder);
+  }
+  calibration::JointReport report;
+  calibration::JointCalibration joint;
+  try {
+    joint = calibration::calibrate_joint(images, encoder, file.camera, scene.render.hand_thickness,
+                                         &report);
+  } catch (const std::invalid_argument& e) {
+    rethrow_for_images("--joint " + o.joint, e);
+  }
+  file.joint = joint;
+  calibration::JointFitReport fit;
+  fit.images = static_cast<int>(rows.size());
+  fit.inliers = static_cast<int>(std::count(report.inlier.begin(), report.inlier.end(), true));
+  fit.center_rms_m = report.center_rms;
+  fit.angle_rms_rad = report.angle_rms;
+  fit.sigma_axis_m = report.sigma_axis;
+  fit.sigma_offset_rad = report.sigma_offset;
+  file.joint_report = fit;
+  Json outliers = Json::array();
+  for (std::size_t i = 0; i < rows.size(); ++i)
+    if (!report.inlier[i]) outliers.push_back(rows[i].image);
+  j["joint"] = {{"axis", {joint.axis_table.x, joint.axis_table.y}},
+                {"encoder_offset_rad", joint.encoder_offset},
+                {"images", fit.images},
+                {"inliers", fit.inliers},
+                {"outliers", outliers},
+                {"center_rms_m", number(fit.center_rms_m)},
+                {"angle_rms_rad", number(fit.angle_rms_rad)},
+                {"sigma_axis_m", number(fit.sigma_axis_m)},
+                {"sigma_offset_rad", number(fit.sigma_offset_rad)}};
+  os << "  joint axis         (" << g6(joint.axis_table.x * 1e3) << ", "
+     << g6(joint.axis_table.y * 1e3) << ") mm +- " << g6(fit.sigma_axis_m * 1e3) << " mm\n"
+     << "  encoder offset     " << g6(joint.encoder_offset * 180 / std::numbers::pi) << " deg +- "
+     << g6(fit.sigma_offset_rad * 180 / std::numbers::pi) << " deg (" << fit.inliers << " of "
+     << fit.images << " images, angle rms " << g6(fit.angle_rms_rad * 180 / std::numbers::pi)
+     << " deg)\n";
+  for (const auto& name : outliers)
+    os << "  outlier            " << name.get<std::string>() << "\n";
+}
+
+// Where the camera file goes: --out, or --camera updated in place.
+fs::path output_path(const CalibrateOptions& o) {
+  if (o.out.empty()) {
+    if (o.camera.empty())
+      throw UsageError("--out: required (FILE.yaml), or --camera FILE to update that file");
+    return o.camera;
+  }
+  const fs::path out = o.out;
+  if (o.out.back() == '/' || fs::is_directory(out))
+    throw UsageError("--out: must be a file (camera.yaml), got '" + o.out + "'");
+  std::error_code ec;
+  const bool in_place = !o.camera.empty() && fs::equivalent(out, o.camera, ec);
+  if (!in_place) check_output_file("--out", out, o.force);
+  return out;
+}
+
+void run_calibrate(const CalibrateOptions& o) {
+  // ---- bad input first: what to calibrate, its inputs, the output
+  if (o.images.empty() && o.table.empty() && o.joint.empty())
+    throw UsageError(
+        "nothing to calibrate: give --images (intrinsics), --table (the table pose) "
+        "or --joint (the joint axis), or several");
+  const bool intrinsics = !o.images.empty();
+  if (intrinsics && o.board.empty()) throw UsageError("--board: required with --images");
+  std::optional<calibration::BoardSpec> board;
+  if (!o.board.empty()) board = calibration::BoardSpec::parse(o.board);
+  std::optional<calibration::BoardSpec> table_board = board;
+  if (!o.table_board.empty()) table_board = calibration::BoardSpec::parse(o.table_board);
+  if (!o.table.empty() && !table_board)
+    throw UsageError("--table: needs the board: --table-board SPEC (or --board)");
+  std::optional<calibration::CameraFile> start;
+  if (!o.camera.empty()) start = calibration::read_camera_file(o.camera);
+  if (!o.table.empty() && !intrinsics && !start)
+    throw UsageError(
+        "--table: needs the camera's intrinsics: --images in the same run, or "
+        "--camera FILE");
+  if (!o.joint.empty() && o.table.empty() && !(start && start->has_table_pose && !intrinsics))
+    throw UsageError(
+        "--joint: needs the table pose: --table in the same run, or --camera FILE "
+        "that has one (flatland.table_rvec)");
+  std::vector<calibration::TablePlacement> table_rows;
+  if (!o.table.empty()) table_rows = calibration::read_table_csv(o.table);
+  std::vector<calibration::JointImage> joint_rows;
+  std::optional<Scene> scene;
+  if (!o.joint.empty()) {
+    joint_rows = calibration::read_joint_csv(o.joint);
+    CommonOptions common;
+    common.scene = o.scene;
+    scene = load_scene_with_overrides(common);
+  }
+  const fs::path out = output_path(o);
+
+  // libpng/libjpeg complain on stderr about corrupt files; our own warning names the file.
+  cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_ERROR);
+  calibration::CameraFile file = start.value_or(calibration::CameraFile{});
+  file.camera_name = o.camera_name_opt && o.camera_name_opt->count()
+                         ? o.camera_name
+                         : (start ? start->camera_name : o.camera_name);
+  Json j;
+  std::ostringstream os;
+  std::vector<std::string> sections;
+  if (intrinsics) {
+    intrinsics_section(o, *board, file, j, os);
+    sections.push_back("intrinsics");
+    if (start && (start->has_table_pose || start->joint) && o.table.empty())
+      warn("new intrinsics: the table pose and joint of " + o.camera +
+           " were measured through the old ones and are dropped; calibrate them again (--table, "
+           "--joint)");
+    if (o.table.empty()) {
+      file.has_table_pose = false;
+      file.table_report.reset();
+    }
+  }
+  if (!o.table.empty()) {
+    table_section(o, *table_board, table_rows, file, j, os);
+    sections.push_back("table");
+    if (o.joint.empty() && file.joint) {
+      warn("new table pose: the joint of " + o.camera +
+           " was measured through the old one and is dropped; calibrate it again (--joint)");
+    }
+  }
+  if ((intrinsics || !o.table.empty()) && o.joint.empty()) {
+    file.joint.reset();
+    file.joint_report.reset();
+  }
+  if (!o.joint.empty()) {
+    joint_section(o, *scene, joint_rows, file, j, os);
+    sections.push_back("joint");
+  }
+
+  // ---- write
+  OutputSet outputs(o.force || (!o.camera.empty() && out == fs::path(o.camera)));
+  outputs.ensure_directory(out.parent_path().empty() ? fs::path(".") : out.parent_path());
+  calibration::write_camera_file(outputs.reserve(out).string(), file);
+  outputs.commit();
+
+  if (o.json) {
+    Json head;
+    head["sections"] = sections;
+    head.update(j);
+    head["out"] = out.string();
+    emit_json(head);
+    return;
+  }
+  std::cout << "flatland calibrate: " <<
+      [&] {
+        std::string s;
+        for (const std::string& x : sections) s += (s.empty() ? "" : ", ") + x;
+        return s;
+      }() << "\n"
+            << os.str() << "  wrote              " << out.string() << "\n";
 }
 
 }  // namespace
@@ -178,28 +385,64 @@ Command add_calibrate_command(CLI::App& app) {
   auto o = std::make_shared<CalibrateOptions>();
   CLI::App* cmd = app.add_subcommand(
       "calibrate",
-      "Calibrate the camera's intrinsics and OpenCV distortion (k1, k2, p1, p2, k3) from images "
-      "of a planar board (Ceres; robust first pass, outlier views dropped) and write a camera "
-      "file (OpenCV YAML, ROS camera_info layout; docs/CALIBRATION.md).");
+      "Calibrate the camera chain and write one camera file (ROS camera_info YAML plus "
+      "flatland's table pose and joint; docs/CALIBRATION.md): the intrinsics and OpenCV "
+      "distortion from images of a board held at varied poses (--images, --board; Ceres, "
+      "outlier views dropped), the table pose from images of the board lying on the table at "
+      "known places (--table), the joint axis and encoder offset from images of the hand at "
+      "known encoder angles (--joint). Give any of the three; a section this run does not "
+      "calibrate comes from --camera FILE, which is updated in place unless --out is given.");
   cmd->add_option("--images", o->images,
-                  "Image files or glob patterns (quote them: 'imgs/*.png'). Unreadable files "
-                  "are skipped with a warning")
-      ->required()
+                  "Intrinsics: image files or glob patterns of the board at varied poses (quote "
+                  "them: 'imgs/*.png'). Unreadable files are skipped with a warning")
       ->type_name("GLOB");
   cmd->add_option("--board", o->board,
                   "The board, counted as OpenCV counts it, sizes in metres: "
                   "chessboard:COLSxROWS:SQUARE_M counts inner corners (OpenCV's patternSize, "
                   "ROS camera_calibration --size; its sample board is chessboard:9x6:0.025), "
                   "charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT] counts squares "
-                  "(cv::aruco::CharucoBoard; DICT default DICT_4X4_50)")
-      ->required()
+                  "(cv::aruco::CharucoBoard; DICT default DICT_4X4_50). Required with --images")
       ->type_name("SPEC");
-  cmd->add_option("--out", o->out, "Camera file to write (YAML)")->required()->type_name("FILE");
+  cmd->add_option("--camera", o->camera,
+                  "Camera file to start from (flatland calibrate's or render's YAML): the "
+                  "sections this run does not calibrate come from it, and it is updated in "
+                  "place unless --out is given")
+      ->type_name("FILE");
+  cmd->add_option("--table", o->table,
+                  "Table pose: CSV with header image,x,y,yaw[,z], a row per image of a chessboard "
+                  "lying on the table: its origin (the outer corner of its square grid, as a "
+                  "scene's targets[i].position) at x, y, z m and its x axis turned by yaw rad in "
+                  "the table frame; image paths relative to the CSV")
+      ->type_name("CSV");
+  cmd->add_option("--table-board", o->table_board,
+                  "The board lying on the table (a chessboard whose inner-corner counts add to "
+                  "an odd number, e.g. chessboard:9x6:0.02). Default: --board")
+      ->type_name("SPEC");
+  cmd->add_option("--joint", o->joint,
+                  "Joint: CSV with header image,encoder, a row per image of the hand alone at "
+                  "that encoder reading (rad), spread over a half turn; image paths relative to "
+                  "the CSV. Needs the table pose (--table now, or in --camera)")
+      ->type_name("CSV");
+  cmd->add_option("--scene", o->scene,
+                  "Scene file for the hand plate's thickness (render.hand_thickness) that --joint "
+                  "measures the hand's top face at. Default: the bundled paper butterfly, " +
+                      default_scene_path())
+      ->type_name("FILE");
+  cmd->add_option("--out", o->out,
+                  "Camera file to write (YAML). Required unless --camera is given (then that "
+                  "file is updated)")
+      ->type_name("FILE");
   add_force_option(*cmd, o->force);
-  cmd->add_option("--camera-name", o->camera_name, "camera_name in the file. Default: flatland");
+  o->camera_name_opt =
+      cmd->add_option("--camera-name", o->camera_name,
+                      "camera_name in the file. Default: --camera's, else flatland");
   cmd->add_flag("--json", o->json,
-                "Print exactly one JSON object on stdout (rms_px, fx, fy, cx, cy, dist, std, "
-                "views_used, views_rejected, view_rms_px, out). Default: off");
+                "Print exactly one JSON object on stdout: sections (what this run calibrated), "
+                "with intrinsics rms_px, fx, fy, cx, cy, dist, std, views_used, views_rejected, "
+                "view_rms_px; with --table a table object (rms_px, corners, images, rvec, tvec, "
+                "camera_in_table); with --joint a joint object (axis, encoder_offset_rad, "
+                "images, inliers, outliers, center_rms_m, angle_rms_rad, sigma_axis_m, "
+                "sigma_offset_rad); and out. Default: off");
   return {cmd, [o] { run_calibrate(*o); }};
 }
 

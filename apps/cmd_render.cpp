@@ -2,6 +2,8 @@
 // directory of PNG frames, with the ground truth of every frame (CSV) and the camera (JSON).
 #include "common.hpp"
 
+#include "flatland/calibration/camera_file.hpp"
+
 #include "flatland/render/renderer.hpp"
 #include "flatland/sim/curve.hpp"
 
@@ -70,8 +72,23 @@ std::string truth_row(long frame, const render::FrameTruth& t) {
                       t.marker_px.y};
   std::string row =
       std::to_string(frame) + "," + format_number(v[0]) + "," + (t.dropped ? "1" : "0");
-  for (std::size_t i = 1; i < sizeof v / sizeof v[0]; ++i) row += "," + format_number(v[i]);
+  // Appended piece by piece: GCC 12's -Wrestrict misfires on "literal" + std::string&&.
+  for (std::size_t i = 1; i < sizeof v / sizeof v[0]; ++i)
+    row.append(",").append(format_number(v[i]));
   return row + "\n";
+}
+
+/// The hand angle every millisecond of the run (rows t,theta): the encoder log flatland track
+/// reads, as the closed loop's 1 kHz servo would record it.
+std::string encoder_csv(const sim::Trajectory& trajectory) {
+  std::string csv = "t,theta\n";
+  const double t0 = trajectory.t_begin(), t1 = trajectory.t_end();
+  const long n = static_cast<long>(std::floor((t1 - t0) * 1000 + 1e-9));
+  for (long i = 0; i <= n; ++i) {
+    const double t = std::min(t0 + i * 1e-3, t1);
+    csv += format_number(t) + "," + format_number(trajectory.sample(t).theta) + "\n";
+  }
+  return csv;
 }
 
 /// The image as 8-bit BGR (a float image from effects.quantize = false is rounded and saturated).
@@ -225,6 +242,10 @@ void run_render(const RenderOptions& o) {
     check_output_file("--out", out.parent_path() / (out.stem().string() + ".truth.csv"),
                       o.common.force);
     check_output_file("--out", out.parent_path() / (out.stem().string() + ".json"), o.common.force);
+    check_output_file("--out", out.parent_path() / (out.stem().string() + ".camera.yaml"),
+                      o.common.force);
+    check_output_file("--out", out.parent_path() / (out.stem().string() + ".encoder.csv"),
+                      o.common.force);
   } else {
     check_output_directory("--out", out, o.common.force);
   }
@@ -239,7 +260,7 @@ void run_render(const RenderOptions& o) {
   OutputSet outputs(o.common.force);
   const cv::Size size(model.width, model.height);
   const double fps = model.fps;
-  fs::path truth_path, meta_path, video_tmp;
+  fs::path truth_path, meta_path, camera_path, encoder_path, video_tmp;
   cv::VideoWriter writer;  // declared after `outputs`: released before its files are removed
   std::string codec;
   if (mp4) {
@@ -265,10 +286,14 @@ void run_render(const RenderOptions& o) {
     const fs::path dir = out.parent_path();
     truth_path = dir / (out.stem().string() + ".truth.csv");
     meta_path = dir / (out.stem().string() + ".json");
+    camera_path = dir / (out.stem().string() + ".camera.yaml");
+    encoder_path = dir / (out.stem().string() + ".encoder.csv");
   } else {
     outputs.begin_directory(out);
     truth_path = out / "truth.csv";
     meta_path = out / "meta.json";
+    camera_path = out / "camera.yaml";
+    encoder_path = out / "encoder.csv";
   }
 
   // ---- simulate
@@ -344,6 +369,16 @@ void run_render(const RenderOptions& o) {
 
   // ---- ground truth and metadata, then everything into place
   outputs.stage(truth_path, truth_csv);
+  // What flatland track needs to map these frames to s_h: the camera (with the table pose and
+  // the joint: the hand pivots at the table origin, its encoder reads the true angle) and the
+  // encoder log.
+  calibration::CameraFile camera_file;
+  camera_file.camera_name = scene.name.empty() ? "flatland" : scene.name;
+  camera_file.camera = model;
+  camera_file.has_table_pose = true;
+  camera_file.joint = calibration::JointCalibration{};
+  calibration::write_camera_file(outputs.reserve(camera_path).string(), camera_file);
+  outputs.stage(encoder_path, encoder_csv(run.trajectory));
   Json meta;
   meta["scene"] = scene.origin;
   meta["name"] = scene.name;
@@ -352,6 +387,8 @@ void run_render(const RenderOptions& o) {
   meta["codec"] = mp4 ? Json(codec) : Json(nullptr);
   meta["output"] = out.string();
   meta["truth"] = truth_path.string();
+  meta["camera_file"] = camera_path.string();
+  meta["encoder"] = encoder_path.string();
   meta["frames"] = written;
   meta["dropped"] = dropped;
   meta["t_begin"] = t0;
@@ -385,6 +422,8 @@ void run_render(const RenderOptions& o) {
     j["codec"] = mp4 ? Json(codec) : Json(nullptr);
     j["truth"] = truth_path.string();
     j["meta"] = meta_path.string();
+    j["camera_file"] = camera_path.string();
+    j["encoder"] = encoder_path.string();
     j["k"] = butterfly ? number(spec.motion.k) : Json(nullptr);
     j["gl"] = {{"backend", render::to_string(backend)}, {"description", gl}};
     emit_json(j);
@@ -401,7 +440,9 @@ void run_render(const RenderOptions& o) {
      << " frames/s (" << gl << ")\n"
      << "  wrote              " << out.string() << (mp4 ? " (" + codec + ")" : "") << "\n"
      << "  wrote              " << truth_path.string() << "\n"
-     << "  wrote              " << meta_path.string() << "\n";
+     << "  wrote              " << meta_path.string() << "\n"
+     << "  wrote              " << camera_path.string() << ", " << encoder_path.string()
+     << " (for flatland track --camera --encoder)\n";
   std::cout << os.str();
 }
 

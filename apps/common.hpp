@@ -251,6 +251,7 @@ Command add_surface_command(CLI::App& app);
 Command add_time_optimal_command(CLI::App& app);
 Command add_render_command(CLI::App& app);
 Command add_calibrate_command(CLI::App& app);
+Command add_render_calibration_command(CLI::App& app);
 Command add_track_command(CLI::App& app);
 Command add_experiment_command(CLI::App& app);
 Command add_montecarlo_command(CLI::App& app);

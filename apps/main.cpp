@@ -38,6 +38,7 @@ int main(int argc, char** argv) {
   std::vector<Command> commands = {add_simulate_command(app),     add_solve_command(app),
                                    add_locus_command(app),        add_surface_command(app),
                                    add_time_optimal_command(app), add_render_command(app)};
+  commands.push_back(add_render_calibration_command(app));
   commands.push_back(add_calibrate_command(app));
   commands.push_back(add_track_command(app));
   commands.push_back(add_experiment_command(app));

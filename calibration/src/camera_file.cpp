@@ -149,6 +149,46 @@ class Reader {
 // A camera file is a few kB; anything far larger is not one.
 constexpr std::size_t kMaxCameraFileBytes = 1 << 20;
 
+// A report's number: finite and not negative (RMS values, sigmas).
+double report_number(const YAML::Node& map, const char* key, const std::string& section,
+                     const Reader& rd) {
+  const std::string field = "flatland." + section + "." + key;
+  const double v = rd.number(rd.require(map, key, field), field);
+  if (v < 0) rd.fail(field, "must not be negative");
+  return v;
+}
+
+int report_count(const YAML::Node& map, const char* key, const std::string& section,
+                 const Reader& rd) {
+  const std::string field = "flatland." + section + "." + key;
+  const int v = rd.integer(rd.require(map, key, field), field);
+  if (v < 0) rd.fail(field, "must not be negative");
+  return v;
+}
+
+// flatland.table_report and flatland.joint_report: what the table and joint fits reported.
+void read_fit_reports(const YAML::Node& fl, const Reader& rd, CameraFile& file) {
+  if (const YAML::Node t = fl["table_report"]; Reader::present(t)) {
+    if (!t.IsMap()) rd.fail("flatland.table_report", "must be a mapping rms_px, corners, images");
+    TablePoseReport r;
+    r.rms_px = report_number(t, "rms_px", "table_report", rd);
+    r.corners = report_count(t, "corners", "table_report", rd);
+    r.images = report_count(t, "images", "table_report", rd);
+    file.table_report = r;
+  }
+  if (const YAML::Node j = fl["joint_report"]; Reader::present(j)) {
+    if (!j.IsMap()) rd.fail("flatland.joint_report", "must be a mapping");
+    JointFitReport r;
+    r.images = report_count(j, "images", "joint_report", rd);
+    r.inliers = report_count(j, "inliers", "joint_report", rd);
+    r.center_rms_m = report_number(j, "center_rms_m", "joint_report", rd);
+    r.angle_rms_rad = report_number(j, "angle_rms_rad", "joint_report", rd);
+    r.sigma_axis_m = report_number(j, "sigma_axis_m", "joint_report", rd);
+    r.sigma_offset_rad = report_number(j, "sigma_offset_rad", "joint_report", rd);
+    file.joint_report = r;
+  }
+}
+
 // The fields of a parsed camera file (the ROS keys, then flatland's extras).
 CameraFile read_fields(const YAML::Node& root, const Reader& rd) {
   if (!root.IsMap()) rd.fail("(document)", "not a mapping");
@@ -237,6 +277,7 @@ CameraFile read_fields(const YAML::Node& root, const Reader& rd) {
     }
     file.report = rep;
   }
+  read_fit_reports(fl, rd, file);
   return file;
 }
 
@@ -286,6 +327,20 @@ void write_camera_file(const std::string& path, const CameraFile& file) {
        << "{";
     for (int k = 0; k < 9; ++k) fs << kStdNames[k] << rep.std[static_cast<std::size_t>(k)];
     fs << "}";
+  }
+  if (file.table_report) {
+    const TablePoseReport& r = *file.table_report;
+    fs << "table_report"
+       << "{"
+       << "rms_px" << r.rms_px << "corners" << r.corners << "images" << r.images << "}";
+  }
+  if (file.joint_report) {
+    const JointFitReport& r = *file.joint_report;
+    fs << "joint_report"
+       << "{"
+       << "images" << r.images << "inliers" << r.inliers << "center_rms_m" << r.center_rms_m
+       << "angle_rms_rad" << r.angle_rms_rad << "sigma_axis_m" << r.sigma_axis_m
+       << "sigma_offset_rad" << r.sigma_offset_rad << "}";
   }
   fs << "}";
   std::string text = fs.releaseAndGetString();

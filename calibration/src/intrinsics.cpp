@@ -248,7 +248,8 @@ std::string BoardSpec::notation() const {
   const cv::Size n = kind == Kind::kChessboard ? pattern_size() : cv::Size(squares_x, squares_y);
   std::string s = std::string(kind == Kind::kChessboard ? "chessboard:" : "charuco:") +
                   size_text(n) + ":" + fmt(square, 6);
-  if (kind == Kind::kCharuco) s += ":" + fmt(marker, 6) + ":" + dictionary;
+  // Appended piece by piece: GCC 12's -Wrestrict misfires on "literal" + std::string&&.
+  if (kind == Kind::kCharuco) s.append(":").append(fmt(marker, 6)).append(":").append(dictionary);
   return s;
 }
 

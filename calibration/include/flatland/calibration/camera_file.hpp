@@ -29,12 +29,30 @@ struct CalibrationReport {
   std::array<double, 9> std{};
 };
 
+/// How the table pose was fitted (flatland calibrate --table).
+struct TablePoseReport {
+  double rms_px = 0;  ///< reprojection RMS of the boards' inner corners
+  int corners = 0;    ///< inner corners used
+  int images = 0;     ///< board placements
+};
+
+/// How the joint was fitted (flatland calibrate --joint; calibrate_joint's JointReport in short).
+struct JointFitReport {
+  int images = 0, inliers = 0;
+  double center_rms_m = 0;      ///< RMS distance of the measured hand centres from the axis
+  double angle_rms_rad = 0;     ///< RMS of measured - (encoder + offset)
+  double sigma_axis_m = 0;      ///< 1-sigma of each axis coordinate
+  double sigma_offset_rad = 0;  ///< 1-sigma of the encoder offset
+};
+
 struct CameraFile {
   std::string camera_name = "flatland";
   render::CameraModel camera;  ///< width, height, K, dist; R, t = table pose when known
   bool has_table_pose = false;
   std::optional<JointCalibration> joint;
-  std::optional<CalibrationReport> report;
+  std::optional<CalibrationReport> report;  ///< of the intrinsics
+  std::optional<TablePoseReport> table_report;
+  std::optional<JointFitReport> joint_report;
 };
 
 /// Write atomically (temp file + rename). Throws std::runtime_error on I/O failure.
