@@ -7,6 +7,7 @@
 #include "flatland/vision/image_file.hpp"
 #include "flatland/vision/mapping.hpp"
 #include "flatland/vision/tracker.hpp"
+#include "flatland/vision/video_reader.hpp"
 
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -31,12 +32,50 @@ struct TrackOptions {
   bool force = false;
   bool json = false;
   double fps = 0;
+  double min_quality = 0.5;
   CLI::Option* fps_opt = nullptr;
 };
 
 const char* kTrackColumns = "frame,t,u,v,sigma_px,quality,state,s_h";
 /// A truncated video fails every read after the cut: one warning per frame up to this many.
 constexpr long kMaxSkipWarnings = 10;
+
+/// Frames by what became of them, with a warning per untrusted frame (up to kMaxSkipWarnings of
+/// each kind).
+struct FrameCounts {
+  long frames = 0, found = 0, lost = 0, low_quality = 0;  // frames: those tracked
+  long unreadable = 0, repeated = 0, damaged = 0;
+  void count(vision::FrameIntegrity integrity, long index, const std::string& video) {
+    long* n = integrity == vision::FrameIntegrity::kRepeated  ? &repeated
+              : integrity == vision::FrameIntegrity::kDamaged ? &damaged
+                                                              : &unreadable;
+    ++*n;
+    if (video.empty() && integrity == vision::FrameIntegrity::kUnreadable) return;  // warned
+    const std::string what =
+        integrity == vision::FrameIntegrity::kRepeated ? "repeats the frame before (same "
+                                                         "pixels or timestamp); not measured"
+        : integrity == vision::FrameIntegrity::kDamaged
+            ? "damaged (the decoder reported an error in it or in a frame it depends on); not "
+              "measured"
+            : "cannot be decoded; skipped";
+    const std::string source = video.empty() ? "--images" : "--video: " + video;
+    if (*n <= kMaxSkipWarnings)
+      std::cerr << "flatland: warning: " << source << ": frame " << index << " " << what << "\n";
+    if (*n == kMaxSkipWarnings)
+      std::cerr << "flatland: warning: " << source << ": further " << vision::to_string(integrity)
+                << " frames not reported\n";
+  }
+};
+
+/// Every frame must be the camera file's size: its K describes that image and no other.
+void check_frame_size(const cv::Mat& image, const render::CameraModel& camera,
+                      const std::string& camera_path) {
+  if (image.cols != camera.width || image.rows != camera.height)
+    throw UsageError("frames are " + std::to_string(image.cols) + " x " +
+                     std::to_string(image.rows) + " px but " + camera_path + " describes a " +
+                     std::to_string(camera.width) + " x " + std::to_string(camera.height) +
+                     " px camera");
+}
 
 /// Encoder log: rows "t,theta" (s, rad), strictly increasing t; a header line is skipped.
 struct EncoderLog {
@@ -115,6 +154,8 @@ void run_track(const TrackOptions& o) {
   const calibration::CameraFile camfile = calibration::read_camera_file(o.camera);
   const render::CameraModel& camera = camfile.camera;
   if (o.fps_opt->count()) require_positive("--fps", o.fps, "frames per s");
+  if (!(o.min_quality >= 0 && o.min_quality <= 1))
+    throw UsageError("--min-quality: must be in [0, 1], got " + format_number(o.min_quality));
 
   CommonOptions common;
   common.scene = o.scene;
@@ -139,7 +180,7 @@ void run_track(const TrackOptions& o) {
   }
 
   std::vector<std::string> files;
-  cv::VideoCapture video;
+  std::optional<vision::VideoReader> video;
   vision::TrackerConfig cfg;
   cfg.method = method;
   if (camfile.has_table_pose) {
@@ -158,109 +199,91 @@ void run_track(const TrackOptions& o) {
     std::error_code ec;
     if (fs::file_size(o.video, ec) == 0 && !ec)
       throw UsageError("--video: " + o.video + ": zero-length file");
-    // FFmpeg logs decoder errors itself ("[mjpeg @ 0x...] overread 8"), lines that break the
-    // one-line error contract and say less than flatland's warnings naming the frame. Quiet
-    // (AV_LOG_QUIET) unless the user asks for FFmpeg's view with OPENCV_FFMPEG_LOGLEVEL.
-    ::setenv("OPENCV_FFMPEG_LOGLEVEL", "-8", 0);
-    // FFmpeg only: CAP_ANY would also try GStreamer, the image-sequence and the built-in MJPEG
-    // readers, which print multi-line errors of their own for a file they cannot read.
     try {
-      video.open(o.video, cv::CAP_FFMPEG);
-    } catch (const cv::Exception&) {
-      video.release();
+      video.emplace(o.video);
+    } catch (const std::invalid_argument& e) {
+      throw UsageError(std::string("--video: ") + e.what());
     }
-    if (!video.isOpened()) throw UsageError("--video: cannot open " + o.video + " as a video");
-    total = std::max(0L, static_cast<long>(video.get(cv::CAP_PROP_FRAME_COUNT)));
-    const double vfps = video.get(cv::CAP_PROP_FPS);
+    total = video->frame_count();
+    const double vfps = video->fps();
     if (vfps > 0 && std::isfinite(vfps)) fps = vfps;
   }
   if (o.fps_opt->count()) fps = o.fps;
 
   // ---- track
   vision::Tracker tracker(cfg);
+  vision::RepeatCheck repeat;  // image sequences; a video's reader checks its own
   std::string csv = std::string(kTrackColumns) + "\n";
-  long frames = 0, found = 0, lost = 0, skipped = 0;
+  FrameCounts n;
   double sigma2 = 0;
   double s_guess = NAN;  // previous s_h; NaN: none (first frame, after a loss)
-  bool size_checked = false;
   {
     ProgressBar bar("track");
     for (long i = 0;; ++i) {
-      cv::Mat image;
+      vision::VideoReader::Frame frame;
       if (!files.empty()) {
         if (i >= total) break;
         std::string why;
-        image = vision::read_image_file(files[static_cast<std::size_t>(i)], cv::IMREAD_COLOR, why);
-        if (image.empty()) {
-          std::cerr << "flatland: warning: skipping unreadable image " << files[i] << " (" << why
+        const std::string& file = files[static_cast<std::size_t>(i)];
+        frame.image = vision::read_image_file(file, cv::IMREAD_COLOR, why);
+        if (frame.image.empty()) {
+          std::cerr << "flatland: warning: skipping unreadable image " << file << " (" << why
                     << ")\n";
-          ++skipped;
-          bar.update(i + 1, total);
-          continue;
+          frame.integrity = vision::FrameIntegrity::kUnreadable;
+        } else if (repeat.repeated(frame.image)) {
+          frame.integrity = vision::FrameIntegrity::kRepeated;
         }
-      } else {
-        bool got = false;
-        try {
-          got = video.read(image);
-        } catch (const cv::Exception&) {
-          got = false;
-        }
-        if (!got || image.empty()) {
-          // FFmpeg reads on past a damaged frame, so within the announced frame count a failed
-          // read skips one frame instead of silently dropping the rest of the video.
-          if (i >= total) break;
-          ++skipped;
-          if (skipped <= kMaxSkipWarnings)
-            std::cerr << "flatland: warning: --video: " << o.video << ": skipping frame " << i
-                      << " (cannot decode it)\n";
-          if (skipped == kMaxSkipWarnings)
-            std::cerr << "flatland: warning: --video: " << o.video
-                      << ": further skipped frames not reported\n";
-          bar.update(i + 1, total);
-          continue;
-        }
+      } else if (!video->read(frame)) {
+        break;
       }
-      if (!size_checked && (mapping || cfg.camera) &&
-          (image.cols != camera.width || image.rows != camera.height))
-        throw UsageError("frames are " + std::to_string(image.cols) + " x " +
-                         std::to_string(image.rows) + " px but " + o.camera + " describes a " +
-                         std::to_string(camera.width) + " x " + std::to_string(camera.height) +
-                         " px camera");
-      size_checked = true;
       const double t = static_cast<double>(i) / fps;
-      const vision::TrackResult r = tracker.track(image);
-      ++frames;
-      std::string row = std::to_string(i) + "," + format_number(t) + ",";
-      if (!r.ok()) {
-        ++lost;
-        s_guess = NAN;
-        row += ",,,0,lost,\n";
-      } else {
-        ++found;
-        sigma2 += r.sigma_px * r.sigma_px;
-        row += format_number(r.center.x) + "," + format_number(r.center.y) + "," +
-               format_number(r.sigma_px) + "," + format_number(r.quality) + "," +
-               vision::to_string(r.state) + ",";
-        std::optional<double> theta = encoder ? encoder->at(t) : std::nullopt;
-        if (mapping && theta) {
-          const double offset = camfile.joint ? camfile.joint->encoder_offset : 0.0;
-          // Near the previous frame's s_h when there is one, else over a whole period of the
-          // closed outline (s is periodic with period 4).
-          const auto c =
-              std::isfinite(s_guess)
-                  ? vision::pixel_to_contact(*mapping, r.center, *theta + offset, s_guess, 0.5)
-                  : vision::pixel_to_contact(*mapping, r.center, *theta + offset, 0.0, 2.0);
-          if (c) {
-            row += format_number(c->s_h);
-            s_guess = c->s_h;
-          }
-        }
-        row += "\n";
-      }
-      csv += row;
+      const std::string head = std::to_string(i) + "," + format_number(t) + ",";
       bar.update(i + 1, std::max(total, i + 1));
+      if (!frame.image.empty()) check_frame_size(frame.image, camera, o.camera);
+      if (frame.integrity != vision::FrameIntegrity::kIntact) {
+        // No measurement from a frame that brings no new, trustworthy picture.
+        n.count(frame.integrity, i, o.video);
+        if (frame.integrity == vision::FrameIntegrity::kUnreadable) s_guess = NAN;
+        csv += head + ",,,," + vision::to_string(frame.integrity) + ",\n";
+        continue;
+      }
+      const vision::TrackResult r = tracker.track(frame.image);
+      ++n.frames;
+      if (!r.ok()) {
+        ++n.lost;
+        s_guess = NAN;
+        csv += head + ",,,0,lost,\n";
+        continue;
+      }
+      std::string row = head + format_number(r.center.x) + "," + format_number(r.center.y) + "," +
+                        format_number(r.sigma_px) + "," + format_number(r.quality) + ",";
+      if (r.quality < o.min_quality) {
+        // Kept for inspection, but not a measurement: no s_h, and state says why.
+        ++n.low_quality;
+        csv += row + "low_quality,\n";
+        continue;
+      }
+      ++n.found;
+      sigma2 += r.sigma_px * r.sigma_px;
+      row += std::string(vision::to_string(r.state)) + ",";
+      std::optional<double> theta = encoder ? encoder->at(t) : std::nullopt;
+      if (mapping && theta) {
+        const double offset = camfile.joint ? camfile.joint->encoder_offset : 0.0;
+        // Near the previous frame's s_h when there is one, else over a whole period of the
+        // closed outline (s is periodic with period 4).
+        const auto c =
+            std::isfinite(s_guess)
+                ? vision::pixel_to_contact(*mapping, r.center, *theta + offset, s_guess, 0.5)
+                : vision::pixel_to_contact(*mapping, r.center, *theta + offset, 0.0, 2.0);
+        if (c) {
+          row += format_number(c->s_h);
+          s_guess = c->s_h;
+        }
+      }
+      csv += row + "\n";
     }
   }
+  const long frames = n.frames, found = n.found, lost = n.lost, skipped = n.unreadable;
   if (frames == 0)
     throw UsageError(std::string(files.empty() ? "--video: " + o.video : "--images: " + o.images) +
                      ": no readable frame");
@@ -277,6 +300,11 @@ void run_track(const TrackOptions& o) {
     j["found"] = found;
     j["lost"] = lost;
     j["skipped"] = skipped;
+    j["unreadable"] = n.unreadable;
+    j["repeated"] = n.repeated;
+    j["damaged"] = n.damaged;
+    j["low_quality"] = n.low_quality;
+    j["min_quality"] = o.min_quality;
     j["rms_sigma_px"] = number(rms_sigma);
     j["method"] = vision::to_string(method);
     j["fit"] = cfg.camera && method == vision::TrackMethod::kEdge ? "table-plane" : "pixel";
@@ -291,7 +319,10 @@ void run_track(const TrackOptions& o) {
                                                             : "")
      << "\n"
      << "  frames             " << frames << " (" << found << " with the disk, " << lost
-     << " lost, " << skipped << " unreadable skipped) at " << format_number(fps) << " fps\n"
+     << " lost, " << n.low_quality << " below quality " << format_number(o.min_quality) << ")"
+     << " at " << format_number(fps) << " fps\n"
+     << "  not measured       " << n.unreadable << " unreadable, " << n.repeated << " repeated, "
+     << n.damaged << " damaged\n"
      << "  rms sigma          " << format_number(rms_sigma) << " px\n"
      << "  s_h                "
      << (mapping ? "from " + o.encoder : std::string("not computed (no --encoder)")) << "\n"
@@ -323,13 +354,19 @@ Command add_track_command(CLI::App& app) {
   cmd->add_option("--out", o->out, "Output CSV (" + std::string(kTrackColumns) + "). Required")
       ->type_name("FILE.csv")
       ->required();
-  cmd->add_flag("--json", o->json,
-                "Print exactly one JSON object on stdout ({frames, found, lost, skipped, fit, "
-                "rms_sigma_px, method, output}); logs go to stderr. Default: off");
+  cmd->add_flag(
+      "--json", o->json,
+      "Print exactly one JSON object on stdout ({frames, found, lost, skipped, unreadable, "
+      "repeated, damaged, low_quality, min_quality, fit, rms_sigma_px, method, "
+      "output}); logs go to stderr. Default: off");
   o->fps_opt =
       cmd->add_option("--fps", o->fps,
                       "Frame rate for the time column, frames per s (> 0); t = frame "
                       "index / fps. Default: the video's, else the camera file's, else 30");
+  cmd->add_option("--min-quality", o->min_quality,
+                  "Quality below which a found disk is not a measurement: its row keeps u, v, "
+                  "sigma_px and quality but says low_quality and gets no s_h. In [0, 1]; "
+                  "clean frames score about 0.95, frames a decoder patched 0.1-0.5. Default: 0.5");
   cmd->add_option("--method", o->method,
                   "Tracker: edge (sub-pixel face/O-ring edge + robust circle fit), moments "
                   "(coverage-weighted moments) or hough (cv::HoughCircles baseline). Default: edge")

@@ -24,7 +24,7 @@ packages=(
   libeigen3-dev libyaml-cpp-dev libcli11-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   gnuplot-nox
-  libopencv-dev libosmesa6-dev mesa-common-dev libegl-dev libegl-mesa0 ffmpeg
+  libopencv-dev libavutil-dev libosmesa6-dev mesa-common-dev libegl-dev libegl-mesa0 ffmpeg
   libceres-dev
   clang libclang-rt-14-dev
 )

@@ -198,9 +198,12 @@ TEST_F(VisionTrackCli, TracksRenderedFramesAndMapsToContactParameter) {
     std::vector<std::string> f;
     std::stringstream ss(rows[i]);
     for (std::string x; std::getline(ss, x, ',');) f.push_back(x);
-    ASSERT_EQ(f.size(), 8u) << rows[i];
     const int frame = std::stoi(f[0]);
-    EXPECT_NE(frame, 3);
+    if (frame == 3) {  // the unreadable frame keeps its row, with no measurement
+      EXPECT_EQ(rows[i], "3,0.1,,,,,unreadable,");
+      continue;
+    }
+    ASSERT_EQ(f.size(), 8u) << rows[i];
     worst = std::max(worst, std::abs(std::stod(f[7]) - s_true[static_cast<std::size_t>(frame)]));
   }
   std::printf("[ vision   ] flatland track: %zu frames, worst |ds_h| %.2e\n", rows.size() - 1,

@@ -1,0 +1,173 @@
+// Tracking real footage: frames a decoder repeated or patched are flagged frame by frame and never
+// reported as measurements. The videos are a rendered run (its truth from the renderer) re-encoded
+// with frozen frames, and the same run with bits flipped; which frames are damaged is decided
+// independently, by decoding the intact and the damaged file side by side.
+#include "cli_support.hpp"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/videoio.hpp>
+
+#include <cmath>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace {
+
+namespace fs = std::filesystem;
+using flatland_test::lines_of;
+using flatland_test::read_text;
+using flatland_test::Result;
+
+struct Row {
+  int frame = 0;
+  std::string state;
+  double u = NAN, v = NAN, sigma = NAN;
+};
+
+std::vector<Row> read_track(const fs::path& csv) {
+  std::vector<Row> rows;
+  const auto lines = lines_of(read_text(csv));
+  for (std::size_t i = 1; i < lines.size(); ++i) {
+    std::vector<std::string> f;
+    std::stringstream ss(lines[i]);
+    for (std::string x; std::getline(ss, x, ',');) f.push_back(x);
+    f.resize(8);
+    Row r;
+    r.frame = std::stoi(f[0]);
+    r.state = f[6];
+    if (!f[2].empty()) r.u = std::stod(f[2]);
+    if (!f[3].empty()) r.v = std::stod(f[3]);
+    if (!f[4].empty()) r.sigma = std::stod(f[4]);
+    rows.push_back(r);
+  }
+  return rows;
+}
+
+// disk_u, disk_v of each frame from render's truth CSV.
+std::vector<cv::Point2d> truth_px(const fs::path& csv) {
+  std::vector<cv::Point2d> out;
+  const auto lines = lines_of(read_text(csv));
+  for (std::size_t i = 1; i < lines.size(); ++i) {
+    std::vector<std::string> f;
+    std::stringstream ss(lines[i]);
+    for (std::string x; std::getline(ss, x, ',');) f.push_back(x);
+    out.emplace_back(std::stod(f[8]), std::stod(f[9]));
+  }
+  return out;
+}
+
+std::vector<cv::Mat> decode(const fs::path& video) {
+  std::vector<cv::Mat> frames;
+  cv::VideoCapture cap(video.string(), cv::CAP_FFMPEG);
+  for (cv::Mat f; cap.read(f);) frames.push_back(f.clone());
+  return frames;
+}
+
+bool measured(const Row& r) { return r.state == "found" || r.state == "tracking"; }
+
+class TrackIntegrity : public flatland_test::CliTestBase {
+ protected:
+  void SetUp() override {
+    CliTestBase::SetUp();
+    const std::string scene =
+        (fs::path(FLATLAND_ASSET_DIR) / "scenes" / "butterfly-camera.yaml").string();
+    const Result r =
+        run("render --scene " + flatland_test::quote(scene) + " --duration 3 --out run.mp4");
+    ASSERT_EQ(r.code, 0) << r.err;
+    truth_ = truth_px(dir_ / "run.truth.csv");
+    ASSERT_EQ(truth_.size(), 91u);
+  }
+
+  std::vector<Row> track(const std::string& video, nlohmann::json& j) {
+    const Result r =
+        run("track --video " + video + " --camera run.camera.yaml --out t.csv --force --json");
+    EXPECT_EQ(r.code, 0) << r.err;
+    if (r.code != 0) return {};
+    j = nlohmann::json::parse(r.out);
+    return read_track(dir_ / "t.csv");
+  }
+
+  // Every measurement is where the truth is, within what its sigma claims (6 sigma) plus the
+  // floor of a clean frame (0.1 px: the renderer's edge bias and the codec's rounding).
+  void expect_honest(const std::vector<Row>& rows) {
+    for (const Row& r : rows)
+      if (measured(r)) {
+        const double err = std::hypot(r.u - truth_[r.frame].x, r.v - truth_[r.frame].y);
+        EXPECT_LT(err, 6 * r.sigma + 0.1)
+            << "frame " << r.frame << " is off by " << err << " px with sigma " << r.sigma;
+      }
+  }
+
+  std::vector<cv::Point2d> truth_;
+};
+
+}  // namespace
+
+TEST_F(TrackIntegrity, FrozenFramesAreFlaggedRepeated) {
+  // Frames 30-45 of the run frozen on frame 30, as a capture pipeline that stalls delivers them.
+  const std::vector<cv::Mat> frames = decode(dir_ / "run.mp4");
+  ASSERT_EQ(frames.size(), 91u);
+  cv::VideoWriter w;
+  for (const char* fourcc : {"avc1", "mp4v"}) {
+    w.open((dir_ / "frozen.mp4").string(), cv::CAP_FFMPEG,
+           cv::VideoWriter::fourcc(fourcc[0], fourcc[1], fourcc[2], fourcc[3]), 30.0,
+           frames[0].size(), true);
+    if (w.isOpened()) break;
+  }
+  if (!w.isOpened()) GTEST_SKIP() << "no MP4 encoder";
+  for (int i = 0; i < 91; ++i)
+    w.write(frames[static_cast<std::size_t>(i >= 30 && i <= 45 ? 30 : i)]);
+  w.release();
+
+  nlohmann::json j;
+  const std::vector<Row> rows = track("frozen.mp4", j);
+  ASSERT_EQ(rows.size(), 91u);
+  for (const Row& r : rows) {
+    if (r.frame >= 31 && r.frame <= 45) {
+      EXPECT_EQ(r.state, "repeated") << "frame " << r.frame;
+      EXPECT_TRUE(std::isnan(r.u) && std::isnan(r.sigma)) << "frame " << r.frame;
+    } else {
+      EXPECT_TRUE(measured(r)) << "frame " << r.frame << " " << r.state;
+    }
+  }
+  EXPECT_EQ(j["repeated"], 15);
+  expect_honest(rows);
+}
+
+TEST_F(TrackIntegrity, DamagedFramesAreFlaggedAndNeverMeasured) {
+  std::string data = read_text(dir_ / "run.mp4");
+  std::mt19937 rng(3);
+  // 20 bit flips in the middle third of the file (the frames' data; the header and index stay).
+  for (int k = 0; k < 20; ++k) {
+    const std::size_t i = data.size() / 3 + rng() % (data.size() / 3);
+    data[i] = static_cast<char>(data[i] ^ (1 << (rng() % 8)));
+  }
+  flatland_test::write_text(dir_ / "damaged.mp4", data);
+  const std::vector<cv::Mat> intact = decode(dir_ / "run.mp4");
+  const std::vector<cv::Mat> damaged = decode(dir_ / "damaged.mp4");
+  ASSERT_EQ(intact.size(), 91u);
+
+  nlohmann::json j;
+  const std::vector<Row> rows = track("damaged.mp4", j);
+  ASSERT_EQ(rows.size(), 91u);
+  int differing = 0;
+  for (const Row& r : rows) {
+    const std::size_t i = static_cast<std::size_t>(r.frame);
+    const bool differs = i >= damaged.size() || damaged[i].empty() ||
+                         cv::norm(intact[i], damaged[i], cv::NORM_INF) > 0;
+    differing += differs;
+    if (differs)
+      EXPECT_TRUE(r.state == "damaged" || r.state == "unreadable")
+          << "frame " << r.frame << " differs from the intact decode but is " << r.state;
+    if (r.state == "damaged") EXPECT_TRUE(std::isnan(r.u)) << "frame " << r.frame;
+  }
+  EXPECT_GT(differing, 5) << "the bit flips damaged nothing: the test tests nothing";
+  EXPECT_GT(j["damaged"].get<int>(), 0);
+  expect_honest(rows);
+  std::printf("damaged video: %d frames differ from the intact decode, %d flagged damaged\n",
+              differing, j["damaged"].get<int>());
+}
