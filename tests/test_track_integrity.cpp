@@ -160,10 +160,13 @@ TEST_F(TrackIntegrity, DamagedFramesAreFlaggedAndNeverMeasured) {
     const bool differs = i >= damaged.size() || damaged[i].empty() ||
                          cv::norm(intact[i], damaged[i], cv::NORM_INF) > 0;
     differing += differs;
-    if (differs)
+    if (differs) {
       EXPECT_TRUE(r.state == "damaged" || r.state == "unreadable")
           << "frame " << r.frame << " differs from the intact decode but is " << r.state;
-    if (r.state == "damaged") EXPECT_TRUE(std::isnan(r.u)) << "frame " << r.frame;
+    }
+    if (r.state == "damaged") {
+      EXPECT_TRUE(std::isnan(r.u)) << "frame " << r.frame;
+    }
   }
   EXPECT_GT(differing, 5) << "the bit flips damaged nothing: the test tests nothing";
   EXPECT_GT(j["damaged"].get<int>(), 0);
