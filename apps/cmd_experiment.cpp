@@ -57,6 +57,7 @@ const std::vector<std::string>& log_columns() {
                                              "estimating",
                                              "measured",
                                              "s_meas",
+                                             "t_capture[s]",
                                              "nis",
                                              "theta_plan[rad]",
                                              "s_true",
@@ -85,16 +86,17 @@ std::string log_csv(const std::vector<drivers::TickLog>& log) {
   for (const drivers::TickLog& r : log) {
     // s_meas and nis mean something only at ticks that folded in a measurement.
     const double s_meas = r.measured ? r.s_meas : nan;
+    const double t_capture = r.measured ? r.t_capture : nan;
     const double nis = r.measured ? r.nis : nan;
     out += format_number(r.t) + ',' + format_number(r.theta) + ',' + format_number(r.theta_dot) +
            ',' + format_number(r.command) + ',' + control::to_string(r.stage) + ',' +
            format_number(r.s_est) + ',' + format_number(r.sdot_est) + ',' + format_number(r.var_s) +
            ',' + format_number(r.var_sdot) + ',' + (r.estimating ? '1' : '0') + ',' +
-           (r.measured ? '1' : '0') + ',' + format_number(s_meas) + ',' + format_number(nis) + ',' +
-           format_number(r.theta_plan) + ',' + format_number(r.s_true) + ',' +
-           format_number(r.sdot_true) + ',' + format_number(r.theta_true) + ',' +
-           format_number(r.fn_ratio) + ',' + format_number(r.mu_required) + ',' +
-           format_number(r.nees) + ',' +
+           (r.measured ? '1' : '0') + ',' + format_number(s_meas) + ',' + format_number(t_capture) +
+           ',' + format_number(nis) + ',' + format_number(r.theta_plan) + ',' +
+           format_number(r.s_true) + ',' + format_number(r.sdot_true) + ',' +
+           format_number(r.theta_true) + ',' + format_number(r.fn_ratio) + ',' +
+           format_number(r.mu_required) + ',' + format_number(r.nees) + ',' +
            (std::isfinite(r.s_true) ? sim::to_string(r.mode_true) : std::string()) + '\n';
   }
   return out;
@@ -397,21 +399,24 @@ void run_experiment(const ExperimentOptions& o) {
                   "plot $plan using 1:2 with lines lw 2 dt 2 lc 'black' title 'planned', \\\n"
                   "     datafile skip 1 using " +
                   t + ":" + col("theta") + " with lines lw 2 lc 'red' title 'actual (encoder)'\n"});
-    std::string s_plot =
-        plan_datablock(plan) + "set title " + title +
-        "\nset grid\nset key bottom right\nset xlabel 't (s)'\n"
-        "set ylabel 'contact parameter s_h'\n"
-        "set yrange [-1.2:1.2]\n"
-        "plot $plan using 1:3 with lines lw 2 dt 2 lc 'black' title 'planned', \\\n"
+    // Drawn so that each stays visible: the truth thick and light underneath, the estimate thin on
+    // top of it, the plan dashed, each measurement at the time its frame was captured (the loop
+    // gets it a latency later).
+    std::string s_plot = plan_datablock(plan) + "set title " + title +
+                         "\nset grid\nset key bottom right\nset xlabel 't (s)'\n"
+                         "set ylabel 'contact parameter s_h'\n"
+                         "set yrange [-1.2:1.2]\nplot ";
+    if (synthetic)
+      s_plot += "datafile skip 1 using " + t + ":" + col("s_true") +
+                " with lines lw 9 lc rgb '#a0d8a0' title 'true', \\\n     ";
+    s_plot +=
+        "$plan using 1:3 with lines lw 2 dt 2 lc 'black' title 'planned', \\\n"
         "     datafile skip 1 using " +
         t + ":(column(" + col("estimating") + ") == 1 ? column(" + col("s_est") +
-        ") : 1/0) with lines lw 2 lc 'red' title 'estimated', \\\n"
+        ") : 1/0) with lines lw 1.5 lc 'red' title 'estimated', \\\n"
         "     datafile skip 1 using " +
-        t + ":(column(" + col("measured") + ") == 1 ? column(" + col("s_meas") +
-        ") : 1/0) with points pt 7 ps 0.6 lc 'blue' title 'measured (vision)'";
-    if (synthetic)
-      s_plot += ", \\\n     datafile skip 1 using " + t + ":" + col("s_true") +
-                " with lines lw 1 lc 'dark-green' title 'true'";
+        col("t_capture") + ":(column(" + col("measured") + ") == 1 ? column(" + col("s_meas") +
+        ") : 1/0) with points pt 6 ps 0.5 lc 'blue' title 'measured (at capture time)'";
     run_plot(outputs, out, {"s_h.gp", "log.csv", "s_h.png", s_plot + "\n"});
   }
 
@@ -486,7 +491,7 @@ void run_experiment(const ExperimentOptions& o) {
      << (truth && !synthetic->success ? " (" + synthetic->failure + ")" : "") << "\n"
      << "  duration           " << opt(j["duration_s"], " s") << "\n"
      << "  s_h at the end     " << opt(j["s_end"]) << "\n"
-     << "  min f_n / mg       " << opt(j["fn_min_ratio"]) << "\n"
+     << "  min f_n            " << opt(j["fn_min_ratio"], " m g sin(tilt)") << "\n"
      << "  max mu required    " << opt(j["mu_max"]) << " (while rolling)\n";
   if (truth) {
     const auto& m = synthetic->mode_time;

@@ -76,7 +76,7 @@ void run_locus(const LocusOptions& o) {
                 "set ylabel 'k'\n"
                 "plot datafile skip 1 using 1:2 with linespoints lw 2 pt 7 title 'k solving s_h(T) "
                 "= 0'\n"
-                "set ylabel 'min f_n / (m g)'\n"
+                "set ylabel 'min f_n / (m g sin(tilt)), the in-plane weight'\n"
                 "set key bottom right\n"
                 "plot datafile skip 1 using 1:3 with linespoints lw 2 pt 7 title 'minimum normal "
                 "force ratio', "
@@ -112,7 +112,8 @@ void run_locus(const LocusOptions& o) {
   std::ostringstream os;
   os << "flatland locus: " << points.size() << " solutions (" << scene.origin << ")"
      << (friction ? ", mu = " + format_number(*spec.contact.mu) : std::string()) << "\n"
-     << "      2T (s)            k   min f_n/mg  required mu"
+     << "  (forces in units of the in-plane weight m g sin(tilt))\n"
+     << "      2T (s)            k     min f_n  required mu"
      << (friction ? "  friction margin" : "") << "\n";
   for (const auto& p : points) {
     char line[160];
@@ -146,7 +147,8 @@ Command add_locus_command(CLI::App& app) {
                      true);
   add_mu_option(*cmd, o->mu,
                 "Static friction coefficient (>= 0): each solution reports its friction margin, "
-                "min (mu f_n - |f_t|) / mg (< 0: it would slip). Default: the scene's contact.mu, "
+                "min (mu f_n - |f_t|) / (m g sin(tilt)) (< 0: it would slip). Default: the scene's "
+                "contact.mu, "
                 "else none reported");
   cmd->add_option("--from", o->from, "Shortest duration 2T, s (> 0). Default: 1.1 s");
   cmd->add_option("--to", o->to, "Longest duration 2T, s (> FROM). Default: 3.0 s");

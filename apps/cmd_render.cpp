@@ -100,9 +100,10 @@ cv::Mat to_bgr8(const cv::Mat& image) {
   return out;
 }
 
-/// --overlay: time, s_h, the contact's mode and the hand's contact force on the frame. The force f = f_n n + f_t t
-/// (n the hand's outward normal, t its tangent towards increasing s_h, both rotated by theta into
-/// the table frame) is drawn from the projected contact point, 0.1 m on the table per m g.
+/// --overlay: time, s_h, the contact's mode and the hand's contact force on the frame. The force f
+/// = f_n n + f_t t (n the hand's outward normal, t its tangent towards increasing s_h, both rotated
+/// by theta into the table frame) is drawn from the projected contact point, 0.1 m on the table per
+/// in-plane weight m g sin(tilt).
 void draw_overlay(cv::Mat& bgr, const render::CameraModel& camera, const sim::PolynomialHand& hand,
                   const sim::Sample& s, const render::FrameTruth& truth) {
   const double c = std::cos(s.theta), sn = std::sin(s.theta);
@@ -133,7 +134,7 @@ void draw_overlay(cv::Mat& bgr, const render::CameraModel& camera, const sim::Po
   else
     std::snprintf(line[1], sizeof line[1], "s_h = %+.3f  %s", s.s_h,
                   sim::to_string(s.mode).c_str());
-  std::snprintf(line[2], sizeof line[2], "f = %.3f mg (f_n %+.3f, f_t %+.3f)", force.norm(),
+  std::snprintf(line[2], sizeof line[2], "f/(m g sin tilt) = %.3f (n %+.3f, t %+.3f)", force.norm(),
                 s.fn_ratio, s.ft_ratio);
   const double font = 1.2 * scale;
   for (int i = 0; i < 3; ++i) {
@@ -479,9 +480,10 @@ Command add_render_command(CLI::App& app) {
   o->duration_opt = cmd->add_option("--duration", o->duration,
                                     "Simulated (and filmed) time, s (> 0). Default: the scene's "
                                     "duration, else 2T for the butterfly, else 1 s");
-  cmd->add_flag("--overlay", o->overlay,
-                "Draw on each frame: t (s), s_h, and the hand's contact force as an arrow from the "
-                "contact point (0.1 m on the table per m g). Default: off");
+  cmd->add_flag(
+      "--overlay", o->overlay,
+      "Draw on each frame: t (s), s_h, and the hand's contact force as an arrow from the "
+      "contact point (0.1 m on the table per in-plane weight m g sin(tilt)). Default: off");
   cmd->add_flag("--solve", o->solve,
                 "Butterfly only: first solve k for the scene's period (as `flatland solve`) and "
                 "film that motion. Default: off (the scene's k)");

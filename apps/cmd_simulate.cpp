@@ -187,8 +187,8 @@ void run_simulate(const SimulateOptions& o) {
      << "  s_h(T)             " << format_number(s_T) << "\n"
      << "  s_h(end), rate     " << format_number(r.final.s_h) << ", "
      << format_number(r.final.sdot_h) << " 1/s\n"
-     << "  f_n at apex / mg   " << format_number(fn_apex) << "\n"
-     << "  min f_n / mg       " << format_number(r.fn_min_ratio)
+     << "  f_n at apex        " << format_number(fn_apex) << " m g sin(tilt)\n"
+     << "  min f_n            " << format_number(r.fn_min_ratio) << " m g sin(tilt)"
      << (contact_lost ? "  (contact lost)" : "") << "\n"
      << "  required mu        " << format_number(r.mu_required) << "\n"
      << "  steps              " << r.stats.steps << " accepted, " << r.stats.rejected
@@ -206,10 +206,11 @@ Command add_simulate_command(CLI::App& app) {
       "simulate",
       "Simulate the scene once (default: the paper's butterfly, 2T = 1.181 s, k = -1.1393) and "
       "report where the disk ends and the contact forces. Command-line values override the scene.");
-  add_common_options(*cmd, o->common,
-                     "Write the trajectory as CSV to this file (SI units: t in s, angles in rad, "
-                     "lengths in m, forces in N; ratios to m g). Default: no file",
-                     false);
+  add_common_options(
+      *cmd, o->common,
+      "Write the trajectory as CSV to this file (SI units: t in s, angles in rad, "
+      "lengths in m, forces in N; ratios to the in-plane weight m g sin(tilt)). Default: no file",
+      false);
   o->period_opt = cmd->add_option("--period", o->period,
                                   "Butterfly duration 2T, s (> 0); also sets the simulated "
                                   "time to 2T unless --duration is given. Default: the scene's "

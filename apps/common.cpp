@@ -778,14 +778,14 @@ std::string solve_report_text(const sim::SolveReport& r) {
      << "  s_h(T)             " << format_number(r.s_T) << "\n"
      << "  s_h(2T), rate      " << format_number(r.s_end) << ", " << format_number(r.sdot_end)
      << " 1/s\n"
-     << "  f_n at apex / mg   " << format_number(r.fn_apex_ratio) << "\n"
-     << "  min f_n / mg       " << format_number(r.fn_min_ratio)
+     << "  f_n at apex        " << format_number(r.fn_apex_ratio) << " m g sin(tilt)\n"
+     << "  min f_n            " << format_number(r.fn_min_ratio) << " m g sin(tilt)"
      << (r.fn_min_ratio < 0 ? "  (contact lost: the hand would throw the disk)" : "") << "\n"
      << "  required mu        " << format_number(r.mu_required) << "\n";
   if (std::isfinite(r.friction_margin))
     os << "  friction margin    " << format_number(r.friction_margin)
-       << " (min (mu f_n - |f_t|) / mg" << (r.friction_margin < 0 ? ": the disk would slip" : "")
-       << ")\n";
+       << " m g sin(tilt): min (mu f_n - |f_t|)"
+       << (r.friction_margin < 0 ? ": the disk would slip" : "") << ")\n";
   os << "  simulations        " << r.simulations << " (" << r.rhs_evals << " rhs evaluations)\n";
   return os.str();
 }
@@ -819,13 +819,13 @@ void write_solution_outputs(OutputSet& outputs, const fs::path& dir, const sim::
             "set multiplot layout 2,1 title 'Contact forces'\n"
             "set grid\n"
             "set xlabel 't (s)'\n"
-            "set ylabel 'force / (m g)'\n"
+            "set ylabel 'force / (m g sin(tilt)), the in-plane weight'\n"
             "plot datafile skip 1 using " +
                 t + ":" + col("fn_ratio") +
-                " with lines lw 2 title 'normal f_n/mg', \\\n"
+                " with lines lw 2 title 'normal f_n', \\\n"
                 "     datafile skip 1 using " +
                 t + ":" + col("ft_ratio") +
-                " with lines lw 2 title 'tangential f_t/mg', 0 with lines lc 'black' notitle\n"
+                " with lines lw 2 title 'tangential f_t', 0 with lines lc 'black' notitle\n"
                 "set ylabel sprintf('required mu (clipped at %g)', mu_clip)\n"
                 "set yrange [0:*]\n"
                 "plot datafile skip 1 using " +

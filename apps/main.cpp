@@ -27,7 +27,8 @@ int main(int argc, char** argv) {
   CLI::App app{
       "flatland: a disk rolling on a one-joint robot hand (the butterfly of Lynch, Shiroma, Arai "
       "and Tanie). All inputs and outputs are SI: lengths in m, times in s, angles in rad, forces "
-      "in N; force ratios are relative to the disk's weight m g.",
+      "in N; force ratios are relative to the disk's in-plane weight m g sin(tilt) (its weight's "
+      "component in the hand's plane; m g on the paper's vertical plane).",
       "flatland"};
   app.footer(
       "Every command reads a scene (--scene, default: the paper's butterfly); command-line "

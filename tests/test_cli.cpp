@@ -263,6 +263,53 @@ TEST_F(CliSolve, WritesTrajectoryAndPlots) {
   EXPECT_EQ(temporaries_in(d), 0);
 }
 
+TEST_F(CliSolve, ForcePlotSaysWhatTheForcesAreDividedBy) {
+  // The ratios are over the in-plane weight m g sin(tilt), not the weight m g (at the air table's
+  // 5 degrees the two differ 11.5 times). The gnuplot script names it.
+  const Result r = run("solve --out results/");
+  if (!have_gnuplot()) GTEST_SKIP() << "no gnuplot";
+  ASSERT_EQ(r.code, 0) << r.err;
+  std::vector<std::string> ylabels;
+  for (const std::string& line : lines_of(read_text(dir_ / "results" / "forces.gp")))
+    if (line.rfind("set ylabel", 0) == 0) ylabels.push_back(line);
+  ASSERT_EQ(ylabels.size(), 2u);
+  EXPECT_EQ(ylabels[0], "set ylabel 'force / (m g sin(tilt)), the in-plane weight'");
+  EXPECT_NE(ylabels[1].find("required mu"), std::string::npos) << ylabels[1];
+  const std::string script = read_text(dir_ / "results" / "forces.gp");
+  EXPECT_EQ(script.find("/mg"), std::string::npos);
+  EXPECT_EQ(script.find("(m g)"), std::string::npos);
+  // The text summary uses the same unit.
+  const Result text = run("solve");
+  EXPECT_NE(text.out.find("f_n at apex        0.1"), std::string::npos) << text.out;
+  EXPECT_NE(text.out.find(" m g sin(tilt)"), std::string::npos) << text.out;
+  EXPECT_EQ(text.out.find("/ mg"), std::string::npos) << text.out;
+}
+
+TEST_F(CliHelp, HelpIsTrueAboutScenesAndWeights) {
+  const Result top = run("--help");
+  EXPECT_NE(top.out.find("in-plane weight m g sin(tilt)"), std::string::npos) << top.out;
+  // Every command reads a scene, as the top-level help says.
+  for (const char* cmd :
+       {"simulate", "solve", "locus", "surface", "time-optimal", "render", "render-calibration",
+        "calibrate", "track", "experiment", "montecarlo", "study"}) {
+    const Result r = run(std::string(cmd) + " --help");
+    EXPECT_EQ(r.code, 0) << cmd;
+    EXPECT_NE(r.out.find("--scene"), std::string::npos) << cmd;
+    EXPECT_EQ(r.out.find(" m g)"), std::string::npos) << cmd;
+    EXPECT_EQ(r.out.find("per m g)"), std::string::npos) << cmd;
+  }
+}
+
+TEST_F(CliSolve, StudySimQuickRunsAQuarterOfTheSettings) {
+  const Result full_help = run("study --help");
+  EXPECT_NE(full_help.out.find("sim: RK4 at 2 steps"), std::string::npos) << full_help.out;
+  const Result r = run("study sim --quick --json --min-cpu 0.001");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  // 2 formulations x (2 RK4 steps + 2 methods x 4 tolerances), against 2 x (7 + 2 x 11).
+  EXPECT_EQ(j.at("rows").size(), 20u) << r.out.substr(0, 400);
+}
+
 TEST_F(CliSolve, MissingGnuplotFailsNamingThePackage) {
   const Result r = run("solve --out results", "PATH=/nonexistent");
   EXPECT_EQ(r.code, 1) << r.err;

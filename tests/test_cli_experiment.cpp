@@ -227,6 +227,7 @@ TEST_F(CliExperimentTest, SyntheticFeedbackRunWritesTheLogResultPlotsAndVideo) {
                         "estimating",
                         "measured",
                         "s_meas",
+                        "t_capture",
                         "nis",
                         "theta_plan[rad]",
                         "s_true",
@@ -240,12 +241,22 @@ TEST_F(CliExperimentTest, SyntheticFeedbackRunWritesTheLogResultPlotsAndVideo) {
   const int t = log.column("t"), th = log.column("theta"), st = log.column("s_true"),
             me = log.column("measured"), stage = log.column("stage");
   ASSERT_GE(t, 0);
+  const int tc = log.column("t_capture");
   long measured = 0;
   bool servo = false;
   for (std::size_t i = 0; i < log.rows.size(); ++i) {
     ASSERT_EQ(log.rows[i].size(), log.header.size()) << "row " << i;
     EXPECT_NEAR(std::stod(log.rows[i][t]), -0.25 + 0.001 * static_cast<double>(i), 1e-9);
     measured += log.rows[i][me] == "1";
+    // A measurement arrives the scene's camera.latency (0.033 s) after its capture, and is
+    // folded in at the first 1 ms tick after that.
+    if (log.rows[i][me] == "1") {
+      const double age = std::stod(log.rows[i][t]) - std::stod(log.rows[i][tc]);
+      EXPECT_GE(age, 0.033 - 1e-9) << "row " << i;
+      EXPECT_LE(age, 0.034 + 1e-9) << "row " << i;
+    } else {
+      EXPECT_EQ(log.rows[i][tc], "nan") << "row " << i;
+    }
     servo = servo || log.rows[i][stage] == "servo";
   }
   EXPECT_TRUE(servo) << "the feedback controller never servoed";

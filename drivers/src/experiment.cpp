@@ -198,6 +198,7 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
         }
         row.measured = true;
         row.s_meas = z->s_h;
+        row.t_capture = z->t_capture;
       } else {
         ++out.frames_lost;
       }

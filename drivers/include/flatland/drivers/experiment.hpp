@@ -42,6 +42,7 @@ struct TickLog {
   bool estimating = false;
   bool measured = false;  ///< a measurement was folded in at this tick
   double s_meas = 0, nis = 0;
+  double t_capture = 0;   ///< s, when the measured frame was exposed (t minus the latency)
   double theta_plan = 0;  ///< the plan's angle for the estimated s_h (stage 2) or time
   // Truth (synthetic runs only; NaN otherwise).
   double s_true = 0, sdot_true = 0, theta_true = 0, fn_ratio = 0, mu_required = 0, nees = 0;
