@@ -5,6 +5,7 @@
 #include "flatland/calibration/camera_file.hpp"
 #include "flatland/calibration/intrinsics.hpp"
 #include "flatland/calibration/joint.hpp"
+#include "flatland/calibration/report.hpp"
 #include "flatland/calibration/session.hpp"
 #include "flatland/vision/image_file.hpp"
 
@@ -27,7 +28,7 @@ namespace {
 struct CalibrateOptions {
   std::vector<std::string> images;
   std::string board, out, camera_name = "flatland";
-  std::string camera, table, table_board, joint, scene;
+  std::string camera, table, table_board, joint, scene, fix, report;
   bool force = false;
   bool json = false;
   CLI::Option* camera_name_opt = nullptr;
@@ -131,15 +132,44 @@ std::string g6(double v) {
   return std::string(buf);
 }
 
+// --report DIR: each view with its residual arrows, and the coverage map, staged as PNG.
+void stage_report(OutputSet& outputs, const fs::path& dir, const calibration::IntrinsicsResult& r,
+                  const std::vector<calibration::BoardView>& views, Json& j) {
+  std::vector<unsigned char> png;
+  Json pictures = Json::array();
+  for (std::size_t i = 0; i < views.size(); ++i) {
+    std::string why;
+    const cv::Mat image = vision::read_image_file(views[i].name, cv::IMREAD_COLOR, why);
+    if (image.empty()) throw std::runtime_error(views[i].name + ": cannot be read again: " + why);
+    char name[32];
+    std::snprintf(name, sizeof name, "view_%03zu_", i);
+    const fs::path out = dir / (name + fs::path(views[i].name).stem().string() + ".png");
+    if (!cv::imencode(".png", calibration::draw_view_residuals(image, r, views, i), png))
+      throw std::runtime_error("cannot encode " + out.string());
+    outputs.stage(out, std::string(png.begin(), png.end()));
+    pictures.push_back(out.string());
+  }
+  if (!cv::imencode(".png", calibration::draw_coverage(r, views), png))
+    throw std::runtime_error("cannot encode the coverage map");
+  outputs.stage(dir / "coverage.png", std::string(png.begin(), png.end()));
+  j["report"] = {{"views", pictures},
+                 {"coverage", (dir / "coverage.png").string()},
+                 {"coverage_fraction", calibration::coverage_fraction(r, views)}};
+}
+
 void intrinsics_section(const CalibrateOptions& o, const calibration::BoardSpec& board,
-                        calibration::CameraFile& file, Json& j, std::ostream& os) {
+                        calibration::CameraFile& file, Json& j, std::ostream& os,
+                        OutputSet& outputs) {
   const DetectedViews d = detect_views(expand_file_patterns(o.images, "--images"), board);
-  const calibration::IntrinsicsResult r = calibration::calibrate_intrinsics(d.views);
+  calibration::IntrinsicsOptions options;
+  options.parse_fixed(o.fix);
+  const calibration::IntrinsicsResult r = calibration::calibrate_intrinsics(d.views, options);
   file.camera = r.camera();
   calibration::CalibrationReport report = r.report();
   report.views_rejected.insert(report.views_rejected.begin(), d.not_found.begin(),
                                d.not_found.end());
   file.report = report;
+  if (!o.report.empty()) stage_report(outputs, o.report, r, d.views, j);
 
   const std::array<double, 9> p = r.params();
   j["rms_px"] = number(r.rms_px);
@@ -151,6 +181,7 @@ void intrinsics_section(const CalibrateOptions& o, const calibration::BoardSpec&
   for (int k = 4; k < 9; ++k) j["dist"].push_back(p[k]);
   j["std"] = Json::object();
   for (int k = 0; k < 9; ++k) j["std"][kParamNames[k]] = number(r.std[k]);
+  j["fixed"] = options.fixed_names();
   j["views_used"] = r.views_used();
   j["views_rejected"] = report.views_rejected;
   j["view_rms_px"] = Json::object();
@@ -160,10 +191,19 @@ void intrinsics_section(const CalibrateOptions& o, const calibration::BoardSpec&
   os << "  intrinsics         " << d.views.size() << " views of " << board.notation() << ", "
      << r.image_size.width << " x " << r.image_size.height << " px\n";
   os << "  rms                " << g6(r.rms_px) << " px over " << r.views_used() << " views\n";
+  if (!options.fixed_names().empty()) {
+    std::string held;
+    for (const std::string& f : options.fixed_names()) held += (held.empty() ? "" : ", ") + f;
+    os << "  held               " << held << "\n";
+  }
   for (int k = 0; k < 9; ++k)
     os << "  " << kParamNames[k] << std::string(17, ' ') << g6(p[k]) << " +- " << g6(r.std[k])
        << (k < 4 ? " px" : "") << "\n";
   for (const std::string& s : report.views_rejected) os << "  rejected           " << s << "\n";
+  if (!o.report.empty())
+    os << "  coverage           " << g6(100 * calibration::coverage_fraction(r, d.views))
+       << " % of the image's 8 x 6 cells; "
+       << "pictures in " << o.report << "\n";
 }
 
 // ---- table pose and joint: images listed in a CSV, each the camera's size
@@ -290,6 +330,10 @@ void run_calibrate(const CalibrateOptions& o) {
         "or --joint (the joint axis), or several");
   const bool intrinsics = !o.images.empty();
   if (intrinsics && o.board.empty()) throw UsageError("--board: required with --images");
+  if (!o.fix.empty() && !intrinsics) throw UsageError("--fix: holds intrinsics; needs --images");
+  if (!o.report.empty() && !intrinsics)
+    throw UsageError("--report: pictures the intrinsics; needs --images");
+  calibration::IntrinsicsOptions{}.parse_fixed(o.fix);  // bad input before any work
   std::optional<calibration::BoardSpec> board;
   if (!o.board.empty()) board = calibration::BoardSpec::parse(o.board);
   std::optional<calibration::BoardSpec> table_board = board;
@@ -317,6 +361,7 @@ void run_calibrate(const CalibrateOptions& o) {
     scene = load_scene_with_overrides(common);
   }
   const fs::path out = output_path(o);
+  if (!o.report.empty()) check_output_directory("--report", o.report, o.force);
 
   // libpng/libjpeg complain on stderr about corrupt files; our own warning names the file.
   cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_ERROR);
@@ -327,8 +372,10 @@ void run_calibrate(const CalibrateOptions& o) {
   Json j;
   std::ostringstream os;
   std::vector<std::string> sections;
+  OutputSet outputs(o.force || (!o.camera.empty() && out == fs::path(o.camera)));
+  if (!o.report.empty()) outputs.begin_directory(o.report);
   if (intrinsics) {
-    intrinsics_section(o, *board, file, j, os);
+    intrinsics_section(o, *board, file, j, os, outputs);
     sections.push_back("intrinsics");
     if (start && (start->has_table_pose || start->joint) && o.table.empty())
       warn("new intrinsics: the table pose and joint of " + o.camera +
@@ -357,7 +404,6 @@ void run_calibrate(const CalibrateOptions& o) {
   }
 
   // ---- write
-  OutputSet outputs(o.force || (!o.camera.empty() && out == fs::path(o.camera)));
   outputs.ensure_directory(out.parent_path().empty() ? fs::path(".") : out.parent_path());
   calibration::write_camera_file(outputs.reserve(out).string(), file);
   outputs.commit();
@@ -403,6 +449,18 @@ Command add_calibrate_command(CLI::App& app) {
                   "charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT] counts squares "
                   "(cv::aruco::CharucoBoard; DICT default DICT_4X4_50). Required with --images")
       ->type_name("SPEC");
+  cmd->add_option("--fix", o->fix,
+                  "Intrinsics held, comma-separated, as OpenCV's flags hold them: k3 (k3 = 0, "
+                  "CALIB_FIX_K3), tangential (p1 = p2 = 0, CALIB_ZERO_TANGENT_DIST), aspect (fy = "
+                  "fx, CALIB_FIX_ASPECT_RATIO), principal-point (the image centre, "
+                  "CALIB_FIX_PRINCIPAL_POINT). Default: none")
+      ->type_name("LIST");
+  cmd->add_option("--report", o->report,
+                  "Directory for pictures to look at before trusting the intrinsics: each view "
+                  "with its detected corners and reprojection errors as arrows (x20), and "
+                  "coverage.png, the image's 8 x 6 cells shaded by the corners in them. Default: "
+                  "none")
+      ->type_name("DIR");
   cmd->add_option("--camera", o->camera,
                   "Camera file to start from (flatland calibrate's or render's YAML): the "
                   "sections this run does not calibrate come from it, and it is updated in "
@@ -436,13 +494,14 @@ Command add_calibrate_command(CLI::App& app) {
   o->camera_name_opt =
       cmd->add_option("--camera-name", o->camera_name,
                       "camera_name in the file. Default: --camera's, else flatland");
-  cmd->add_flag("--json", o->json,
-                "Print exactly one JSON object on stdout: sections (what this run calibrated), "
-                "with intrinsics rms_px, fx, fy, cx, cy, dist, std, views_used, views_rejected, "
-                "view_rms_px; with --table a table object (rms_px, corners, images, rvec, tvec, "
-                "camera_in_table); with --joint a joint object (axis, encoder_offset_rad, "
-                "images, inliers, outliers, center_rms_m, angle_rms_rad, sigma_axis_m, "
-                "sigma_offset_rad); and out. Default: off");
+  cmd->add_flag(
+      "--json", o->json,
+      "Print exactly one JSON object on stdout: sections (what this run calibrated), "
+      "with intrinsics rms_px, fx, fy, cx, cy, dist, std, fixed, views_used, views_rejected, "
+      "view_rms_px; with --table a table object (rms_px, corners, images, rvec, tvec, "
+      "camera_in_table); with --joint a joint object (axis, encoder_offset_rad, "
+      "images, inliers, outliers, center_rms_m, angle_rms_rad, sigma_axis_m, "
+      "sigma_offset_rad); and out. Default: off");
   return {cmd, [o] { run_calibrate(*o); }};
 }
 

@@ -239,6 +239,46 @@ TEST_F(CalibrationChain, BadSessionInputExitsTwoWithOneLine) {
   EXPECT_FALSE(fs::exists(dir_ / "s2"));
 }
 
+TEST_F(CalibrationChain, HeldParametersAndReportPictures) {
+  render_session();
+  const Result r = run("calibrate --images 'sess/intrinsics/*.png' --board " + board_ +
+                       " --fix k3,tangential --report rep --out camera.yaml --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j.at("fixed"), nlohmann::json::array({"k3", "tangential"}));
+  EXPECT_EQ(j.at("dist")[2].get<double>(), 0.0);
+  EXPECT_EQ(j.at("dist")[3].get<double>(), 0.0);
+  EXPECT_EQ(j.at("dist")[4].get<double>(), 0.0);
+  EXPECT_EQ(j.at("std").at("k3").get<double>(), 0.0);
+  const auto& pictures = j.at("report").at("views");
+  ASSERT_EQ(pictures.size(), 16u);
+  for (const auto& p : pictures) {
+    const cv::Mat drawn = cv::imread((dir_ / p.get<std::string>()).string());
+    ASSERT_EQ(drawn.size(), cv::Size(640, 480)) << p;
+  }
+  // The pictures are drawn over the views: not the views themselves.
+  const cv::Mat first = cv::imread((dir_ / "sess/intrinsics/view_00.png").string());
+  const cv::Mat drawn = cv::imread((dir_ / pictures[0].get<std::string>()).string());
+  EXPECT_GT(cv::norm(first, drawn, cv::NORM_L1), 1000.0);
+  EXPECT_TRUE(fs::exists(dir_ / "rep" / "coverage.png"));
+  const double coverage = j.at("report").at("coverage_fraction").get<double>();
+  EXPECT_GT(coverage, 0.25);
+  EXPECT_LE(coverage, 1.0);
+
+  // Bad input: one line, exit 2, nothing written.
+  Result bad = run("calibrate --images 'sess/intrinsics/*.png' --board " + board_ +
+                   " --fix k4 --out other.yaml");
+  EXPECT_EQ(bad.code, 2);
+  EXPECT_TRUE(one_line(bad.err)) << bad.err;
+  EXPECT_NE(bad.err.find("--fix: unknown parameter 'k4'"), std::string::npos) << bad.err;
+  bad = run("calibrate --camera camera.yaml --table sess/table.csv --report rep2 --out other.yaml");
+  EXPECT_EQ(bad.code, 2);
+  EXPECT_NE(bad.err.find("--report: pictures the intrinsics; needs --images"), std::string::npos)
+      << bad.err;
+  EXPECT_FALSE(fs::exists(dir_ / "other.yaml"));
+  EXPECT_FALSE(fs::exists(dir_ / "rep2"));
+}
+
 TEST(CalibrationSessionCsv, PathsResolveAgainstTheCsvAndZIsOptional) {
   const fs::path dir = fs::temp_directory_path() / ("flatland_csv_" + std::to_string(::getpid()));
   fs::create_directories(dir);

@@ -317,6 +317,64 @@ TEST(CalibrationIntrinsics, AgreesWithOpenCvOnTheSameCorners) {
   for (int k = 0; k < 5; ++k) EXPECT_NEAR(p[4 + k], dist.at<double>(k), 2e-3) << kNames[4 + k];
 }
 
+TEST(CalibrationIntrinsics, HeldParametersMatchOpenCvsFlags) {
+  // Each CALIB_FIX_* equivalent against cv::calibrateCamera with that flag on the same corners.
+  const std::vector<BoardView> views = detected_chessboard_views(10);
+  std::vector<std::vector<cv::Point3f>> obj;
+  std::vector<std::vector<cv::Point2f>> img;
+  for (const BoardView& v : views) {
+    obj.push_back(v.object_points);
+    img.push_back(v.image_points);
+  }
+  const cv::Size size = views[0].image_size;
+  const std::vector<std::pair<std::string, int>> cases = {
+      {"k3", cv::CALIB_FIX_K3},
+      {"tangential", cv::CALIB_ZERO_TANGENT_DIST},
+      {"aspect", cv::CALIB_FIX_ASPECT_RATIO},
+      {"principal-point", cv::CALIB_FIX_PRINCIPAL_POINT},
+      {"k3,tangential,aspect,principal-point", cv::CALIB_FIX_K3 | cv::CALIB_ZERO_TANGENT_DIST |
+                                                   cv::CALIB_FIX_ASPECT_RATIO |
+                                                   cv::CALIB_FIX_PRINCIPAL_POINT}};
+  for (const auto& [names, flags] : cases) {
+    SCOPED_TRACE(names);
+    IntrinsicsOptions options;
+    options.parse_fixed(names);
+    const IntrinsicsResult r = calibrate_intrinsics(views, options);
+    cv::Mat K = cv::Mat::eye(3, 3, CV_64F), dist;  // fx / fy = 1 for CALIB_FIX_ASPECT_RATIO
+    std::vector<cv::Mat> rv, tv;
+    const double rms = cv::calibrateCamera(obj, img, size, K, dist, rv, tv, flags);
+    const std::array<double, 9> p = r.params();
+    EXPECT_NEAR(r.rms_px, rms, 1e-3);
+    const double cv_p[4] = {K.at<double>(0, 0), K.at<double>(1, 1), K.at<double>(0, 2),
+                            K.at<double>(1, 2)};
+    for (int k = 0; k < 4; ++k) EXPECT_NEAR(p[k], cv_p[k], 1e-3 * cv_p[k]) << kNames[k];
+    for (int k = 0; k < 5; ++k) EXPECT_NEAR(p[4 + k], dist.at<double>(k), 2e-3) << kNames[4 + k];
+    // Held exactly, with no uncertainty.
+    if (options.fix_k3) {
+      EXPECT_EQ(p[8], 0.0);
+      EXPECT_EQ(r.std[8], 0.0);
+    }
+    if (options.zero_tangent_dist) {
+      EXPECT_EQ(p[6], 0.0);
+      EXPECT_EQ(p[7], 0.0);
+    }
+    if (options.fix_aspect_ratio) {
+      EXPECT_EQ(p[0], p[1]);
+    }
+    if (options.fix_principal_point) {
+      EXPECT_EQ(p[2], (size.width - 1) / 2.0);
+      EXPECT_EQ(p[3], (size.height - 1) / 2.0);
+    }
+  }
+  // The truth's principal point is 3 px right of and 2 px above the centre, where the free fit
+  // finds it: the hold at the centre (checked above) did move it.
+  const std::array<double, 9> free = calibrate_intrinsics(views).params();
+  EXPECT_NEAR(free[2], truth_camera().cx, 1.0);
+  EXPECT_NEAR(free[3], truth_camera().cy, 1.0);
+  IntrinsicsOptions bad;
+  EXPECT_THROW(bad.parse_fixed("k3,k4"), std::invalid_argument);
+}
+
 TEST(CalibrationIntrinsics, OutlierViewIsFlaggedAndDropped) {
   std::vector<BoardView> views = detected_chessboard_views(10);
   // A view whose corners were matched to the wrong board points (a detector gone wrong):

@@ -86,9 +86,11 @@ int dictionary_id(const std::string& name) {
 // ---------------------------------------------------------------- the model
 
 // OpenCV's projection (cv::projectPoints) of a board point (X, Y, 0) seen with pose
-// (rvec, tvec) by a camera with intrinsics fx fy cx cy k1 k2 p1 p2 k3.
+// (rvec, tvec) by a camera with intrinsics fx fy cx cy k1 k2 p1 p2 k3. `unit_aspect`: fy is fx
+// (CALIB_FIX_ASPECT_RATIO with a ratio of 1; intr[1] is then held and ignored).
 template <typename T>
-void project(const T* intr, const T* rvec, const T* tvec, double X, double Y, T* uv) {
+void project(const T* intr, const T* rvec, const T* tvec, double X, double Y, T* uv,
+             bool unit_aspect = false) {
   const T p[3] = {T(X), T(Y), T(0)};
   T pc[3];
   ceres::AngleAxisRotatePoint(rvec, p, pc);
@@ -101,35 +103,39 @@ void project(const T* intr, const T* rvec, const T* tvec, double X, double Y, T*
   const T xd = x * radial + T(2) * intr[6] * x * y + intr[7] * (r2 + T(2) * x * x);
   const T yd = y * radial + intr[6] * (r2 + T(2) * y * y) + T(2) * intr[7] * x * y;
   uv[0] = intr[0] * xd + intr[2];
-  uv[1] = intr[1] * yd + intr[3];
+  uv[1] = (unit_aspect ? intr[0] : intr[1]) * yd + intr[3];
 }
 
 // One observed corner: residual = projection - observation, in px.
 struct ReprojectionError {
-  ReprojectionError(double u, double v, double X, double Y) : u(u), v(v), X(X), Y(Y) {}
+  ReprojectionError(double u, double v, double X, double Y, bool unit_aspect)
+      : u(u), v(v), X(X), Y(Y), unit_aspect(unit_aspect) {}
 
   template <typename T>
   bool operator()(const T* intr, const T* rvec, const T* tvec, T* residual) const {
     T uv[2];
-    project(intr, rvec, tvec, X, Y, uv);
+    project(intr, rvec, tvec, X, Y, uv, unit_aspect);
     residual[0] = uv[0] - T(u);
     residual[1] = uv[1] - T(v);
     return true;
   }
 
-  static ceres::CostFunction* create(const cv::Point2f& image, const cv::Point3f& object) {
+  static ceres::CostFunction* create(const cv::Point2f& image, const cv::Point3f& object,
+                                     bool unit_aspect) {
     return new ceres::AutoDiffCostFunction<ReprojectionError, 2, 9, 3, 3>(
-        new ReprojectionError(image.x, image.y, object.x, object.y));
+        new ReprojectionError(image.x, image.y, object.x, object.y, unit_aspect));
   }
 
   double u, v, X, Y;
+  bool unit_aspect;
 };
 
 struct Pose {
   double r[3], t[3];
 };
 
-// Sum of squared reprojection errors of one view, px^2.
+// Sum of squared reprojection errors of one view, px^2 (intr[1] already equal to intr[0] when
+// the aspect ratio is fixed).
 double view_ssr(const double* intr, const Pose& pose, const BoardView& view) {
   double ssr = 0;
   for (std::size_t i = 0; i < view.image_points.size(); ++i) {
@@ -155,9 +161,20 @@ ceres::Solver::Options solver_options(int max_iterations) {
   return o;
 }
 
+// The intrinsics held constant (indices into fx fy cx cy k1 k2 p1 p2 k3), from the options'
+// CALIB_FIX_* equivalents.
+std::vector<int> held_parameters(const IntrinsicsOptions& o) {
+  std::vector<int> held;
+  if (o.fix_aspect_ratio) held.push_back(1);
+  if (o.fix_principal_point) held.insert(held.end(), {2, 3});
+  if (o.zero_tangent_dist) held.insert(held.end(), {6, 7});
+  if (o.fix_k3) held.push_back(8);
+  return held;
+}
+
 // Solve for intrinsics and the poses of views[i] for every i in `which`.
 void solve(double* intr, std::vector<Pose>& poses, const std::vector<BoardView>& views,
-           const std::vector<int>& which, ceres::LossFunction* loss, int max_iterations,
+           const std::vector<int>& which, ceres::LossFunction* loss, const IntrinsicsOptions& io,
            ceres::Problem* keep = nullptr) {
   std::unique_ptr<ceres::Problem> owned;
   ceres::Problem::Options po;
@@ -168,11 +185,15 @@ void solve(double* intr, std::vector<Pose>& poses, const std::vector<BoardView>&
   for (int i : which) {
     const BoardView& v = views[i];
     for (std::size_t k = 0; k < v.image_points.size(); ++k)
-      problem.AddResidualBlock(ReprojectionError::create(v.image_points[k], v.object_points[k]),
-                               loss, intr, poses[i].r, poses[i].t);
+      problem.AddResidualBlock(
+          ReprojectionError::create(v.image_points[k], v.object_points[k], io.fix_aspect_ratio),
+          loss, intr, poses[i].r, poses[i].t);
   }
+  const std::vector<int> held = held_parameters(io);
+  if (!held.empty()) problem.SetManifold(intr, new ceres::SubsetManifold(9, held));
   ceres::Solver::Summary summary;
-  ceres::Solve(solver_options(max_iterations), &problem, &summary);
+  ceres::Solve(solver_options(io.max_iterations), &problem, &summary);
+  if (io.fix_aspect_ratio) intr[1] = intr[0];
   if (!summary.IsSolutionUsable())
     throw std::runtime_error("calibration: Ceres failed: " + summary.message);
 }
@@ -448,7 +469,7 @@ IntrinsicsResult calibrate_intrinsics(const std::vector<BoardView>& views,
 
   // ---- pass 1: robust (Huber) so that a bad view or a few bad corners cannot drag the solution.
   ceres::HuberLoss huber(options.loss_scale_px);
-  solve(intr, poses, views, usable, &huber, options.max_iterations);
+  solve(intr, poses, views, usable, &huber, options);
 
   std::vector<double> rms1;
   for (int i : usable) {
@@ -478,7 +499,7 @@ IntrinsicsResult calibrate_intrinsics(const std::vector<BoardView>& views,
   ceres::Problem::Options po;
   po.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   ceres::Problem problem(po);
-  solve(intr, poses, views, inliers, nullptr, options.max_iterations, &problem);
+  solve(intr, poses, views, inliers, nullptr, options, &problem);
 
   double ssr = 0;
   std::size_t points = 0;
@@ -502,7 +523,8 @@ IntrinsicsResult calibrate_intrinsics(const std::vector<BoardView>& views,
   if (options.compute_covariance) {
     // (J^T J)^-1 of the intrinsics' block, scaled by the residual variance estimated from the fit
     // itself (sigma^2 = SSR / (2N - p)): the image noise need not be known.
-    const double dof = 2.0 * static_cast<double>(points) - 9.0 - 6.0 * inliers.size();
+    const double free_parameters = 9.0 - static_cast<double>(held_parameters(options).size());
+    const double dof = 2.0 * static_cast<double>(points) - free_parameters - 6.0 * inliers.size();
     ceres::Covariance::Options co;
     co.algorithm_type = ceres::SPARSE_QR;
     co.num_threads = 1;
@@ -516,6 +538,36 @@ IntrinsicsResult calibrate_intrinsics(const std::vector<BoardView>& views,
     }
   }
   return result;
+}
+
+}  // namespace flatland::calibration
+
+namespace flatland::calibration {
+
+void IntrinsicsOptions::parse_fixed(const std::string& list) {
+  std::stringstream ss(list);
+  for (std::string name; std::getline(ss, name, ',');) {
+    if (name == "k3")
+      fix_k3 = true;
+    else if (name == "tangential")
+      zero_tangent_dist = true;
+    else if (name == "aspect")
+      fix_aspect_ratio = true;
+    else if (name == "principal-point")
+      fix_principal_point = true;
+    else
+      throw std::invalid_argument("--fix: unknown parameter '" + name +
+                                  "' (k3, tangential, aspect, principal-point)");
+  }
+}
+
+std::vector<std::string> IntrinsicsOptions::fixed_names() const {
+  std::vector<std::string> out;
+  if (fix_k3) out.push_back("k3");
+  if (zero_tangent_dist) out.push_back("tangential");
+  if (fix_aspect_ratio) out.push_back("aspect");
+  if (fix_principal_point) out.push_back("principal-point");
+  return out;
 }
 
 }  // namespace flatland::calibration

@@ -70,6 +70,18 @@ struct IntrinsicsOptions {
   double min_tilt_deg = 5.0;  ///< all views tilted less than this: focal length unobservable
   int max_iterations = 100;
   bool compute_covariance = true;
+  // Parameters held, as OpenCV's flags hold them (no initial camera matrix: the principal point
+  // stays at the image centre, the aspect ratio at 1, the distortion terms at 0). A held
+  // parameter's standard deviation is 0.
+  bool fix_k3 = false;               ///< CALIB_FIX_K3
+  bool zero_tangent_dist = false;    ///< CALIB_ZERO_TANGENT_DIST: p1 = p2 = 0
+  bool fix_aspect_ratio = false;     ///< CALIB_FIX_ASPECT_RATIO: fy = fx
+  bool fix_principal_point = false;  ///< CALIB_FIX_PRINCIPAL_POINT: (cx, cy) = ((w-1)/2, (h-1)/2)
+  /// "k3,tangential,aspect,principal-point" (any of them, comma-separated; empty: none) into the
+  /// flags above. Throws std::invalid_argument naming an unknown one.
+  void parse_fixed(const std::string& list);
+  /// The held parameters' names, in that notation.
+  std::vector<std::string> fixed_names() const;
 };
 
 struct IntrinsicsResult {
