@@ -30,11 +30,13 @@ struct CalibrateOptions {
   std::string board, out, camera_name = "flatland";
   std::string camera, table, table_board, joint, scene, fix, report;
   bool force = false;
+  bool rational = false;
   bool json = false;
   CLI::Option* camera_name_opt = nullptr;
 };
 
 const char* kParamNames[9] = {"fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"};
+const char* kRationalNames[3] = {"k4", "k5", "k6"};
 
 void warn(const std::string& message) { std::cerr << "flatland: warning: " << message << "\n"; }
 
@@ -163,12 +165,14 @@ void intrinsics_section(const CalibrateOptions& o, const calibration::BoardSpec&
   const DetectedViews d = detect_views(expand_file_patterns(o.images, "--images"), board);
   calibration::IntrinsicsOptions options;
   options.parse_fixed(o.fix);
+  options.rational_model = o.rational;
   const calibration::IntrinsicsResult r = calibration::calibrate_intrinsics(d.views, options);
   file.camera = r.camera();
   calibration::CalibrationReport report = r.report();
   report.views_rejected.insert(report.views_rejected.begin(), d.not_found.begin(),
                                d.not_found.end());
   file.report = report;
+  file.rational_model = r.rational;
   if (!o.report.empty()) stage_report(outputs, o.report, r, d.views, j);
 
   const std::array<double, 9> p = r.params();
@@ -181,6 +185,12 @@ void intrinsics_section(const CalibrateOptions& o, const calibration::BoardSpec&
   for (int k = 4; k < 9; ++k) j["dist"].push_back(p[k]);
   j["std"] = Json::object();
   for (int k = 0; k < 9; ++k) j["std"][kParamNames[k]] = number(r.std[k]);
+  j["model"] = r.rational ? "rational_polynomial" : "plumb_bob";
+  if (r.rational)
+    for (int k = 0; k < 3; ++k) {
+      j["dist"].push_back(r.dist[5 + k]);
+      j["std"][kRationalNames[k]] = number(r.std_rational[static_cast<std::size_t>(k)]);
+    }
   j["fixed"] = options.fixed_names();
   j["views_used"] = r.views_used();
   j["views_rejected"] = report.views_rejected;
@@ -199,6 +209,10 @@ void intrinsics_section(const CalibrateOptions& o, const calibration::BoardSpec&
   for (int k = 0; k < 9; ++k)
     os << "  " << kParamNames[k] << std::string(17, ' ') << g6(p[k]) << " +- " << g6(r.std[k])
        << (k < 4 ? " px" : "") << "\n";
+  if (r.rational)
+    for (int k = 0; k < 3; ++k)
+      os << "  " << kRationalNames[k] << std::string(17, ' ') << g6(r.dist[5 + k]) << " +- "
+         << g6(r.std_rational[static_cast<std::size_t>(k)]) << "\n";
   for (const std::string& s : report.views_rejected) os << "  rejected           " << s << "\n";
   if (!o.report.empty())
     os << "  coverage           " << g6(100 * calibration::coverage_fraction(r, d.views))
@@ -331,6 +345,8 @@ void run_calibrate(const CalibrateOptions& o) {
   const bool intrinsics = !o.images.empty();
   if (intrinsics && o.board.empty()) throw UsageError("--board: required with --images");
   if (!o.fix.empty() && !intrinsics) throw UsageError("--fix: holds intrinsics; needs --images");
+  if (o.rational && !intrinsics)
+    throw UsageError("--rational: a model of the intrinsics; needs --images");
   if (!o.report.empty() && !intrinsics)
     throw UsageError("--report: pictures the intrinsics; needs --images");
   calibration::IntrinsicsOptions{}.parse_fixed(o.fix);  // bad input before any work
@@ -455,6 +471,10 @@ Command add_calibrate_command(CLI::App& app) {
                   "fx, CALIB_FIX_ASPECT_RATIO), principal-point (the image centre, "
                   "CALIB_FIX_PRINCIPAL_POINT). Default: none")
       ->type_name("LIST");
+  cmd->add_flag("--rational", o->rational,
+                "Intrinsics with OpenCV's rational model (CALIB_RATIONAL_MODEL): k4, k5, k6 in "
+                "the radial term's denominator, 8 coefficients, written as ROS's "
+                "rational_polynomial (for wide-angle lenses). Default: off (plumb_bob, 5)");
   cmd->add_option("--report", o->report,
                   "Directory for pictures to look at before trusting the intrinsics: each view "
                   "with its detected corners and reprojection errors as arrows (x20), and "
@@ -497,7 +517,8 @@ Command add_calibrate_command(CLI::App& app) {
   cmd->add_flag(
       "--json", o->json,
       "Print exactly one JSON object on stdout: sections (what this run calibrated), "
-      "with intrinsics rms_px, fx, fy, cx, cy, dist, std, fixed, views_used, views_rejected, "
+      "with intrinsics rms_px, fx, fy, cx, cy, dist (5 or, rational, 8), std, model, fixed, "
+      "views_used, views_rejected, "
       "view_rms_px; with --table a table object (rms_px, corners, images, rvec, tvec, "
       "camera_in_table); with --joint a joint object (axis, encoder_offset_rad, "
       "images, inliers, outliers, center_rms_m, angle_rms_rad, sigma_axis_m, "

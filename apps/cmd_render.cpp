@@ -170,6 +170,8 @@ Json camera_json(const render::CameraModel& m, const CameraSpec& spec) {
             {m.K(1, 0), m.K(1, 1), m.K(1, 2)},
             {m.K(2, 0), m.K(2, 1), m.K(2, 2)}};
   j["distortion"] = {m.dist[0], m.dist[1], m.dist[2], m.dist[3], m.dist[4]};
+  if (m.rational())
+    for (int k = 5; k < 8; ++k) j["distortion"].push_back(m.dist[k]);
   const cv::Vec3d r = m.rvec();
   j["rvec"] = {r[0], r[1], r[2]};
   j["tvec"] = {m.t[0], m.t[1], m.t[2]};

@@ -279,6 +279,33 @@ TEST_F(CalibrationChain, HeldParametersAndReportPictures) {
   EXPECT_FALSE(fs::exists(dir_ / "rep2"));
 }
 
+TEST_F(CalibrationChain, RationalModelCalibratesAndTracks) {
+  render_session();
+  const std::string scene = flatland_test::quote(camera_scene());
+  const Result c = run("calibrate --images 'sess/intrinsics/*.png' --board " + board_ +
+                       " --rational --table sess/table.csv --joint sess/joint.csv --scene " +
+                       scene + " --out camera.yaml --json");
+  ASSERT_EQ(c.code, 0) << c.err;
+  const nlohmann::json j = nlohmann::json::parse(c.out);
+  EXPECT_EQ(j.at("model"), "rational_polynomial");
+  EXPECT_EQ(j.at("dist").size(), 8u);
+  EXPECT_TRUE(j.at("std").contains("k6"));
+  const calibration::CameraFile cal =
+      calibration::read_camera_file((dir_ / "camera.yaml").string());
+  EXPECT_TRUE(cal.rational_model);
+  // Through the rational file, track still maps the run to the true s_h.
+  ASSERT_EQ(run("render --scene " + scene + " --duration 0.5 --out frames").code, 0);
+  const Result t =
+      run("track --images 'frames/*.png' --camera camera.yaml --encoder "
+          "frames/encoder.csv --scene " +
+          scene + " --out track.csv");
+  ASSERT_EQ(t.code, 0) << t.err;
+  const std::vector<double> s = column(dir_ / "track.csv", "s_h");
+  const std::vector<double> s_true = column(dir_ / "frames" / "truth.csv", "s_h");
+  ASSERT_EQ(s.size(), s_true.size());
+  for (std::size_t i = 0; i < s.size(); ++i) EXPECT_NEAR(s[i], s_true[i], 0.005) << "frame " << i;
+}
+
 TEST(CalibrationSessionCsv, PathsResolveAgainstTheCsvAndZIsOptional) {
   const fs::path dir = fs::temp_directory_path() / ("flatland_csv_" + std::to_string(::getpid()));
   fs::create_directories(dir);

@@ -61,7 +61,7 @@ CameraFile full_file() {
   f.camera.width = 640;
   f.camera.height = 480;
   f.camera.K = cv::Matx33d(801.25, 0, 322.5, 0, 799.75, 237.25, 0, 0, 1);
-  f.camera.dist = cv::Vec<double, 5>(-0.2, 0.08, 0.001, -0.0005, 0.0125);
+  f.camera.dist = render::Distortion(-0.2, 0.08, 0.001, -0.0005, 0.0125, 0, 0, 0);
   cv::Rodrigues(cv::Vec3d(3.1, 0.05, -0.02), f.camera.R);
   f.camera.t = cv::Vec3d(0.01, -0.02, 1.2);
   f.camera.fps = 30;
@@ -132,6 +132,29 @@ TEST_F(CameraFileTest, RoundTripsEveryField) {
   EXPECT_TRUE(std::isnan(g.report->std[8]));
 }
 
+TEST_F(CameraFileTest, RationalModelRoundTripsAsRosRationalPolynomial) {
+  CameraFile f = full_file();
+  f.camera.dist = render::Distortion(1.5, 0.3, 0.001, -0.0005, 0.01, 1.9, 0.6, 0.02);
+  f.rational_model = true;
+  f.report->std_rational = std::array<double, 3>{0.1, 0.2, 0.3};
+  write_camera_file(path("camera.yaml"), f);
+  const std::string text = read("camera.yaml");
+  EXPECT_NE(text.find("distortion_model: rational_polynomial"), std::string::npos) << text;
+  const CameraFile g = read_camera_file(path("camera.yaml"));
+  EXPECT_TRUE(g.rational_model);
+  for (int i = 0; i < 8; ++i) EXPECT_DOUBLE_EQ(g.camera.dist[i], f.camera.dist[i]) << i;
+  ASSERT_TRUE(g.report->std_rational.has_value());
+  EXPECT_DOUBLE_EQ((*g.report->std_rational)[2], 0.3);
+  // ROS's rational_polynomial has 8 coefficients; 5 are an error naming the field.
+  const std::string five =
+      replace(kMinimal, "distortion_model: plumb_bob", "distortion_model: rational_polynomial");
+  EXPECT_EQ(error_of(five),
+            path("bad.yaml") + ": distortion_coefficients: must be 1 x 8, got 1 x 5");
+  // A plumb_bob camera stays plumb_bob.
+  write_camera_file(path("plain.yaml"), full_file());
+  EXPECT_FALSE(read_camera_file(path("plain.yaml")).rational_model);
+}
+
 TEST_F(CameraFileTest, UsesTheRosCameraInfoLayout) {
   write_camera_file(path("camera.yaml"), full_file());
   const std::string text = read("camera.yaml");
@@ -162,8 +185,8 @@ TEST_F(CameraFileTest, ValidationErrorsNameTheField) {
   EXPECT_EQ(error_of(replace(kMinimal, "0, 800, 240", "0, 0, 240")),
             p + ": camera_matrix: fy must be positive");
   EXPECT_EQ(error_of(replace(kMinimal, "plumb_bob", "fisheye")),
-            p + ": distortion_model: unknown model 'fisheye' (flatland uses OpenCV's "
-                "5-coefficient plumb_bob)");
+            p + ": distortion_model: unknown model 'fisheye' (OpenCV's plumb_bob, 5 coefficients, "
+                "or rational_polynomial, 8)");
   EXPECT_EQ(error_of(replace(kMinimal, "  cols: 5\n  data: [-0.1, 0.01, 0, 0, 0]",
                              "  cols: 4\n  data: [-0.1, 0.01, 0, 0]")),
             p + ": distortion_coefficients: must be 1 x 5, got 1 x 4");

@@ -52,11 +52,14 @@ void expect_error_names(const CameraSpec& spec, const std::string& field) {
   EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
 }
 
-/// Brown-Conrady model written out, independent of OpenCV: camera-frame point -> pixel.
-cv::Point2d brown_conrady(const cv::Vec3d& pc, const cv::Matx33d& K, const cv::Vec<double, 5>& d) {
+/// Brown-Conrady model written out, independent of OpenCV: camera-frame point -> pixel. With
+/// k4..k6 (d[5..7]) the rational model's denominator divides the radial term.
+cv::Point2d brown_conrady(const cv::Vec3d& pc, const cv::Matx33d& K,
+                          const flatland::render::Distortion& d) {
   const double x = pc[0] / pc[2], y = pc[1] / pc[2];
   const double r2 = x * x + y * y;
-  const double radial = 1 + d[0] * r2 + d[1] * r2 * r2 + d[4] * r2 * r2 * r2;
+  const double radial = (1 + d[0] * r2 + d[1] * r2 * r2 + d[4] * r2 * r2 * r2) /
+                        (1 + d[5] * r2 + d[6] * r2 * r2 + d[7] * r2 * r2 * r2);
   const double xd = x * radial + 2 * d[2] * x * y + d[3] * (r2 + 2 * x * x);
   const double yd = y * radial + d[2] * (r2 + 2 * y * y) + 2 * d[3] * x * y;
   return {K(0, 0) * xd + K(0, 2), K(1, 1) * yd + K(1, 2)};
@@ -110,29 +113,38 @@ TEST(RenderCamera, LookAtPointProjectsToPrincipalPointAndUpIsUp) {
 }
 
 TEST(RenderCamera, ProjectMatchesOpenCVAndTheModelWrittenOut) {
-  const CameraModel cam = CameraModel::from_spec(oblique_spec({-0.3, 0.1, 1e-3, -2e-3, 0.02}));
-  std::vector<cv::Point3d> pts;
-  for (double x = -0.3; x <= 0.31; x += 0.1)
-    for (double y = -0.2; y <= 0.41; y += 0.1)
-      for (double z : {0.0, 0.03}) pts.emplace_back(x, y, z);
-  const std::vector<cv::Point2d> got = cam.project(pts);
-  ASSERT_EQ(got.size(), pts.size());
+  for (const bool rational : {false, true}) {
+    SCOPED_TRACE(rational ? "rational" : "plumb_bob");
+    CameraModel cam = CameraModel::from_spec(oblique_spec({-0.3, 0.1, 1e-3, -2e-3, 0.02}));
+    if (rational) {
+      cam.dist[5] = 0.05;  // k4..k6: the rational model's denominator
+      cam.dist[6] = -0.02;
+      cam.dist[7] = 0.01;
+    }
+    EXPECT_EQ(cam.rational(), rational);
+    std::vector<cv::Point3d> pts;
+    for (double x = -0.3; x <= 0.31; x += 0.1)
+      for (double y = -0.2; y <= 0.41; y += 0.1)
+        for (double z : {0.0, 0.03}) pts.emplace_back(x, y, z);
+    const std::vector<cv::Point2d> got = cam.project(pts);
+    ASSERT_EQ(got.size(), pts.size());
 
-  std::vector<cv::Point2d> ref;
-  cv::projectPoints(pts, cv::Mat(cam.rvec()), cv::Mat(cam.t), cv::Mat(cam.K), cv::Mat(cam.dist),
-                    ref);
-  for (std::size_t i = 0; i < pts.size(); ++i) {
-    EXPECT_NEAR(got[i].x, ref[i].x, 1e-9);
-    EXPECT_NEAR(got[i].y, ref[i].y, 1e-9);
-    const cv::Vec3d pc = cam.R * cv::Vec3d(pts[i].x, pts[i].y, pts[i].z) + cam.t;
-    ASSERT_GT(pc[2], 0);
-    const cv::Point2d own = brown_conrady(pc, cam.K, cam.dist);
-    EXPECT_NEAR(got[i].x, own.x, 1e-7);
-    EXPECT_NEAR(got[i].y, own.y, 1e-7);
-    const cv::Point2d single = cam.project(pts[i]);
-    EXPECT_EQ(single, got[i]);
+    std::vector<cv::Point2d> ref;
+    cv::projectPoints(pts, cv::Mat(cam.rvec()), cv::Mat(cam.t), cv::Mat(cam.K), cv::Mat(cam.dist),
+                      ref);
+    for (std::size_t i = 0; i < pts.size(); ++i) {
+      EXPECT_NEAR(got[i].x, ref[i].x, 1e-9);
+      EXPECT_NEAR(got[i].y, ref[i].y, 1e-9);
+      const cv::Vec3d pc = cam.R * cv::Vec3d(pts[i].x, pts[i].y, pts[i].z) + cam.t;
+      ASSERT_GT(pc[2], 0);
+      const cv::Point2d own = brown_conrady(pc, cam.K, cam.dist);
+      EXPECT_NEAR(got[i].x, own.x, 1e-7);
+      EXPECT_NEAR(got[i].y, own.y, 1e-7);
+      const cv::Point2d single = cam.project(pts[i]);
+      EXPECT_EQ(single, got[i]);
+    }
+    EXPECT_TRUE(cam.project(std::vector<cv::Point3d>{}).empty());
   }
-  EXPECT_TRUE(cam.project(std::vector<cv::Point3d>{}).empty());
 }
 
 // --- Validation ------------------------------------------------------------------------------

@@ -25,6 +25,7 @@ namespace flatland::calibration {
 namespace {
 
 const char* kStdNames[9] = {"fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"};
+const char* kRationalStdNames[3] = {"k4", "k5", "k6"};
 
 // ROS's {rows, cols, data} matrix layout.
 void write_matrix(cv::FileStorage& fs, const std::string& key, int rows, int cols,
@@ -210,11 +211,15 @@ CameraFile read_fields(const YAML::Node& root, const Reader& rd) {
 
   const std::string model_name =
       rd.text(rd.require(root, "distortion_model", "distortion_model"), "distortion_model");
-  if (model_name != "plumb_bob")
+  if (model_name != "plumb_bob" && model_name != "rational_polynomial")
     rd.fail("distortion_model",
-            "unknown model '" + model_name + "' (flatland uses OpenCV's 5-coefficient plumb_bob)");
-  const std::vector<double> d = rd.matrix(root, "distortion_coefficients", 1, 5);
-  for (int i = 0; i < 5; ++i) m.dist[i] = d[static_cast<std::size_t>(i)];
+            "unknown model '" + model_name +
+                "' (OpenCV's plumb_bob, 5 coefficients, or rational_polynomial, "
+                "8)");
+  file.rational_model = model_name == "rational_polynomial";
+  const int n = file.rational_model ? 8 : 5;
+  const std::vector<double> d = rd.matrix(root, "distortion_coefficients", 1, n);
+  for (int i = 0; i < n; ++i) m.dist[i] = d[static_cast<std::size_t>(i)];
 
   const YAML::Node fl = root["flatland"];
   if (!Reader::present(fl)) return file;
@@ -274,6 +279,17 @@ CameraFile read_fields(const YAML::Node& root, const Reader& rd) {
           rep.std[static_cast<std::size_t>(k)] =
               rd.number(e, std::string("flatland.std.") + kStdNames[k], false);
       }
+      if (file.rational_model) {
+        std::array<double, 3> r;
+        r.fill(std::nan(""));
+        for (int k = 0; k < 3; ++k) {
+          const YAML::Node e = sd[kRationalStdNames[k]];
+          if (Reader::present(e))
+            r[static_cast<std::size_t>(k)] =
+                rd.number(e, std::string("flatland.std.") + kRationalStdNames[k], false);
+        }
+        rep.std_rational = r;
+      }
     }
     file.report = rep;
   }
@@ -292,10 +308,11 @@ void write_camera_file(const std::string& path, const CameraFile& file) {
   write_matrix(fs, "camera_matrix", 3, 3,
                {m.K(0, 0), m.K(0, 1), m.K(0, 2), m.K(1, 0), m.K(1, 1), m.K(1, 2), m.K(2, 0),
                 m.K(2, 1), m.K(2, 2)});
-  fs << "distortion_model"
-     << "plumb_bob";
-  write_matrix(fs, "distortion_coefficients", 1, 5,
-               {m.dist[0], m.dist[1], m.dist[2], m.dist[3], m.dist[4]});
+  // ROS's names: plumb_bob has 5 coefficients, rational_polynomial 8 (OpenCV's order for both).
+  const bool rational = file.rational_model || m.rational();
+  fs << "distortion_model" << (rational ? "rational_polynomial" : "plumb_bob");
+  std::vector<double> d(m.dist.val, m.dist.val + (rational ? 8 : 5));
+  write_matrix(fs, "distortion_coefficients", 1, rational ? 8 : 5, d);
   // ROS readers expect these two as well; for a monocular camera R = I and P = [K | 0].
   write_matrix(fs, "rectification_matrix", 3, 3, {1, 0, 0, 0, 1, 0, 0, 0, 1});
   write_matrix(
@@ -326,6 +343,9 @@ void write_camera_file(const std::string& path, const CameraFile& file) {
     fs << "std"
        << "{";
     for (int k = 0; k < 9; ++k) fs << kStdNames[k] << rep.std[static_cast<std::size_t>(k)];
+    if (rep.std_rational)
+      for (int k = 0; k < 3; ++k)
+        fs << kRationalStdNames[k] << (*rep.std_rational)[static_cast<std::size_t>(k)];
     fs << "}";
   }
   if (file.table_report) {

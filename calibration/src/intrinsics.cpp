@@ -85,12 +85,17 @@ int dictionary_id(const std::string& name) {
 
 // ---------------------------------------------------------------- the model
 
+// The intrinsics' parameter block: fx fy cx cy k1 k2 p1 p2 k3, then k4 k5 k6 for the rational
+// model (CALIB_RATIONAL_MODEL), which alone uses them.
+constexpr int kPlumbBob = 9, kRational = 12;
+
 // OpenCV's projection (cv::projectPoints) of a board point (X, Y, 0) seen with pose
-// (rvec, tvec) by a camera with intrinsics fx fy cx cy k1 k2 p1 p2 k3. `unit_aspect`: fy is fx
-// (CALIB_FIX_ASPECT_RATIO with a ratio of 1; intr[1] is then held and ignored).
+// (rvec, tvec) by a camera with intrinsics `intr` (kPlumbBob or, with `rational`, kRational of
+// them). `unit_aspect`: fy is fx (CALIB_FIX_ASPECT_RATIO with a ratio of 1; intr[1] is then held
+// and ignored).
 template <typename T>
 void project(const T* intr, const T* rvec, const T* tvec, double X, double Y, T* uv,
-             bool unit_aspect = false) {
+             bool unit_aspect, bool rational) {
   const T p[3] = {T(X), T(Y), T(0)};
   T pc[3];
   ceres::AngleAxisRotatePoint(rvec, p, pc);
@@ -99,7 +104,8 @@ void project(const T* intr, const T* rvec, const T* tvec, double X, double Y, T*
   pc[2] += tvec[2];
   const T x = pc[0] / pc[2], y = pc[1] / pc[2];
   const T r2 = x * x + y * y;
-  const T radial = T(1) + r2 * (intr[4] + r2 * (intr[5] + r2 * intr[8]));
+  T radial = T(1) + r2 * (intr[4] + r2 * (intr[5] + r2 * intr[8]));
+  if (rational) radial /= T(1) + r2 * (intr[9] + r2 * (intr[10] + r2 * intr[11]));
   const T xd = x * radial + T(2) * intr[6] * x * y + intr[7] * (r2 + T(2) * x * x);
   const T yd = y * radial + intr[6] * (r2 + T(2) * y * y) + T(2) * intr[7] * x * y;
   uv[0] = intr[0] * xd + intr[2];
@@ -107,6 +113,7 @@ void project(const T* intr, const T* rvec, const T* tvec, double X, double Y, T*
 }
 
 // One observed corner: residual = projection - observation, in px.
+template <int N>
 struct ReprojectionError {
   ReprojectionError(double u, double v, double X, double Y, bool unit_aspect)
       : u(u), v(v), X(X), Y(Y), unit_aspect(unit_aspect) {}
@@ -114,7 +121,7 @@ struct ReprojectionError {
   template <typename T>
   bool operator()(const T* intr, const T* rvec, const T* tvec, T* residual) const {
     T uv[2];
-    project(intr, rvec, tvec, X, Y, uv, unit_aspect);
+    project(intr, rvec, tvec, X, Y, uv, unit_aspect, N == kRational);
     residual[0] = uv[0] - T(u);
     residual[1] = uv[1] - T(v);
     return true;
@@ -122,7 +129,7 @@ struct ReprojectionError {
 
   static ceres::CostFunction* create(const cv::Point2f& image, const cv::Point3f& object,
                                      bool unit_aspect) {
-    return new ceres::AutoDiffCostFunction<ReprojectionError, 2, 9, 3, 3>(
+    return new ceres::AutoDiffCostFunction<ReprojectionError, 2, N, 3, 3>(
         new ReprojectionError(image.x, image.y, object.x, object.y, unit_aspect));
   }
 
@@ -136,11 +143,12 @@ struct Pose {
 
 // Sum of squared reprojection errors of one view, px^2 (intr[1] already equal to intr[0] when
 // the aspect ratio is fixed).
-double view_ssr(const double* intr, const Pose& pose, const BoardView& view) {
+double view_ssr(const double* intr, const Pose& pose, const BoardView& view, bool rational) {
   double ssr = 0;
   for (std::size_t i = 0; i < view.image_points.size(); ++i) {
     double uv[2];
-    project(intr, pose.r, pose.t, view.object_points[i].x, view.object_points[i].y, uv);
+    project(intr, pose.r, pose.t, view.object_points[i].x, view.object_points[i].y, uv, false,
+            rational);
     const double du = uv[0] - view.image_points[i].x, dv = uv[1] - view.image_points[i].y;
     ssr += du * du + dv * dv;
   }
@@ -186,11 +194,16 @@ void solve(double* intr, std::vector<Pose>& poses, const std::vector<BoardView>&
     const BoardView& v = views[i];
     for (std::size_t k = 0; k < v.image_points.size(); ++k)
       problem.AddResidualBlock(
-          ReprojectionError::create(v.image_points[k], v.object_points[k], io.fix_aspect_ratio),
+          io.rational_model ? ReprojectionError<kRational>::create(
+                                  v.image_points[k], v.object_points[k], io.fix_aspect_ratio)
+                            : ReprojectionError<kPlumbBob>::create(
+                                  v.image_points[k], v.object_points[k], io.fix_aspect_ratio),
           loss, intr, poses[i].r, poses[i].t);
   }
   const std::vector<int> held = held_parameters(io);
-  if (!held.empty()) problem.SetManifold(intr, new ceres::SubsetManifold(9, held));
+  if (!held.empty())
+    problem.SetManifold(intr,
+                        new ceres::SubsetManifold(io.rational_model ? kRational : kPlumbBob, held));
   ceres::Solver::Summary summary;
   ceres::Solve(solver_options(io.max_iterations), &problem, &summary);
   if (io.fix_aspect_ratio) intr[1] = intr[0];
@@ -382,6 +395,7 @@ CalibrationReport IntrinsicsResult::report() const {
   r.views_used = views_used();
   r.views_rejected = rejected;
   r.std = std;
+  if (rational) r.std_rational = std_rational;
   return r;
 }
 
@@ -465,7 +479,9 @@ IntrinsicsResult calibrate_intrinsics(const std::vector<BoardView>& views,
         fmt(max_tilt, 2) + " deg, need views tilted by " + fmt(options.min_tilt_deg, 2) +
         " deg or more)");
 
-  double intr[9] = {f0, f0, Kinit(0, 2), Kinit(1, 2), 0, 0, 0, 0, 0};
+  double intr[kRational] = {f0, f0, Kinit(0, 2), Kinit(1, 2), 0, 0, 0, 0, 0, 0, 0, 0};
+  const bool rational = options.rational_model;
+  result.rational = rational;
 
   // ---- pass 1: robust (Huber) so that a bad view or a few bad corners cannot drag the solution.
   ceres::HuberLoss huber(options.loss_scale_px);
@@ -473,7 +489,8 @@ IntrinsicsResult calibrate_intrinsics(const std::vector<BoardView>& views,
 
   std::vector<double> rms1;
   for (int i : usable) {
-    const double r = std::sqrt(view_ssr(intr, poses[i], views[i]) / views[i].image_points.size());
+    const double r =
+        std::sqrt(view_ssr(intr, poses[i], views[i], rational) / views[i].image_points.size());
     result.view_rms_px[i] = r;
     rms1.push_back(r);
   }
@@ -504,7 +521,7 @@ IntrinsicsResult calibrate_intrinsics(const std::vector<BoardView>& views,
   double ssr = 0;
   std::size_t points = 0;
   for (int i : inliers) {
-    const double s = view_ssr(intr, poses[i], views[i]);
+    const double s = view_ssr(intr, poses[i], views[i], rational);
     ssr += s;
     points += views[i].image_points.size();
     result.view_rms_px[i] = std::sqrt(s / views[i].image_points.size());
@@ -518,23 +535,30 @@ IntrinsicsResult calibrate_intrinsics(const std::vector<BoardView>& views,
   result.rms_px = std::sqrt(ssr / static_cast<double>(points));
   result.K = cv::Matx33d(intr[0], 0, intr[2], 0, intr[1], intr[3], 0, 0, 1);
   for (int k = 0; k < 5; ++k) result.dist[k] = intr[4 + k];
+  if (rational)
+    for (int k = 0; k < 3; ++k) result.dist[5 + k] = intr[9 + k];
 
   result.std.fill(std::numeric_limits<double>::quiet_NaN());
+  result.std_rational.fill(std::numeric_limits<double>::quiet_NaN());
   if (options.compute_covariance) {
     // (J^T J)^-1 of the intrinsics' block, scaled by the residual variance estimated from the fit
     // itself (sigma^2 = SSR / (2N - p)): the image noise need not be known.
-    const double free_parameters = 9.0 - static_cast<double>(held_parameters(options).size());
+    const int block = rational ? kRational : kPlumbBob;
+    const double free_parameters = block - static_cast<double>(held_parameters(options).size());
     const double dof = 2.0 * static_cast<double>(points) - free_parameters - 6.0 * inliers.size();
     ceres::Covariance::Options co;
     co.algorithm_type = ceres::SPARSE_QR;
     co.num_threads = 1;
     ceres::Covariance covariance(co);
     std::vector<std::pair<const double*, const double*>> blocks = {{intr, intr}};
-    double cov[81];
+    double cov[kRational * kRational];
     if (dof > 0 && covariance.Compute(blocks, &problem) &&
         covariance.GetCovarianceBlock(intr, intr, cov)) {
       const double sigma2 = ssr / dof;
-      for (int k = 0; k < 9; ++k) result.std[k] = std::sqrt(std::max(0.0, cov[k * 9 + k] * sigma2));
+      const auto sd = [&](int k) { return std::sqrt(std::max(0.0, cov[k * block + k] * sigma2)); };
+      for (int k = 0; k < kPlumbBob; ++k) result.std[k] = sd(k);
+      if (rational)
+        for (int k = 0; k < 3; ++k) result.std_rational[k] = sd(kPlumbBob + k);
     }
   }
   return result;
@@ -555,6 +579,8 @@ void IntrinsicsOptions::parse_fixed(const std::string& list) {
       fix_aspect_ratio = true;
     else if (name == "principal-point")
       fix_principal_point = true;
+    else if (name.empty())
+      continue;
     else
       throw std::invalid_argument("--fix: unknown parameter '" + name +
                                   "' (k3, tangential, aspect, principal-point)");

@@ -95,13 +95,13 @@ std::vector<cv::Point2f> find_board_corners(const cv::Mat& image, const TargetSp
 }  // namespace
 
 TablePose estimate_table_pose(const cv::Mat& image, const TargetSpec& board, const cv::Matx33d& K,
-                              const cv::Vec<double, 5>& dist) {
+                              const render::Distortion& dist) {
   return estimate_table_pose(std::vector<cv::Mat>{image}, std::vector<TargetSpec>{board}, K, dist);
 }
 
 TablePose estimate_table_pose(const std::vector<cv::Mat>& images,
                               const std::vector<TargetSpec>& boards, const cv::Matx33d& K,
-                              const cv::Vec<double, 5>& dist) {
+                              const render::Distortion& dist) {
   const std::string who = "estimate_table_pose: ";
   if (images.empty() || images.size() != boards.size())
     throw std::invalid_argument(who + std::to_string(images.size()) + " images but " +

@@ -128,7 +128,7 @@ CameraModel CameraModel::from_spec(const CameraSpec& spec) {
 }
 
 bool CameraModel::distorted() const {
-  for (int i = 0; i < 5; ++i)
+  for (int i = 0; i < 8; ++i)
     if (dist[i] != 0) return true;
   return false;
 }
@@ -282,7 +282,7 @@ DistortionMaps compute_distortion_maps(const CameraModel& camera, int supersampl
 struct MapsKey {
   int width, height, supersample;
   cv::Matx33d K;
-  cv::Vec<double, 5> dist;
+  Distortion dist;
   bool operator==(const MapsKey& o) const {
     return width == o.width && height == o.height && supersample == o.supersample && K == o.K &&
            dist == o.dist;

@@ -8,6 +8,7 @@
 
 #include <opencv2/core.hpp>
 
+#include <array>
 #include <optional>
 #include <string>
 
@@ -27,6 +28,7 @@ struct CalibrationReport {
   std::vector<std::string> views_rejected;  ///< file names (or indices) and why
   /// Standard deviations from Ceres' covariance: fx, fy, cx, cy, k1, k2, p1, p2, k3.
   std::array<double, 9> std{};
+  std::optional<std::array<double, 3>> std_rational;  ///< k4, k5, k6 (rational model only)
 };
 
 /// How the table pose was fitted (flatland calibrate --table).
@@ -48,6 +50,9 @@ struct JointFitReport {
 struct CameraFile {
   std::string camera_name = "flatland";
   render::CameraModel camera;  ///< width, height, K, dist; R, t = table pose when known
+  /// distortion_model rational_polynomial (8 coefficients) rather than plumb_bob (5); written so
+  /// whenever camera.rational() too.
+  bool rational_model = false;
   bool has_table_pose = false;
   std::optional<JointCalibration> joint;
   std::optional<CalibrationReport> report;  ///< of the intrinsics

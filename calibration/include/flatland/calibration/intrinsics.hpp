@@ -77,6 +77,8 @@ struct IntrinsicsOptions {
   bool zero_tangent_dist = false;    ///< CALIB_ZERO_TANGENT_DIST: p1 = p2 = 0
   bool fix_aspect_ratio = false;     ///< CALIB_FIX_ASPECT_RATIO: fy = fx
   bool fix_principal_point = false;  ///< CALIB_FIX_PRINCIPAL_POINT: (cx, cy) = ((w-1)/2, (h-1)/2)
+  /// CALIB_RATIONAL_MODEL: k4, k5, k6 in the denominator of the radial term, 8 coefficients.
+  bool rational_model = false;
   /// "k3,tangential,aspect,principal-point" (any of them, comma-separated; empty: none) into the
   /// flags above. Throws std::invalid_argument naming an unknown one.
   void parse_fixed(const std::string& list);
@@ -86,7 +88,8 @@ struct IntrinsicsOptions {
 
 struct IntrinsicsResult {
   cv::Matx33d K = cv::Matx33d::eye();
-  cv::Vec<double, 5> dist = cv::Vec<double, 5>::all(0);  ///< k1, k2, p1, p2, k3
+  render::Distortion dist = render::Distortion::all(0);  ///< k1 k2 p1 p2 k3 (k4 k5 k6)
+  bool rational = false;  ///< calibrated with the rational model (k4, k5, k6 free)
   cv::Size image_size;
   double rms_px = 0;  ///< over the views used
   /// Per input view (same order as the input): RMS reprojection error, px, at the final
@@ -98,6 +101,7 @@ struct IntrinsicsResult {
   /// Standard deviations of fx fy cx cy k1 k2 p1 p2 k3 (NaN if the covariance is rank deficient
   /// or was not computed).
   std::array<double, 9> std{};
+  std::array<double, 3> std_rational{};  ///< of k4, k5, k6 (NaN unless rational)
   std::array<double, 9> params() const;  ///< fx fy cx cy k1 k2 p1 p2 k3
   int views_used() const;
   /// The camera (intrinsics only; pose identity) and the report for the camera file.

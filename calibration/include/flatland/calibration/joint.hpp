@@ -30,13 +30,13 @@ struct TablePose {
 /// corners could be matched the wrong way round. Throws
 /// std::invalid_argument (one line) for a ChArUco or symmetric board, bad K, or no board found.
 TablePose estimate_table_pose(const cv::Mat& image, const TargetSpec& board, const cv::Matx33d& K,
-                              const cv::Vec<double, 5>& dist);
+                              const render::Distortion& dist);
 /// The same from several images of boards at known places (one board per image, the camera
 /// fixed): all corners in one pose fit. Spread placements determine the table's tilt better.
 /// Errors name the image index.
 TablePose estimate_table_pose(const std::vector<cv::Mat>& images,
                               const std::vector<TargetSpec>& boards, const cv::Matx33d& K,
-                              const cv::Vec<double, 5>& dist);
+                              const render::Distortion& dist);
 
 /// Per-image results of calibrate_joint, for reports and for rejecting outliers.
 struct JointReport {
