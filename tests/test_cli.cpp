@@ -300,6 +300,23 @@ TEST_F(CliHelp, HelpIsTrueAboutScenesAndWeights) {
   }
 }
 
+TEST_F(CliSolve, StudyCalibrationPrintsATable) {
+  const Result r = run("study calibration --quick");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto lines = lines_of(r.out);
+  ASSERT_GE(lines.size(), 18u) << r.out;  // title, header, 4 x 4 cells
+  // A header of named columns, then rows of as many aligned fields: not CSV.
+  std::istringstream header(lines[1]);
+  std::vector<std::string> names;
+  for (std::string w; header >> w;) names.push_back(w);
+  EXPECT_EQ(names, (std::vector<std::string>{"views", "noise_px", "failures", "fx", "fy", "cx",
+                                             "cy", "k1", "k2", "rms_px", "time_s"}));
+  for (std::size_t i = 2; i < 18; ++i) {
+    EXPECT_EQ(lines[i].find(','), std::string::npos) << lines[i];
+    EXPECT_EQ(lines[i].size(), lines[1].size()) << lines[i];
+  }
+}
+
 TEST_F(CliSolve, StudySimQuickRunsAQuarterOfTheSettings) {
   const Result full_help = run("study --help");
   EXPECT_NE(full_help.out.find("sim: RK4 at 2 steps"), std::string::npos) << full_help.out;
