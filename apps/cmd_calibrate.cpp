@@ -320,6 +320,12 @@ void joint_section(const CalibrateOptions& o, const Scene& scene,
     os << "  outlier            " << name.get<std::string>() << "\n";
 }
 
+// Whether the output is the --camera file itself (then it is replaced without --force).
+bool updates_in_place(const CalibrateOptions& o, const fs::path& out) {
+  std::error_code ec;
+  return !o.camera.empty() && (out == fs::path(o.camera) || fs::equivalent(out, o.camera, ec));
+}
+
 // Where the camera file goes: --out, or --camera updated in place.
 fs::path output_path(const CalibrateOptions& o) {
   if (o.out.empty()) {
@@ -330,9 +336,7 @@ fs::path output_path(const CalibrateOptions& o) {
   const fs::path out = o.out;
   if (o.out.back() == '/' || fs::is_directory(out))
     throw UsageError("--out: must be a file (camera.yaml), got '" + o.out + "'");
-  std::error_code ec;
-  const bool in_place = !o.camera.empty() && fs::equivalent(out, o.camera, ec);
-  if (!in_place) check_output_file("--out", out, o.force);
+  if (!updates_in_place(o, out)) check_output_file("--out", out, o.force);
   return out;
 }
 
@@ -388,7 +392,7 @@ void run_calibrate(const CalibrateOptions& o) {
   Json j;
   std::ostringstream os;
   std::vector<std::string> sections;
-  OutputSet outputs(o.force || (!o.camera.empty() && out == fs::path(o.camera)));
+  OutputSet outputs(o.force || updates_in_place(o, out));
   if (!o.report.empty()) outputs.begin_directory(o.report);
   if (intrinsics) {
     intrinsics_section(o, *board, file, j, os, outputs);
