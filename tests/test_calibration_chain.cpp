@@ -238,6 +238,12 @@ TEST_F(CalibrationChain, BadSessionInputExitsTwoWithOneLine) {
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("--table-views: must be in [1, 50], got 0"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(dir_ / "s2"));
+  const Result sym = run("render-calibration --scene " + flatland_test::quote(camera_scene()) +
+                         " --out s3 --board chessboard:8x6:0.02");
+  EXPECT_EQ(sym.code, 2);
+  EXPECT_TRUE(one_line(sym.err)) << sym.err;
+  EXPECT_NE(sym.err.find("add to an odd number"), std::string::npos) << sym.err;
+  EXPECT_FALSE(fs::exists(dir_ / "s3"));
 }
 
 TEST_F(CalibrationChain, HeldParametersAndReportPictures) {

@@ -391,6 +391,14 @@ CalibrationSession render_calibration_session(const Scene& scene, const SessionO
   CalibrationSession session;
   session.board = options.board.empty() ? default_board(cam) : BoardSpec::parse(options.board);
   const BoardSpec& board = session.board;
+  // The table views are read by estimate_table_pose: a chessboard whose corners cannot be matched
+  // the wrong way round.
+  const cv::Size inner = board.pattern_size();
+  if (board.kind != BoardSpec::Kind::kChessboard || (inner.width + inner.height) % 2 == 0)
+    throw std::invalid_argument(
+        "--board: the table views need a chessboard whose inner-corner "
+        "counts add to an odd number (e.g. chessboard:9x6:0.02), got " +
+        board.notation());
   session.truth.camera_name = scene.name.empty() ? "flatland" : scene.name;
   session.truth.camera = cam;
   session.truth.has_table_pose = true;
