@@ -160,12 +160,10 @@ void stage_report(OutputSet& outputs, const fs::path& dir, const calibration::In
 }
 
 void intrinsics_section(const CalibrateOptions& o, const calibration::BoardSpec& board,
+                        const calibration::IntrinsicsOptions& options,
                         calibration::CameraFile& file, Json& j, std::ostream& os,
                         OutputSet& outputs) {
   const DetectedViews d = detect_views(expand_file_patterns(o.images, "--images"), board);
-  calibration::IntrinsicsOptions options;
-  options.parse_fixed(o.fix);
-  options.rational_model = o.rational;
   const calibration::IntrinsicsResult r = calibration::calibrate_intrinsics(d.views, options);
   file.camera = r.camera();
   calibration::CalibrationReport report = r.report();
@@ -234,11 +232,6 @@ cv::Mat read_listed_image(const std::string& option, const std::string& path,
   return image;
 }
 
-// A library error about image i, told with the image's file name.
-[[noreturn]] void rethrow_for_images(const std::string& option, const std::exception& e) {
-  throw UsageError(option + ": " + e.what());
-}
-
 void table_section(const CalibrateOptions& o, const calibration::BoardSpec& board,
                    const std::vector<calibration::TablePlacement>& rows,
                    calibration::CameraFile& file, Json& j, std::ostream& os) {
@@ -252,7 +245,7 @@ void table_section(const CalibrateOptions& o, const calibration::BoardSpec& boar
   try {
     pose = calibration::estimate_table_pose(images, boards, file.camera.K, file.camera.dist);
   } catch (const std::invalid_argument& e) {
-    rethrow_for_images("--table " + o.table, e);
+    throw UsageError("--table " + o.table + ": " + e.what());
   }
   file.camera.R = pose.R;
   file.camera.t = pose.t;
@@ -287,7 +280,7 @@ void joint_section(const CalibrateOptions& o, const Scene& scene,
     joint = calibration::calibrate_joint(images, encoder, file.camera, scene.render.hand_thickness,
                                          &report);
   } catch (const std::invalid_argument& e) {
-    rethrow_for_images("--joint " + o.joint, e);
+    throw UsageError("--joint " + o.joint + ": " + e.what());
   }
   file.joint = joint;
   calibration::JointFitReport fit;
@@ -353,7 +346,9 @@ void run_calibrate(const CalibrateOptions& o) {
     throw UsageError("--rational: a model of the intrinsics; needs --images");
   if (!o.report.empty() && !intrinsics)
     throw UsageError("--report: pictures the intrinsics; needs --images");
-  calibration::IntrinsicsOptions{}.parse_fixed(o.fix);  // bad input before any work
+  calibration::IntrinsicsOptions intrinsics_options;  // parsed with the other bad input
+  intrinsics_options.parse_fixed(o.fix);
+  intrinsics_options.rational_model = o.rational;
   std::optional<calibration::BoardSpec> board;
   if (!o.board.empty()) board = calibration::BoardSpec::parse(o.board);
   std::optional<calibration::BoardSpec> table_board = board;
@@ -395,7 +390,7 @@ void run_calibrate(const CalibrateOptions& o) {
   OutputSet outputs(o.force || updates_in_place(o, out));
   if (!o.report.empty()) outputs.begin_directory(o.report);
   if (intrinsics) {
-    intrinsics_section(o, *board, file, j, os, outputs);
+    intrinsics_section(o, *board, intrinsics_options, file, j, os, outputs);
     sections.push_back("intrinsics");
     if (start && (start->has_table_pose || start->joint) && o.table.empty())
       warn("new intrinsics: the table pose and joint of " + o.camera +
