@@ -444,15 +444,7 @@ void run_calibrate(const CalibrateOptions& o) {
 
 Command add_calibrate_command(CLI::App& app) {
   auto o = std::make_shared<CalibrateOptions>();
-  CLI::App* cmd = app.add_subcommand(
-      "calibrate",
-      "Calibrate the camera chain and write one camera file (ROS camera_info YAML plus "
-      "flatland's table pose and joint; docs/CALIBRATION.md): the intrinsics and OpenCV "
-      "distortion from images of a board held at varied poses (--images, --board; Ceres, "
-      "outlier views dropped), the table pose from images of the board lying on the table at "
-      "known places (--table), the joint axis and encoder offset from images of the hand at "
-      "known encoder angles (--joint). Give any of the three; a section this run does not "
-      "calibrate comes from --camera FILE, which is updated in place unless --out is given.");
+  CLI::App* cmd = add_command(app, "calibrate");
   cmd->add_option("--images", o->images,
                   "Intrinsics: image files or glob patterns of the board at varied poses (quote "
                   "them: 'imgs/*.png'). Unreadable files are skipped with a warning")

@@ -521,13 +521,7 @@ void run_experiment(const ExperimentOptions& o) {
 
 Command add_experiment_command(CLI::App& app) {
   auto o = std::make_shared<ExperimentOptions>();
-  CLI::App* cmd = app.add_subcommand(
-      "experiment",
-      "Run one closed-loop butterfly experiment (paper section 5): the 1 kHz vision-feedback (or "
-      "open-loop) controller against a synthetic world, a recording or a live camera. Writes "
-      "the 1 kHz log (CSV, SI units), the result (JSON) and the plots of theta(t) and s_h(t), "
-      "planned vs actual (paper Fig. 10). Exit code 0 whenever the experiment ran, even if the "
-      "disk did not reach the goal (see \"success\").");
+  CLI::App* cmd = add_command(app, "experiment");
   add_common_options(*cmd, o->common,
                      "Directory for log.csv, result.json, theta.png, s_h.png (+ their .gp "
                      "scripts) and, with --video, video.mp4; created, and refused if it exists "

@@ -135,10 +135,7 @@ void run_locus(const LocusOptions& o) {
 
 Command add_locus_command(CLI::App& app) {
   auto o = std::make_shared<LocusOptions>();
-  CLI::App* cmd = app.add_subcommand(
-      "locus",
-      "Solve the butterfly for N durations 2T evenly spaced over [FROM, TO] (paper Fig. 7): k "
-      "against 2T and the minimum normal force ratio of each solution.");
+  CLI::App* cmd = add_command(app, "locus");
   add_common_options(*cmd, o->common,
                      "Directory for locus.csv (period in s, k, fn_min_ratio, fn_apex_ratio, "
                      "mu_required, s_end, sdot_end in 1/s, friction_margin) and locus.png with its "

@@ -208,11 +208,7 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
 
 Command add_montecarlo_command(CLI::App& app) {
   auto o = std::make_shared<MonteCarloOptions>();
-  CLI::App* cmd = app.add_subcommand(
-      "montecarlo",
-      "Robustness of the closed loop: N synthetic experiments per controller, each in a world "
-      "perturbed from the scene (uniform draws seeded by --seed and the run number; the loop "
-      "assumes the nominal scene). Prints the success counts with Wilson 95 % intervals.");
+  CLI::App* cmd = add_command(app, "montecarlo");
   add_common_options(*cmd, o->common,
                      "Directory for runs.csv (one row per experiment) and result.json; created, "
                      "and refused if it exists and is not empty. Default: no files",

@@ -453,12 +453,7 @@ void run_render(const RenderOptions& o) {
 
 Command add_render_command(CLI::App& app) {
   auto o = std::make_shared<RenderOptions>();
-  CLI::App* cmd = app.add_subcommand(
-      "render",
-      "Simulate the scene and film it with the scene's camera (its `camera` section): an MP4 "
-      "video or PNG frames at the camera's frame rate from the start to the end of the run, with "
-      "the ground truth of every frame (CSV: times in s, positions in m, image points in px) and "
-      "the camera's intrinsics and pose (JSON).");
+  CLI::App* cmd = add_command(app, "render");
   add_common_options(*cmd, o->common,
                      "FILE.mp4: an H.264 video (MPEG-4 part 2 if H.264 cannot be encoded) with "
                      "FILE.truth.csv and FILE.json beside it; anything else: a directory of "

@@ -107,13 +107,7 @@ void run_render_calibration(const RenderCalibrationOptions& o) {
 
 Command add_render_calibration_command(CLI::App& app) {
   auto o = std::make_shared<RenderCalibrationOptions>();
-  CLI::App* cmd = app.add_subcommand(
-      "render-calibration",
-      "Film a synthetic calibration session of the scene's camera: the board held at random "
-      "poses (intrinsics/), lying on the table at spread places (table/ and table.csv), and the "
-      "hand alone at encoder angles over a half turn (joint/ and joint.csv), with the scene's "
-      "effects, plus the true camera file (truth.yaml). Feeds flatland calibrate "
-      "(docs/CALIBRATION.md).");
+  CLI::App* cmd = add_command(app, "render-calibration");
   cmd->add_option("--scene", o->scene,
                   "Scene file with a camera section. Default: the bundled paper butterfly, " +
                       default_scene_path())

@@ -202,10 +202,7 @@ void run_simulate(const SimulateOptions& o) {
 
 Command add_simulate_command(CLI::App& app) {
   auto o = std::make_shared<SimulateOptions>();
-  CLI::App* cmd = app.add_subcommand(
-      "simulate",
-      "Simulate the scene once (default: the paper's butterfly, 2T = 1.181 s, k = -1.1393) and "
-      "report where the disk ends and the contact forces. Command-line values override the scene.");
+  CLI::App* cmd = add_command(app, "simulate");
   add_common_options(
       *cmd, o->common,
       "Write the trajectory as CSV to this file (SI units: t in s, angles in rad, "

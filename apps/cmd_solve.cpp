@@ -69,12 +69,7 @@ void run_solve(const SolveOptions& o) {
 
 Command add_solve_command(CLI::App& app) {
   auto o = std::make_shared<SolveOptions>();
-  CLI::App* cmd = app.add_subcommand(
-      "solve",
-      "Find the butterfly solution for one duration 2T: the dip k (or, with --solve-for d, the "
-      "hand shape parameter d) for which the disk is at the fingertip, s_h = 0, at t = T, so that "
-      "it comes to rest on the back of the hand at t = 2T (paper section 4.3; 2T = 1.181 s gives "
-      "k = -1.1393). Reports the contact forces of the solution.");
+  CLI::App* cmd = add_command(app, "solve");
   add_common_options(*cmd, o->common,
                      "Directory for trajectory.csv (the solution every 1 ms; SI units), "
                      "trajectory.png (theta and s_h against t) and forces.png (contact force "

@@ -514,11 +514,7 @@ void run_study(const StudyOptions& o) {
 
 Command add_study_command(CLI::App& app) {
   auto o = std::make_shared<StudyOptions>();
-  CLI::App* cmd = app.add_subcommand(
-      "study",
-      "Speed-accuracy studies (docs/ACCURACY.md). 'sim': the simulator's work-precision diagram "
-      "(RK4 at several steps, dopri5 and dop853 at rtol 1e-3 ... 1e-13, general and reduced "
-      "formulations): error in s_h(T) and in the solved k against CPU time.");
+  CLI::App* cmd = add_command(app, "study");
   cmd->add_option("name", o->name,
                   "Which study: sim, render, tracker, calibration, closed-loop. 'render': the "
                   "renderer's centroid error against cv::projectPoints and its frames/s against "

@@ -144,10 +144,7 @@ void run_surface(const SurfaceOptions& o) {
 
 Command add_surface_command(CLI::App& app) {
   auto o = std::make_shared<SurfaceOptions>();
-  CLI::App* cmd = app.add_subcommand(
-      "surface",
-      "Compute s_h at t = T for every (k, 2T) of a grid (paper Fig. 6); its zero level is the "
-      "locus of butterfly solutions. Runs in parallel.");
+  CLI::App* cmd = add_command(app, "surface");
   add_common_options(
       *cmd, o->common,
       "Directory for surface.csv (k, period in s, s_T; k-major rows) and surface.png "

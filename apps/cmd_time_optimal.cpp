@@ -77,13 +77,7 @@ void run_time_optimal(const TimeOptimalOptions& o) {
 
 Command add_time_optimal_command(CLI::App& app) {
   auto o = std::make_shared<TimeOptimalOptions>();
-  CLI::App* cmd = app.add_subcommand(
-      "time-optimal",
-      "Find the shortest duration 2T in [FROM, TO] whose butterfly solution keeps the normal "
-      "force >= 0 throughout (paper section 4.3: 2T = 1.095 s, k = -1.1493) and, with a friction "
-      "coefficient (--mu or the scene's contact.mu), needs no more friction than that (mu = 0.306 "
-      "gives the paper's 1.181 s). The binding constraint must be violated at FROM and hold at "
-      "TO.");
+  CLI::App* cmd = add_command(app, "time-optimal");
   add_common_options(*cmd, o->common,
                      "Directory for the solution's trajectory.csv (every 1 ms; SI units), "
                      "trajectory.png and forces.png with their gnuplot scripts; created if "

@@ -334,11 +334,7 @@ void run_track(const TrackOptions& o) {
 
 Command add_track_command(CLI::App& app) {
   auto o = std::make_shared<TrackOptions>();
-  CLI::App* cmd = app.add_subcommand(
-      "track",
-      "Track the disk in a video or an image sequence: per frame its centre (px, sub-pixel), the "
-      "centre's 1-sigma uncertainty (px), a quality score (0..1), the track state (found, "
-      "tracking, lost) and, with --encoder, the hand contact parameter s_h (CSV).");
+  CLI::App* cmd = add_command(app, "track");
   cmd->add_option("--video", o->video, "Input video file (anything OpenCV's FFmpeg backend reads)")
       ->type_name("FILE");
   cmd->add_option("--images", o->images,

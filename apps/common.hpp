@@ -2,6 +2,7 @@
 // command-line overrides, JSON and CSV output, staged (atomic) output files, progress bar, gnuplot.
 #pragma once
 
+#include "commands.hpp"
 #include "flatland/scene/scene.hpp"
 #include "flatland/sim/hybrid.hpp"
 #include "flatland/sim/search.hpp"
@@ -237,24 +238,5 @@ std::string solve_report_text(const sim::SolveReport& r);
 /// DIR/forces.png for a solved motion.
 void write_solution_outputs(OutputSet& outputs, const fs::path& dir, const sim::RunResult& run,
                             bool no_plot);
-
-/// Registered command: its CLI11 subcommand and what to run when it was selected.
-struct Command {
-  CLI::App* app;
-  std::function<void()> run;
-};
-
-Command add_simulate_command(CLI::App& app);
-Command add_solve_command(CLI::App& app);
-Command add_locus_command(CLI::App& app);
-Command add_surface_command(CLI::App& app);
-Command add_time_optimal_command(CLI::App& app);
-Command add_render_command(CLI::App& app);
-Command add_calibrate_command(CLI::App& app);
-Command add_render_calibration_command(CLI::App& app);
-Command add_track_command(CLI::App& app);
-Command add_experiment_command(CLI::App& app);
-Command add_montecarlo_command(CLI::App& app);
-Command add_study_command(CLI::App& app);
 
 }  // namespace flatland::app

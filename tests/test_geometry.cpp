@@ -9,6 +9,8 @@
 #include <cmath>
 #include <numbers>
 #include <stdexcept>
+#include <string>
+#include <vector>
 
 using namespace flatland::sim;
 
@@ -122,6 +124,61 @@ TEST(Geometry, ValidationNamesTheFailingCondition) {
   EXPECT_NE(message(PolynomialHand(0.18, -0.18, -0.9, 0.216), 0.051).find("self-intersect"),
             std::string::npos);
   EXPECT_NE(message(paper_hand(), -0.05).find("radius"), std::string::npos);
+}
+
+// The self-intersection check tests only segment pairs whose x ranges overlap; it must report
+// what a test of every pair of the same polyline reports (the first pair in outline order).
+TEST(Geometry, SelfIntersectionSweepFindsWhatEveryPairFinds) {
+  constexpr int kSamples = 2000, kStride = 4;  // validate_hand_for_disk's polyline
+  auto crosses = [](const Vec2& p1, const Vec2& p2, const Vec2& q1, const Vec2& q2) {
+    auto side = [](const Vec2& o, const Vec2& a, const Vec2& b) {
+      return (a - o).x() * (b - o).y() - (a - o).y() * (b - o).x();
+    };
+    return ((side(q1, q2, p1) > 0) != (side(q1, q2, p2) > 0)) &&
+           ((side(p1, p2, q1) > 0) != (side(p1, p2, q2) > 0));
+  };
+  int folded = 0, checked = 0;
+  // Tips reaching back over the palm: b and d of either sign and size fold the right half.
+  for (double b : {-0.18, -0.05, 0.05, 0.18})
+    for (double c : {-0.25, -0.1, 0.1})
+      for (double d = -0.6; d <= 0.6; d += 0.05) {
+        const PolynomialHand hand(0.18, b, c, d);
+        std::string message = "no error";
+        try {
+          validate_hand_for_disk(hand, 1e-4);
+        } catch (const std::invalid_argument& e) {
+          message = e.what();
+        }
+        // The checks before this one (cusp, crossing the mirror axis, tight wells) stop first.
+        if (message.find("between") == std::string::npos && message != "no error" &&
+            message.find("no well") == std::string::npos)
+          continue;
+        ++checked;
+        std::vector<Vec2> pts;
+        for (int i = 0; i <= kSamples; i += kStride)
+          pts.push_back(hand.geometry(-1.0 + 2.0 * i / kSamples, 0).point);
+        int first_i = -1;
+        for (std::size_t i = 0; i + 1 < pts.size() && first_i < 0; ++i)
+          for (std::size_t j = i + 2; j + 1 < pts.size(); ++j)
+            if (crosses(pts[i], pts[i + 1], pts[j], pts[j + 1])) {
+              first_i = static_cast<int>(i);
+              break;
+            }
+        if (first_i < 0) {
+          EXPECT_EQ(message.find("between"), std::string::npos) << "b=" << b << " d=" << d;
+          continue;
+        }
+        ++folded;
+        const std::string key = "self-intersects between at s_h=";
+        const auto at = message.find(key);
+        ASSERT_NE(at, std::string::npos)
+            << message << " (b=" << b << " c=" << c << " d=" << d << ")";
+        EXPECT_NEAR(std::stod(message.substr(at + key.size())),
+                    -1.0 + 2.0 * first_i * kStride / kSamples, 1e-9)
+            << message;
+      }
+  EXPECT_GT(folded, 5);
+  EXPECT_GT(checked, folded);
 }
 
 TEST(Geometry, BadObjectsAndMotionsAreRejected) {

@@ -151,8 +151,10 @@ double half_period_s_h(const SimulationSpec& spec, double period, double k, long
   return s_at_half_period(build_problem(s), s, period, k, rhs_evals);
 }
 
-SolveReport evaluate(const SimulationSpec& spec, double period, double k) {
-  check_period(period);
+namespace {
+/// evaluate() on an already built problem of the same spec (the motion is replaced).
+SolveReport evaluate_on(const std::shared_ptr<const RollingProblem>& base,
+                        const SimulationSpec& spec, double period, double k) {
   SimulationSpec s = paper_model(spec);
   s.motion.kind = MotionSpec::Kind::kButterfly;
   s.motion.period = period;
@@ -163,7 +165,7 @@ SolveReport evaluate(const SimulationSpec& spec, double period, double k) {
   rep.period = period;
   rep.k = k;
   rep.d = s.hand.d;
-  rep.run = simulate(build_problem(s), s.initial, o);
+  rep.run = simulate(with_motion(base, period, k), s.initial, o);
   const RunResult& r = rep.run;
   const double T = s.initial.t0 + 0.5 * period;
   rep.s_T = r.trajectory.s_h(T);
@@ -182,6 +184,16 @@ SolveReport evaluate(const SimulationSpec& spec, double period, double k) {
   rep.simulations += 1;
   rep.rhs_evals += r.stats.rhs_evals;
   return rep;
+}
+}  // namespace
+
+SolveReport evaluate(const SimulationSpec& spec, double period, double k) {
+  check_period(period);
+  SimulationSpec s = paper_model(spec);
+  s.motion.kind = MotionSpec::Kind::kButterfly;
+  s.motion.period = period;
+  s.motion.k = k;
+  return evaluate_on(build_problem(s), s, period, k);
 }
 
 namespace {
@@ -207,7 +219,7 @@ SolveReport solve_k_from(const SimulationSpec& spec,
   if (!root.converged)
     throw std::runtime_error("solve: root finder did not converge for 2T = " + num(period) + " s");
   check_root_is_continuous(f, root, set.tolerance, lo, hi, "k");
-  SolveReport rep = evaluate(spec, period, root.x);
+  SolveReport rep = evaluate_on(base, spec, period, root.x);
   rep.simulations += sims;
   rep.rhs_evals += rhs;
   return rep;
