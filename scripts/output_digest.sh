@@ -3,7 +3,8 @@
 # "Refactoring"): run it with the flatland built before and after a change and diff the two.
 #   scripts/output_digest.sh [FLATLAND] > before.txt
 # Each line: an md5 and what it digests. Outputs that carry wall-clock times (timings, dates) are
-# left out of the digest field by field, not file by file.
+# left out of the digest field by field, not file by file, and so are the paths of the output and
+# the scene (the bundled scenes are found at run time, wherever the program is).
 set -euo pipefail
 flatland=${1:-build/bin/flatland}
 work=$(mktemp -d)
@@ -14,7 +15,7 @@ strip_times() {
   python3 -c 'import json,sys
 def drop(v):
     if isinstance(v, dict):
-        return {k: drop(x) for k, x in v.items() if not any(w in k for w in ("wall", "elapsed", "seconds", "_ms", "timing")) and k not in ("out", "output")}
+        return {k: drop(x) for k, x in v.items() if not any(w in k for w in ("wall", "elapsed", "seconds", "_ms", "timing")) and k not in ("out", "output", "scene")}
     if isinstance(v, list):
         return [drop(x) for x in v]
     return v

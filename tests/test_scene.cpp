@@ -10,11 +10,14 @@
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <numbers>
 #include <string>
+
+#include <unistd.h>
 
 namespace {
 
@@ -115,10 +118,33 @@ void expect_field_error(const std::string& yaml, const std::string& field,
 // --------------------------------------------------------------------------------------------
 // Bundled scenes
 
+// Found at run time beside the program (build/bin/../share/flatland links to assets/), never
+// through a path compiled in from the source tree.
 TEST(SceneTest, DefaultScenePathIsTheButterfly) {
+  namespace fs = std::filesystem;
+  ASSERT_EQ(std::getenv("FLATLAND_DATA_DIR"), nullptr) << "the test sets it itself";
   const std::string p = flatland::default_scene_path();
-  EXPECT_EQ(p, std::string(FLATLAND_ASSET_DIR) + "/scenes/butterfly.yaml");
-  EXPECT_TRUE(std::filesystem::exists(p));
+  EXPECT_TRUE(fs::equivalent(p, std::string(FLATLAND_ASSET_DIR) + "/scenes/butterfly.yaml")) << p;
+  const fs::path self = fs::read_symlink("/proc/self/exe");
+  EXPECT_EQ(fs::path(flatland::data_directory()),
+            (self.parent_path() / ".." / "share" / "flatland").lexically_normal());
+}
+
+TEST(SceneTest, DataDirectoryFromTheEnvironmentComesFirst) {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::temp_directory_path() / ("flatland_data_" + std::to_string(::getpid()));
+  fs::create_directories(dir / "scenes");
+  std::ofstream(dir / "scenes" / "butterfly.yaml") << "name: x\n";
+  ::setenv("FLATLAND_DATA_DIR", dir.c_str(), 1);
+  const std::string found = flatland::data_directory();
+  // Without a butterfly.yaml the environment's directory is passed over.
+  fs::remove(dir / "scenes" / "butterfly.yaml");
+  const std::string passed_over = flatland::data_directory();
+  ::unsetenv("FLATLAND_DATA_DIR");
+  fs::remove_all(dir);
+  EXPECT_EQ(found, dir.string());
+  EXPECT_NE(passed_over, dir.string());
+  EXPECT_TRUE(fs::exists(fs::path(passed_over) / "scenes" / "butterfly.yaml")) << passed_over;
 }
 
 TEST(SceneTest, ButterflySceneHasThePapersValuesInSI) {

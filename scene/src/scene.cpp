@@ -11,10 +11,12 @@
 #include <algorithm>
 #include <array>
 #include <cerrno>
+#include <cstdlib>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <initializer_list>
 #include <limits>
 #include <numbers>
@@ -821,6 +823,24 @@ Scene load_scene(const std::string& path) {
   return parse_scene(text, path);
 }
 
-std::string default_scene_path() { return FLATLAND_ASSET_DIR "/scenes/butterfly.yaml"; }
+std::string data_directory() {
+  namespace fs = std::filesystem;
+  std::vector<fs::path> places;
+  if (const char* env = std::getenv("FLATLAND_DATA_DIR"); env && *env) places.emplace_back(env);
+  std::error_code ec;
+  const fs::path self = fs::read_symlink("/proc/self/exe", ec);
+  if (!ec) {
+    places.push_back(self.parent_path() / ".." / "share" / "flatland");  // PREFIX/bin
+    places.push_back(self.parent_path() / ".." / ".." / "share" / "flatland");  // PREFIX/libexec/x
+  }
+  places.emplace_back(FLATLAND_INSTALL_DATA_DIR);
+  for (const fs::path& p : places)
+    if (fs::is_regular_file(p / "scenes" / "butterfly.yaml", ec))
+      return p.lexically_normal().string();
+  // Nothing found: the first place, so that loading names where the scenes were expected.
+  return places.front().lexically_normal().string();
+}
+
+std::string default_scene_path() { return data_directory() + "/scenes/butterfly.yaml"; }
 
 }  // namespace flatland

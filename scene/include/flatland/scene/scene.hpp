@@ -146,7 +146,14 @@ struct Scene {
 Scene parse_scene(const std::string& yaml_text, const std::string& origin = "<string>");
 /// Read a file and parse it; an unreadable file is a SceneError too.
 Scene load_scene(const std::string& path);
-/// The bundled default scene (the paper's butterfly): assets/scenes/butterfly.yaml.
+/// The directory of flatland's bundled data (scenes/, boards/, shapes/), found at run time: the
+/// environment's FLATLAND_DATA_DIR when set; else share/flatland beside the running program
+/// (PREFIX/bin/../share/flatland, or from PREFIX/libexec/flatland/; the build tree has
+/// build/share/flatland); else the installed PREFIX/share/flatland. The first that holds
+/// scenes/butterfly.yaml; when none does, the first of them (loading a scene from it then names
+/// the missing file).
+std::string data_directory();
+/// The bundled default scene (the paper's butterfly): data_directory()/scenes/butterfly.yaml.
 std::string default_scene_path();
 
 }  // namespace flatland

@@ -1,0 +1,46 @@
+// flatland: the whole library in one include (find_package(flatland), flatland::flatland).
+// Each module also has its own headers, <flatland/MODULE/...>, for a program that needs less:
+// docs/DEVELOPING.md, "Layers", says what each module holds and what it depends on.
+#pragma once
+
+
+#include "flatland/sim/contact.hpp"
+#include "flatland/sim/curve.hpp"
+#include "flatland/sim/hybrid.hpp"
+#include "flatland/sim/motion.hpp"
+#include "flatland/sim/object.hpp"
+#include "flatland/sim/rolling.hpp"
+#include "flatland/sim/roots.hpp"
+#include "flatland/sim/search.hpp"
+#include "flatland/sim/simulate.hpp"
+#include "flatland/sim/spec.hpp"
+
+#include "flatland/scene/scene.hpp"
+
+#include "flatland/render/camera.hpp"
+#include "flatland/render/effects.hpp"
+#include "flatland/render/gl_context.hpp"
+#include "flatland/render/renderer.hpp"
+
+#include "flatland/vision/hand_pose.hpp"
+#include "flatland/vision/image_file.hpp"
+#include "flatland/vision/mapping.hpp"
+#include "flatland/vision/tracker.hpp"
+#include "flatland/vision/video_reader.hpp"
+
+#include "flatland/calibration/camera_file.hpp"
+#include "flatland/calibration/intrinsics.hpp"
+#include "flatland/calibration/joint.hpp"
+#include "flatland/calibration/report.hpp"
+#include "flatland/calibration/session.hpp"
+
+#include "flatland/control/controller.hpp"
+#include "flatland/control/estimator.hpp"
+#include "flatland/control/types.hpp"
+
+#include "flatland/drivers/experiment.hpp"
+#include "flatland/drivers/interfaces.hpp"
+#include "flatland/drivers/live.hpp"
+#include "flatland/drivers/montecarlo.hpp"
+#include "flatland/drivers/recorded.hpp"
+#include "flatland/drivers/synthetic.hpp"
