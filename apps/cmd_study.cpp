@@ -291,7 +291,7 @@ void run_sim_study(const StudyOptions& o) {
 
 // ---- study calibration ------------------------------------------------------------------------
 
-// The camera of tests/test_calibration_intrinsics.cpp: VGA, f = 800 px, an off-centre principal
+// The camera of tests/calibration/test_calibration_intrinsics.cpp: VGA, f = 800 px, an off-centre principal
 // point and barrel distortion, so that every parameter has something to recover.
 namespace {
 

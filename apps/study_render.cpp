@@ -126,7 +126,7 @@ double disk_radius_px(const render::CameraModel& cam, cv::Point2d c, double radi
   return r;
 }
 
-/// The window the centroid is taken over (tests/test_render.cpp's): 1.4 apparent radii around
+/// The window the centroid is taken over (tests/render/test_render.cpp's): 1.4 apparent radii around
 /// the truth, so that it holds the whole disk and a border of table.
 cv::Rect centroid_window(cv::Point2d around, double radius_px) {
   const int r = static_cast<int>(radius_px * 1.4);
@@ -138,7 +138,7 @@ bool inside(const cv::Rect& roi, int width, int height, int margin) {
          roi.y + roi.height <= height - margin;
 }
 
-/// Intensity centroid of the disk's bright face, the method of tests/test_render.cpp
+/// Intensity centroid of the disk's bright face, the method of tests/render/test_render.cpp
 /// (Render.DiskCentroidMatchesProjectedCentre): weights are the excess over the table level (the
 /// median of the window's top row) less 5 DN, so the dark O-ring, rubber side and table weigh
 /// nothing.
@@ -354,7 +354,7 @@ void run_render_study(const StudyOptions& o) {
   const int n_positions = o.quick ? 4 : 24;
   const double timing_seconds = o.quick ? 0.05 : 0.5;  // per cell, wall
   const std::uint64_t seed = scene.effects.seed;
-  const double bound = 0.05;  // px: the renderer's acceptance bound (tests/test_render.cpp)
+  const double bound = 0.05;  // px: the renderer's acceptance bound (tests/render/test_render.cpp)
 
   const double load_start = load_average_1min();
   const auto wall0 = std::chrono::steady_clock::now();

@@ -18,7 +18,7 @@ using namespace flatland::calibration;
 
 namespace {
 
-// The test suite's setup (tests/test_calibration_intrinsics.cpp): fx = fy = 800 px, barrel
+// The test suite's setup (tests/calibration/test_calibration_intrinsics.cpp): fx = fy = 800 px, barrel
 // distortion, a 16 x 12 chessboard of 25 mm squares tilted 15-45 deg, 4 x 4 anti-aliasing,
 // sigma = 1 DN noise.
 const std::vector<BoardView>& views() {
