@@ -2,7 +2,7 @@
 // or ChArUco), written as a camera file (OpenCV YAML, ROS camera_info layout).
 #include "common.hpp"
 
-#include "flatland/calibration/camera_file.hpp"
+#include "flatland/camera/camera_file.hpp"
 #include "flatland/calibration/intrinsics.hpp"
 #include "flatland/calibration/joint.hpp"
 #include "flatland/calibration/report.hpp"
@@ -40,11 +40,11 @@ const char* kRationalNames[3] = {"k4", "k5", "k6"};
 
 void warn(const std::string& message) { std::cerr << "flatland: warning: " << message << "\n"; }
 
-std::string describe(const calibration::BoardSpec& b) {
+std::string describe(const camera::Board& b) {
   const cv::Size p = b.pattern_size();
   const std::string inner = std::to_string(p.width) + "x" + std::to_string(p.height);
   const std::string squares = std::to_string(b.squares_x) + "x" + std::to_string(b.squares_y);
-  return b.kind == calibration::BoardSpec::Kind::kChessboard
+  return b.kind == camera::Board::Kind::kChessboard
              ? "a chessboard of " + inner + " inner corners (" + squares + " squares)"
              : "a ChArUco board of " + squares + " squares (" + inner + " inner corners)";
 }
@@ -55,12 +55,12 @@ constexpr std::size_t kHintImages = 3;
 
 // The board was found nowhere: say what was searched for and, if the same numbers in the other
 // count find a board, say so (people count a chessboard's squares, or a ChArUco board's corners).
-std::string board_found_nowhere(const calibration::BoardSpec& board,
+std::string board_found_nowhere(const camera::Board& board,
                                 const std::vector<std::string>& readable) {
   std::string message = "board found in no image (" + std::to_string(readable.size()) +
                         " images searched for " + describe(board) + ", --board " +
                         board.notation() + ")";
-  const std::optional<calibration::BoardSpec> other = board.other_count();
+  const std::optional<camera::Board> other = board.other_count();
   if (!other) return message;
   std::size_t tried = 0, found = 0;
   for (const std::string& f : readable) {
@@ -71,7 +71,7 @@ std::string board_found_nowhere(const calibration::BoardSpec& board,
     if (!image.empty() && calibration::detect_board(image, *other, f)) ++found;
   }
   if (found == 0) return message;
-  const bool chessboard = board.kind == calibration::BoardSpec::Kind::kChessboard;
+  const bool chessboard = board.kind == camera::Board::Kind::kChessboard;
   return message + "; but " + describe(*other) + " is in " + std::to_string(found) +
          " of the first " + std::to_string(tried) + ": flatland counts " +
          (chessboard ? "a chessboard by its inner corners, as OpenCV's patternSize does"
@@ -89,7 +89,7 @@ struct DetectedViews {
 };
 
 DetectedViews detect_views(const std::vector<std::string>& files,
-                           const calibration::BoardSpec& board) {
+                           const camera::Board& board) {
   DetectedViews d;
   std::string first_sized;
   std::vector<std::string> readable;
@@ -159,14 +159,14 @@ void stage_report(OutputSet& outputs, const fs::path& dir, const calibration::In
                  {"coverage_fraction", calibration::coverage_fraction(r, views)}};
 }
 
-void intrinsics_section(const CalibrateOptions& o, const calibration::BoardSpec& board,
+void intrinsics_section(const CalibrateOptions& o, const camera::Board& board,
                         const calibration::IntrinsicsOptions& options,
-                        calibration::CameraFile& file, Json& j, std::ostream& os,
+                        camera::CameraFile& file, Json& j, std::ostream& os,
                         OutputSet& outputs) {
   const DetectedViews d = detect_views(expand_file_patterns(o.images, "--images"), board);
   const calibration::IntrinsicsResult r = calibration::calibrate_intrinsics(d.views, options);
   file.camera = r.camera();
-  calibration::CalibrationReport report = r.report();
+  camera::CalibrationReport report = r.report();
   report.views_rejected.insert(report.views_rejected.begin(), d.not_found.begin(),
                                d.not_found.end());
   file.report = report;
@@ -221,7 +221,7 @@ void intrinsics_section(const CalibrateOptions& o, const calibration::BoardSpec&
 // ---- table pose and joint: images listed in a CSV, each the camera's size
 
 cv::Mat read_listed_image(const std::string& option, const std::string& path,
-                          const render::CameraModel& camera) {
+                          const camera::CameraModel& camera) {
   std::string why;
   const cv::Mat image = vision::read_image_file(path, cv::IMREAD_COLOR, why);
   if (image.empty()) throw UsageError(option + ": " + path + ": " + why);
@@ -232,14 +232,14 @@ cv::Mat read_listed_image(const std::string& option, const std::string& path,
   return image;
 }
 
-void table_section(const CalibrateOptions& o, const calibration::BoardSpec& board,
+void table_section(const CalibrateOptions& o, const camera::Board& board,
                    const std::vector<calibration::TablePlacement>& rows,
-                   calibration::CameraFile& file, Json& j, std::ostream& os) {
+                   camera::CameraFile& file, Json& j, std::ostream& os) {
   std::vector<cv::Mat> images;
-  std::vector<TargetSpec> boards;
+  std::vector<camera::PlacedBoard> boards;
   for (const calibration::TablePlacement& p : rows) {
     images.push_back(read_listed_image("--table", p.image, file.camera));
-    boards.push_back(p.target(board));
+    boards.push_back(p.placed(board));
   }
   calibration::TablePose pose;
   try {
@@ -251,7 +251,7 @@ void table_section(const CalibrateOptions& o, const calibration::BoardSpec& boar
   file.camera.t = pose.t;
   file.has_table_pose = true;
   file.table_report =
-      calibration::TablePoseReport{pose.rms_px, pose.corners, static_cast<int>(rows.size())};
+      camera::TablePoseReport{pose.rms_px, pose.corners, static_cast<int>(rows.size())};
   const cv::Vec3d rv = file.camera.rvec(), c = file.camera.position_in_table();
   j["table"] = {{"rms_px", number(pose.rms_px)},
                 {"corners", pose.corners},
@@ -266,7 +266,7 @@ void table_section(const CalibrateOptions& o, const calibration::BoardSpec& boar
 }
 
 void joint_section(const CalibrateOptions& o, const Scene& scene,
-                   const std::vector<calibration::JointImage>& rows, calibration::CameraFile& file,
+                   const std::vector<calibration::JointImage>& rows, camera::CameraFile& file,
                    Json& j, std::ostream& os) {
   std::vector<cv::Mat> images;
   std::vector<double> encoder;
@@ -275,7 +275,7 @@ void joint_section(const CalibrateOptions& o, const Scene& scene,
     encoder.push_back(r.encoder);
   }
   calibration::JointReport report;
-  calibration::JointCalibration joint;
+  camera::JointCalibration joint;
   try {
     joint = calibration::calibrate_joint(images, encoder, file.camera, scene.render.hand_thickness,
                                          &report);
@@ -283,7 +283,7 @@ void joint_section(const CalibrateOptions& o, const Scene& scene,
     throw UsageError("--joint " + o.joint + ": " + e.what());
   }
   file.joint = joint;
-  calibration::JointFitReport fit;
+  camera::JointFitReport fit;
   fit.images = static_cast<int>(rows.size());
   fit.inliers = static_cast<int>(std::count(report.inlier.begin(), report.inlier.end(), true));
   fit.center_rms_m = report.center_rms;
@@ -349,14 +349,14 @@ void run_calibrate(const CalibrateOptions& o) {
   calibration::IntrinsicsOptions intrinsics_options;  // parsed with the other bad input
   intrinsics_options.parse_fixed(o.fix);
   intrinsics_options.rational_model = o.rational;
-  std::optional<calibration::BoardSpec> board;
-  if (!o.board.empty()) board = calibration::BoardSpec::parse(o.board);
-  std::optional<calibration::BoardSpec> table_board = board;
-  if (!o.table_board.empty()) table_board = calibration::BoardSpec::parse(o.table_board);
+  std::optional<camera::Board> board;
+  if (!o.board.empty()) board = camera::Board::parse(o.board);
+  std::optional<camera::Board> table_board = board;
+  if (!o.table_board.empty()) table_board = camera::Board::parse(o.table_board);
   if (!o.table.empty() && !table_board)
     throw UsageError("--table: needs the board: --table-board SPEC (or --board)");
-  std::optional<calibration::CameraFile> start;
-  if (!o.camera.empty()) start = calibration::read_camera_file(o.camera);
+  std::optional<camera::CameraFile> start;
+  if (!o.camera.empty()) start = camera::read_camera_file(o.camera);
   if (!o.table.empty() && !intrinsics && !start)
     throw UsageError(
         "--table: needs the camera's intrinsics: --images in the same run, or "
@@ -380,7 +380,7 @@ void run_calibrate(const CalibrateOptions& o) {
 
   // libpng/libjpeg complain on stderr about corrupt files; our own warning names the file.
   cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_ERROR);
-  calibration::CameraFile file = start.value_or(calibration::CameraFile{});
+  camera::CameraFile file = start.value_or(camera::CameraFile{});
   file.camera_name = o.camera_name_opt && o.camera_name_opt->count()
                          ? o.camera_name
                          : (start ? start->camera_name : o.camera_name);
@@ -420,7 +420,7 @@ void run_calibrate(const CalibrateOptions& o) {
 
   // ---- write
   outputs.ensure_directory(out.parent_path().empty() ? fs::path(".") : out.parent_path());
-  calibration::write_camera_file(outputs.reserve(out).string(), file);
+  camera::write_camera_file(outputs.reserve(out).string(), file);
   outputs.commit();
 
   if (o.json) {

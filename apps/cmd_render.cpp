@@ -2,7 +2,7 @@
 // directory of PNG frames, with the ground truth of every frame (CSV) and the camera (JSON).
 #include "common.hpp"
 
-#include "flatland/calibration/camera_file.hpp"
+#include "flatland/camera/camera_file.hpp"
 
 #include "flatland/render/renderer.hpp"
 #include "flatland/sim/curve.hpp"
@@ -104,7 +104,7 @@ cv::Mat to_bgr8(const cv::Mat& image) {
 /// = f_n n + f_t t (n the hand's outward normal, t its tangent towards increasing s_h, both rotated
 /// by theta into the table frame) is drawn from the projected contact point, 0.1 m on the table per
 /// in-plane weight m g sin(tilt).
-void draw_overlay(cv::Mat& bgr, const render::CameraModel& camera, const sim::PolynomialHand& hand,
+void draw_overlay(cv::Mat& bgr, const camera::CameraModel& camera, const sim::PolynomialHand& hand,
                   const sim::Sample& s, const render::FrameTruth& truth) {
   const double c = std::cos(s.theta), sn = std::sin(s.theta);
   const auto rotate = [&](const sim::Vec2& v) {
@@ -158,7 +158,7 @@ Json effects_json(const EffectsSpec& e) {
   return j;
 }
 
-Json camera_json(const render::CameraModel& m, const CameraSpec& spec) {
+Json camera_json(const camera::CameraModel& m, const CameraSpec& spec) {
   Json j;
   j["width"] = m.width;
   j["height"] = m.height;
@@ -256,7 +256,7 @@ void run_render(const RenderOptions& o) {
   // The renderer validates the camera and effects (bad input) and makes the GL context (a
   // runtime failure), both before any file exists.
   render::Renderer renderer(scene, backend);
-  const render::CameraModel& model = renderer.camera();
+  const camera::CameraModel& model = renderer.camera();
   const std::string gl = renderer.gl_description();
 
   // ---- outputs: the video (or the frame directory) first, so that a missing codec fails fast
@@ -375,12 +375,12 @@ void run_render(const RenderOptions& o) {
   // What flatland track needs to map these frames to s_h: the camera (with the table pose and
   // the joint: the hand pivots at the table origin, its encoder reads the true angle) and the
   // encoder log.
-  calibration::CameraFile camera_file;
+  camera::CameraFile camera_file;
   camera_file.camera_name = scene.name.empty() ? "flatland" : scene.name;
   camera_file.camera = model;
   camera_file.has_table_pose = true;
-  camera_file.joint = calibration::JointCalibration{};
-  calibration::write_camera_file(outputs.reserve(camera_path).string(), camera_file);
+  camera_file.joint = camera::JointCalibration{};
+  camera::write_camera_file(outputs.reserve(camera_path).string(), camera_file);
   outputs.stage(encoder_path, encoder_csv(run.trajectory));
   Json meta;
   meta["scene"] = scene.origin;

@@ -3,7 +3,8 @@
 // `flatland calibrate` reads and the true camera file, to test the calibration chain end to end.
 #include "common.hpp"
 
-#include "flatland/calibration/session.hpp"
+#include "flatland/camera/camera_file.hpp"
+#include "flatland/drivers/calibration_session.hpp"
 
 #include <opencv2/imgcodecs.hpp>
 
@@ -41,13 +42,13 @@ void run_render_calibration(const RenderCalibrationOptions& o) {
     throw UsageError(scene.origin +
                      ": camera: missing (render-calibration films the scene's "
                      "camera; e.g. assets/scenes/butterfly-camera.yaml)");
-  calibration::SessionOptions so;
+  drivers::SessionOptions so;
   so.intrinsics_views = o.intrinsics_views;
   so.table_views = o.table_views;
   so.joint_views = o.joint_views;
   so.seed = static_cast<std::uint64_t>(o.seed);
   so.board = o.board;
-  if (!so.board.empty()) calibration::BoardSpec::parse(so.board);  // bad input before any work
+  if (!so.board.empty()) camera::Board::parse(so.board);  // bad input before any work
   const fs::path out = o.out;
   check_output_directory("--out", out, o.force);
 
@@ -56,11 +57,11 @@ void run_render_calibration(const RenderCalibrationOptions& o) {
   for (const char* sub : {"intrinsics", "table", "joint"}) outputs.ensure_directory(out / sub);
   const long total = so.intrinsics_views + so.table_views + so.joint_views;
   long done = 0;
-  calibration::CalibrationSession session;
+  drivers::CalibrationSession session;
   {
     ProgressBar bar("render-calibration");
     std::vector<unsigned char> png;
-    session = calibration::render_calibration_session(
+    session = drivers::render_calibration_session(
         scene, so, [&](const std::string& path, const cv::Mat& image) {
           if (!cv::imencode(".png", image, png))
             throw std::runtime_error("cannot encode " + path + " as PNG");
@@ -70,7 +71,7 @@ void run_render_calibration(const RenderCalibrationOptions& o) {
   }
   outputs.stage(out / "table.csv", calibration::table_csv(session.table));
   outputs.stage(out / "joint.csv", calibration::joint_csv(session.joint));
-  calibration::write_camera_file(outputs.reserve(out / "truth.yaml").string(), session.truth);
+  camera::write_camera_file(outputs.reserve(out / "truth.yaml").string(), session.truth);
   const std::string board = session.board.notation();
   const std::string command =
       "flatland calibrate --images '" + (out / "intrinsics").string() + "/*.png' --board " + board +

@@ -3,7 +3,7 @@
 // parameter s_h through the camera file's calibration (docs/VISION.md).
 #include "common.hpp"
 
-#include "flatland/calibration/camera_file.hpp"
+#include "flatland/camera/camera_file.hpp"
 #include "flatland/vision/image_file.hpp"
 #include "flatland/vision/mapping.hpp"
 #include "flatland/vision/tracker.hpp"
@@ -68,7 +68,7 @@ struct FrameCounts {
 };
 
 /// Every frame must be the camera file's size: its K describes that image and no other.
-void check_frame_size(const cv::Mat& image, const render::CameraModel& camera,
+void check_frame_size(const cv::Mat& image, const camera::CameraModel& camera,
                       const std::string& camera_path) {
   if (image.cols != camera.width || image.rows != camera.height)
     throw UsageError("frames are " + std::to_string(image.cols) + " x " +
@@ -151,8 +151,8 @@ void run_track(const TrackOptions& o) {
     throw UsageError("--out: must be a file name (FILE.csv), not a directory: " + o.out);
   check_output_file("--out", out, o.force);
   const vision::TrackMethod method = vision::parse_track_method(o.method);
-  const calibration::CameraFile camfile = calibration::read_camera_file(o.camera);
-  const render::CameraModel& camera = camfile.camera;
+  const camera::CameraFile camfile = camera::read_camera_file(o.camera);
+  const camera::CameraModel& camera = camfile.camera;
   if (o.fps_opt->count()) require_positive("--fps", o.fps, "frames per s");
   if (!(o.min_quality >= 0 && o.min_quality <= 1))
     throw UsageError("--min-quality: must be in [0, 1], got " + format_number(o.min_quality));

@@ -6,6 +6,7 @@
 // bench/render_bench.cpp).
 #include "study_vision.hpp"
 
+#include "flatland/model/compile.hpp"
 #include "flatland/render/renderer.hpp"
 #include "flatland/vision/mapping.hpp"
 
@@ -35,7 +36,7 @@ Scene load_camera_scene(const StudyOptions& o, const std::string& study) {
   if (!scene.camera)
     throw UsageError(scene.origin + ": camera: the scene has no camera section (needed by study " +
                      study + ")");
-  render::CameraModel::from_spec(*scene.camera);  // invalid_argument (exit 2) naming the field
+  flatland::model::compile_camera(*scene.camera);  // invalid_argument (exit 2) naming the field
   return scene;
 }
 
@@ -60,7 +61,7 @@ const std::string kLogTics = [] {
 }();
 
 Json camera_summary(const CameraSpec& spec) {
-  const render::CameraModel m = render::CameraModel::from_spec(spec);
+  const camera::CameraModel m = flatland::model::compile_camera(spec);
   Json j;
   j["width"] = m.width;
   j["height"] = m.height;
@@ -114,7 +115,7 @@ CameraSpec scaled_camera(CameraSpec c, double s) {
 
 /// The disk's apparent radius (px) at `c`: the largest distance of its projected rim (top face)
 /// from its projected centre.
-double disk_radius_px(const render::CameraModel& cam, cv::Point2d c, double radius, double z) {
+double disk_radius_px(const camera::CameraModel& cam, cv::Point2d c, double radius, double z) {
   std::vector<cv::Point3d> pts{{c.x, c.y, z}};
   for (int i = 0; i < 32; ++i) {
     const double a = 2 * std::numbers::pi * i / 32;
@@ -188,7 +189,7 @@ Scene cell_scene(const Scene& scene, double scale, int factor) {
 std::vector<Position> free_positions(const Scene& scene, const std::vector<double>& scales, int n,
                                      std::uint64_t seed) {
   const double radius = scene.sim.object.radius, z = scene.render.disk_thickness;
-  std::vector<render::CameraModel> cams;
+  std::vector<camera::CameraModel> cams;
   std::vector<cv::Mat> backgrounds;
   for (double s : scales) {
     render::Renderer r(cell_scene(scene, s, 1));
@@ -197,7 +198,7 @@ std::vector<Position> free_positions(const Scene& scene, const std::vector<doubl
     cv::cvtColor(r.render_8u(disk_at({1e3, 1e3}, 0)), gray, cv::COLOR_BGR2GRAY);
     backgrounds.push_back(gray);
   }
-  const render::CameraModel& cam = cams.front();
+  const camera::CameraModel& cam = cams.front();
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> U(0, 1);
   std::vector<Position> out;
@@ -208,7 +209,7 @@ std::vector<Position> free_positions(const Scene& scene, const std::vector<doubl
     if (!p) continue;
     bool ok = true;
     for (std::size_t i = 0; i < cams.size() && ok; ++i) {
-      const render::CameraModel& c = cams[i];
+      const camera::CameraModel& c = cams[i];
       cv::Rect roi =
           centroid_window(c.project(cv::Point3d(p->x, p->y, z)), disk_radius_px(c, *p, radius, z));
       roi = cv::Rect(roi.x - 3, roi.y - 3, roi.width + 6, roi.height + 6);
@@ -233,7 +234,7 @@ RenderCell measure_cell(const Scene& scene, double scale, int factor,
                         std::string& gl, const std::function<void()>& tick) {
   render::Renderer r(cell_scene(scene, scale, factor));
   gl = r.gl_description();
-  const render::CameraModel& cam = r.camera();
+  const camera::CameraModel& cam = r.camera();
   const double radius = scene.sim.object.radius, z = scene.render.disk_thickness;
   RenderCell c;
   c.supersample = factor;
@@ -377,7 +378,7 @@ void run_render_study(const StudyOptions& o) {
       std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
   const double load_end = load_average_1min();
 
-  const render::CameraModel base = render::CameraModel::from_spec(*scene.camera);
+  const camera::CameraModel base = flatland::model::compile_camera(*scene.camera);
   Json j;
   j["study"] = "render";
   j["scene"] = scene.origin;

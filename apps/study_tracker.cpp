@@ -6,6 +6,7 @@
 // lost frames per (method, exposure, noise).
 #include "study_vision.hpp"
 
+#include "flatland/model/compile.hpp"
 #include "flatland/render/effects.hpp"
 #include "flatland/render/renderer.hpp"
 #include "flatland/vision/mapping.hpp"
@@ -62,7 +63,7 @@ double max_of(const std::vector<double>& v) {
 }
 
 /// The projected disk centre's path length (px) over [t - e/2, t + e/2].
-double streak_px(const render::CameraModel& cam, const sim::Trajectory& tr, double z, double t,
+double streak_px(const camera::CameraModel& cam, const sim::Trajectory& tr, double z, double t,
                  double exposure) {
   if (exposure <= 0) return 0;
   double len = 0;
@@ -79,7 +80,7 @@ double streak_px(const render::CameraModel& cam, const sim::Trajectory& tr, doub
 }
 
 /// |mean of the projected centres at the renderer's sub-frame times - projected centre at t| (px).
-double subframe_shift_px(const render::CameraModel& cam, const sim::Trajectory& tr, double z,
+double subframe_shift_px(const camera::CameraModel& cam, const sim::Trajectory& tr, double z,
                          double t, double exposure, int subframes) {
   auto at = [&](double ts) {
     const auto c = tr.sample(std::clamp(ts, tr.t_begin(), tr.t_end())).object_position;
@@ -152,7 +153,7 @@ void run_tracker_study(const StudyOptions& o) {
     throw UsageError(scene.origin + ": study tracker: the run (" +
                      format_number(tr.t_end() - tr.t_begin()) + " s) gives fewer than 3 frames");
 
-  const render::CameraModel cam0 = render::CameraModel::from_spec(*scene.camera);
+  const camera::CameraModel cam0 = flatland::model::compile_camera(*scene.camera);
   std::vector<BlurLevel> blurs;
   for (double f : fractions) {
     BlurLevel b;

@@ -1,6 +1,9 @@
 // Calibration wall time for 20 rendered chessboard views: flatland's Ceres calibration (both
 // passes, with and without the covariance) against cv::calibrateCamera on the same corners.
 // Results: docs/CALIBRATION.md.
+#include "flatland/model/compile.hpp"
+#include "flatland/camera/board.hpp"
+#include "flatland/camera/camera_model.hpp"
 #include "flatland/calibration/intrinsics.hpp"
 #include "flatland/render/effects.hpp"
 #include "flatland/render/renderer.hpp"
@@ -31,8 +34,8 @@ const std::vector<BoardView>& views() {
     cam.cy = 237.5;
     cam.distortion = {-0.2, 0.08, 0.001, -0.0005, 0.0};
     cam.position = {0.0, 0.0, 1.0};
-    const render::CameraModel model = render::CameraModel::from_spec(cam);
-    const BoardSpec board = BoardSpec::parse("chessboard:15x11:0.025");
+    const camera::CameraModel model = flatland::model::compile_camera(cam);
+    const camera::Board board = camera::Board::parse("chessboard:15x11:0.025");
     std::mt19937_64 rng(7);
     std::uniform_real_distribution<double> U(0.0, 1.0);
     std::vector<BoardView> out;
@@ -125,7 +128,7 @@ void BM_DetectChessboard(benchmark::State& state) {
   render::SceneState st;
   st.disk_center = {5.0, 5.0};
   const cv::Mat image = r.render_8u(st);
-  const BoardSpec board = BoardSpec::parse("chessboard:15x11:0.025");
+  const camera::Board board = camera::Board::parse("chessboard:15x11:0.025");
   for (auto _ : state) benchmark::DoNotOptimize(detect_board(image, board));
 }
 BENCHMARK(BM_DetectChessboard)->Unit(benchmark::kMillisecond);

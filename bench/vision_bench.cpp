@@ -2,6 +2,7 @@
 // interest, and whole-frame re-acquisition, for each method, on one rendered frame of the
 // air-table butterfly (noise 2 DN, 30 Hz exposure blur). Medians over repetitions are reported.
 // Run: build/bin/flatland_vision_bench
+#include "flatland/model/compile.hpp"
 #include <benchmark/benchmark.h>
 
 #include "flatland/render/renderer.hpp"
@@ -67,7 +68,7 @@ void TrackRoiTablePlane(benchmark::State& state) {
   cam.cx = 319.5;
   cam.cy = 239.5;
   cam.position = {0.0, 0.0, 1.2};
-  cfg.camera = render::CameraModel::from_spec(cam);
+  cfg.camera = flatland::model::compile_camera(cam);
   cfg.plane_z = 0.006;
   if (state.range(0)) cfg.camera->dist = {-0.25, 0.08, 0, 0, 0};  // cost of undistortPoints
   vision::Tracker tracker(cfg);
@@ -104,7 +105,7 @@ void PixelToContact(benchmark::State& state) {
   cam.cy = 239.5;
   cam.position = {0.0, 0.0, 1.2};
   cam.distortion = {-0.1, 0.02, 0, 0, 0};
-  m.camera = render::CameraModel::from_spec(cam);
+  m.camera = flatland::model::compile_camera(cam);
   m.plane_z = 0.006;
   m.disk_radius = 0.051;
   for (auto _ : state) {

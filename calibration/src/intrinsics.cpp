@@ -21,68 +21,6 @@ namespace flatland::calibration {
 
 namespace {
 
-// ---------------------------------------------------------------- board spec
-
-int parse_int(const std::string& s, const std::string& what) {
-  std::size_t used = 0;
-  int v = 0;
-  try {
-    v = std::stoi(s, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  if (used == 0 || used != s.size())
-    throw std::invalid_argument("--board: " + what + ": not an integer: '" + s + "'");
-  return v;
-}
-
-double parse_double(const std::string& s, const std::string& what) {
-  std::size_t used = 0;
-  double v = 0;
-  try {
-    v = std::stod(s, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  if (used == 0 || used != s.size() || !std::isfinite(v))
-    throw std::invalid_argument("--board: " + what + ": not a number: '" + s + "'");
-  return v;
-}
-
-std::vector<std::string> split(const std::string& s, char sep) {
-  std::vector<std::string> out;
-  std::string cur;
-  for (char c : s) {
-    if (c == sep) {
-      out.push_back(cur);
-      cur.clear();
-    } else {
-      cur += c;
-    }
-  }
-  out.push_back(cur);
-  return out;
-}
-
-const std::vector<std::string>& dictionary_names() {
-  // cv::aruco::PREDEFINED_DICTIONARY_NAME order (the renderer uses the same list).
-  static const std::vector<std::string> names = {
-      "DICT_4X4_50",         "DICT_4X4_100",       "DICT_4X4_250",       "DICT_4X4_1000",
-      "DICT_5X5_50",         "DICT_5X5_100",       "DICT_5X5_250",       "DICT_5X5_1000",
-      "DICT_6X6_50",         "DICT_6X6_100",       "DICT_6X6_250",       "DICT_6X6_1000",
-      "DICT_7X7_50",         "DICT_7X7_100",       "DICT_7X7_250",       "DICT_7X7_1000",
-      "DICT_ARUCO_ORIGINAL", "DICT_APRILTAG_16h5", "DICT_APRILTAG_25h9", "DICT_APRILTAG_36h10",
-      "DICT_APRILTAG_36h11"};
-  return names;
-}
-
-int dictionary_id(const std::string& name) {
-  const auto& names = dictionary_names();
-  for (std::size_t i = 0; i < names.size(); ++i)
-    if (names[i] == name) return static_cast<int>(i);
-  throw std::invalid_argument("--board: unknown ArUco dictionary '" + name + "'");
-}
-
 // ---------------------------------------------------------------- the model
 
 // The intrinsics' parameter block: fx fy cx cy k1 k2 p1 p2 k3, then k4 k5 k6 for the rational
@@ -224,93 +162,9 @@ std::string fmt(double v, int precision = 3) {
 
 }  // namespace
 
-// ---------------------------------------------------------------- BoardSpec
-
-BoardSpec BoardSpec::parse(const std::string& text) {
-  const std::vector<std::string> f = split(text, ':');
-  BoardSpec b;
-  if (f[0] == "chessboard") {
-    b.kind = Kind::kChessboard;
-    if (f.size() != 3)
-      throw std::invalid_argument("--board: expected chessboard:COLSxROWS:SQUARE_M, got '" + text +
-                                  "'");
-  } else if (f[0] == "charuco") {
-    b.kind = Kind::kCharuco;
-    if (f.size() != 4 && f.size() != 5)
-      throw std::invalid_argument(
-          "--board: expected charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT], got '" + text + "'");
-  } else {
-    throw std::invalid_argument("--board: unknown board type '" + f[0] +
-                                "' (chessboard or charuco)");
-  }
-  // Counted as OpenCV counts them: a chessboard by its inner corners (the patternSize of
-  // cv::findChessboardCorners and ROS camera_calibration's --size), a ChArUco board by its squares
-  // (cv::aruco::CharucoBoard's squaresX, squaresY).
-  const bool chessboard = b.kind == Kind::kChessboard;
-  const char* unit = chessboard ? "inner corners" : "squares";
-  const std::vector<std::string> dims = split(f[1], 'x');
-  if (dims.size() != 2)
-    throw std::invalid_argument(std::string("--board: expected COLSxROWS (") + unit + "), got '" +
-                                f[1] + "'");
-  const int cols = parse_int(dims[0], "COLS");
-  const int rows = parse_int(dims[1], "ROWS");
-  // cv::findChessboardCorners refuses a pattern narrower than 3 corners; a ChArUco board needs
-  // 2x2 squares for one inner corner.
-  const int least = chessboard ? 3 : 2;
-  constexpr int kMost = 999;
-  if (cols < least || rows < least || cols > kMost || rows > kMost)
-    throw std::invalid_argument("--board: COLSxROWS counts " + std::string(unit) + " and must be " +
-                                std::to_string(least) + " to " + std::to_string(kMost) +
-                                " each, got " + f[1]);
-  b.squares_x = chessboard ? cols + 1 : cols;
-  b.squares_y = chessboard ? rows + 1 : rows;
-  b.square = parse_double(f[2], "SQUARE_M");
-  if (!(b.square > 0)) throw std::invalid_argument("--board: SQUARE_M must be positive (m)");
-  if (b.kind == Kind::kCharuco) {
-    b.marker = parse_double(f[3], "MARKER_M");
-    if (!(b.marker > 0 && b.marker < b.square))
-      throw std::invalid_argument("--board: MARKER_M must be in (0, SQUARE_M) (m)");
-    if (f.size() == 5) {
-      dictionary_id(f[4]);  // validates
-      b.dictionary = f[4];
-    }
-  }
-  return b;
-}
-
-std::string BoardSpec::notation() const {
-  const cv::Size n = kind == Kind::kChessboard ? pattern_size() : cv::Size(squares_x, squares_y);
-  std::string s = std::string(kind == Kind::kChessboard ? "chessboard:" : "charuco:") +
-                  size_text(n) + ":" + fmt(square, 6);
-  // Appended piece by piece: GCC 12's -Wrestrict misfires on "literal" + std::string&&.
-  if (kind == Kind::kCharuco) s.append(":").append(fmt(marker, 6)).append(":").append(dictionary);
-  return s;
-}
-
-std::optional<BoardSpec> BoardSpec::other_count() const {
-  BoardSpec b = *this;
-  const int step = kind == Kind::kChessboard ? -1 : 1;
-  b.squares_x += step;
-  b.squares_y += step;
-  const int least_squares = kind == Kind::kChessboard ? 4 : 2;
-  if (b.squares_x < least_squares || b.squares_y < least_squares) return std::nullopt;
-  return b;
-}
-
-std::vector<cv::Point3f> BoardSpec::corners() const {
-  // As cv::aruco::CharucoBoard::chessboardCorners: inner corner (c, r) at ((c+1), (r+1)) squares
-  // from the printed top-left outer corner, rows running down the print.
-  std::vector<cv::Point3f> out;
-  for (int r = 0; r < squares_y - 1; ++r)
-    for (int c = 0; c < squares_x - 1; ++c)
-      out.emplace_back(static_cast<float>((c + 1) * square), static_cast<float>((r + 1) * square),
-                       0.0f);
-  return out;
-}
-
 // ---------------------------------------------------------------- detection
 
-std::optional<BoardView> detect_board(const cv::Mat& image, const BoardSpec& board,
+std::optional<BoardView> detect_board(const cv::Mat& image, const camera::Board& board,
                                       const std::string& name) {
   if (image.empty()) return std::nullopt;
   cv::Mat gray;
@@ -327,7 +181,7 @@ std::optional<BoardView> detect_board(const cv::Mat& image, const BoardSpec& boa
   view.image_size = gray.size();
   const std::vector<cv::Point3f> all = board.corners();
   std::vector<int> ids;
-  if (board.kind == BoardSpec::Kind::kChessboard) {
+  if (board.kind == camera::Board::Kind::kChessboard) {
     const cv::Size pattern = board.pattern_size();
     if (!cv::findChessboardCorners(gray, pattern, view.image_points,
                                    cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE))
@@ -335,7 +189,7 @@ std::optional<BoardView> detect_board(const cv::Mat& image, const BoardSpec& boa
     for (int k = 0; k < pattern.area(); ++k) ids.push_back(k);
   } else {
     const auto dict = cv::aruco::getPredefinedDictionary(
-        cv::aruco::PREDEFINED_DICTIONARY_NAME(dictionary_id(board.dictionary)));
+        cv::aruco::PREDEFINED_DICTIONARY_NAME(*camera::aruco_dictionary_id(board.dictionary)));
     const auto cv_board = cv::aruco::CharucoBoard::create(board.squares_x, board.squares_y,
                                                           static_cast<float>(board.square),
                                                           static_cast<float>(board.marker), dict);
@@ -358,7 +212,7 @@ std::optional<BoardView> detect_board(const cv::Mat& image, const BoardSpec& boa
   for (std::size_t i = 0; i < view.image_points.size(); ++i)
     for (std::size_t j = i + 1; j < view.image_points.size(); ++j)
       spacing = std::min(spacing, cv::norm(view.image_points[i] - view.image_points[j]));
-  const double reach = board.kind == BoardSpec::Kind::kChessboard
+  const double reach = board.kind == camera::Board::Kind::kChessboard
                            ? 0.4 * spacing
                            : spacing * (board.square - board.marker) / (2 * board.square) - 1;
   const int half = std::clamp(static_cast<int>(reach), 2, 10);
@@ -378,8 +232,8 @@ int IntrinsicsResult::views_used() const {
   return static_cast<int>(std::count(used.begin(), used.end(), true));
 }
 
-render::CameraModel IntrinsicsResult::camera() const {
-  render::CameraModel m;
+camera::CameraModel IntrinsicsResult::camera() const {
+  camera::CameraModel m;
   m.width = image_size.width;
   m.height = image_size.height;
   m.K = K;
@@ -387,8 +241,8 @@ render::CameraModel IntrinsicsResult::camera() const {
   return m;
 }
 
-CalibrationReport IntrinsicsResult::report() const {
-  CalibrationReport r;
+camera::CalibrationReport IntrinsicsResult::report() const {
+  camera::CalibrationReport r;
   r.rms_px = rms_px;
   for (std::size_t i = 0; i < used.size(); ++i)
     if (used[i]) r.view_rms_px.push_back(view_rms_px[i]);

@@ -2,7 +2,7 @@
 // hand's outline at known encoder angles. See docs/JOINT.md.
 #include "flatland/calibration/joint.hpp"
 
-#include "flatland/render/renderer.hpp"
+#include "flatland/camera/board.hpp"
 
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
@@ -44,10 +44,10 @@ double grey_at(const cv::Mat& gray, cv::Point2f p) {
 
 namespace {
 
-// The board's inner corners in the image, in OpenCV's order (render::target_corners' order).
-std::vector<cv::Point2f> find_board_corners(const cv::Mat& image, const TargetSpec& board,
+// The board's inner corners in the image, in OpenCV's order (camera::corners_in_table's order).
+std::vector<cv::Point2f> find_board_corners(const cv::Mat& image, const camera::Board& board,
                                             const std::string& who) {
-  if (board.kind != TargetSpec::Kind::kChessboard)
+  if (board.kind != camera::Board::Kind::kChessboard)
     throw std::invalid_argument(who + "only chessboards are supported");
   // Messages count inner corners, as the scene file and --board do (OpenCV's patternSize).
   const int n = board.squares_x - 1, m = board.squares_y - 1;  // inner corners per row, rows
@@ -94,14 +94,14 @@ std::vector<cv::Point2f> find_board_corners(const cv::Mat& image, const TargetSp
 
 }  // namespace
 
-TablePose estimate_table_pose(const cv::Mat& image, const TargetSpec& board, const cv::Matx33d& K,
-                              const render::Distortion& dist) {
-  return estimate_table_pose(std::vector<cv::Mat>{image}, std::vector<TargetSpec>{board}, K, dist);
+TablePose estimate_table_pose(const cv::Mat& image, const camera::PlacedBoard& board, const cv::Matx33d& K,
+                              const camera::Distortion& dist) {
+  return estimate_table_pose(std::vector<cv::Mat>{image}, std::vector<camera::PlacedBoard>{board}, K, dist);
 }
 
 TablePose estimate_table_pose(const std::vector<cv::Mat>& images,
-                              const std::vector<TargetSpec>& boards, const cv::Matx33d& K,
-                              const render::Distortion& dist) {
+                              const std::vector<camera::PlacedBoard>& boards, const cv::Matx33d& K,
+                              const camera::Distortion& dist) {
   const std::string who = "estimate_table_pose: ";
   if (images.empty() || images.size() != boards.size())
     throw std::invalid_argument(who + std::to_string(images.size()) + " images but " +
@@ -115,8 +115,8 @@ TablePose estimate_table_pose(const std::vector<cv::Mat>& images,
   std::vector<cv::Point2f> found;
   for (std::size_t i = 0; i < images.size(); ++i) {
     const std::string where = images.size() > 1 ? who + "image " + std::to_string(i) + ": " : who;
-    const std::vector<cv::Point2f> corners = find_board_corners(images[i], boards[i], where);
-    const std::vector<cv::Point3d> object = render::target_corners(boards[i]);
+    const std::vector<cv::Point2f> corners = find_board_corners(images[i], boards[i].board, where);
+    const std::vector<cv::Point3d> object = camera::corners_in_table(boards[i]);
     found.insert(found.end(), corners.begin(), corners.end());
     object_f.insert(object_f.end(), object.begin(), object.end());
   }
@@ -145,9 +145,9 @@ TablePose estimate_table_pose(const std::vector<cv::Mat>& images,
   return pose;
 }
 
-JointCalibration calibrate_joint(const std::vector<cv::Mat>& images,
+camera::JointCalibration calibrate_joint(const std::vector<cv::Mat>& images,
                                  const std::vector<double>& encoder_angles,
-                                 const render::CameraModel& camera, double plate_height,
+                                 const camera::CameraModel& camera, double plate_height,
                                  JointReport* report) {
   const std::string who = "calibrate_joint: ";
   if (images.size() != encoder_angles.size())
@@ -218,7 +218,7 @@ JointCalibration calibrate_joint(const std::vector<cv::Mat>& images,
     }
   axis *= 1.0 / static_cast<double>(used);
   mean_rel /= static_cast<double>(used);
-  JointCalibration result;
+  camera::JointCalibration result;
   result.axis_table = axis;
   result.encoder_offset = wrap_half_turn(rough_offset + mean_rel);
 

@@ -1,7 +1,8 @@
 #include "flatland/drivers/experiment.hpp"
 
 #include "flatland/drivers/recorded.hpp"
-#include "flatland/render/camera.hpp"
+#include "flatland/camera/camera_model.hpp"
+#include "flatland/model/compile.hpp"
 #include "flatland/sim/search.hpp"
 #include "flatland/sim/spec.hpp"
 
@@ -89,7 +90,7 @@ LoopSetup::LoopSetup(const Scene& nominal) : scene(nominal) {
     throw std::invalid_argument(nominal.origin +
                                 ": object: the closed loop rolls a disk (object.type: disk)");
   plan = make_plan(nominal);
-  const render::CameraModel camera = render::CameraModel::from_spec(*nominal.camera);
+  const camera::CameraModel camera = flatland::model::compile_camera(*nominal.camera);
   mapping.camera = camera;
   mapping.plane_z = nominal.render.disk_thickness;  // the tracked edge is the disk's top face
   mapping.disk_radius = nominal.sim.object.radius;

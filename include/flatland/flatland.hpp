@@ -17,7 +17,13 @@
 
 #include "flatland/scene/scene.hpp"
 
-#include "flatland/render/camera.hpp"
+#include "flatland/camera/board.hpp"
+#include "flatland/camera/camera_file.hpp"
+#include "flatland/camera/camera_model.hpp"
+
+#include "flatland/model/compile.hpp"
+
+#include "flatland/render/distortion_maps.hpp"
 #include "flatland/render/effects.hpp"
 #include "flatland/render/gl_context.hpp"
 #include "flatland/render/renderer.hpp"
@@ -28,7 +34,6 @@
 #include "flatland/vision/tracker.hpp"
 #include "flatland/vision/video_reader.hpp"
 
-#include "flatland/calibration/camera_file.hpp"
 #include "flatland/calibration/intrinsics.hpp"
 #include "flatland/calibration/joint.hpp"
 #include "flatland/calibration/report.hpp"
@@ -38,6 +43,7 @@
 #include "flatland/control/estimator.hpp"
 #include "flatland/control/types.hpp"
 
+#include "flatland/drivers/calibration_session.hpp"
 #include "flatland/drivers/experiment.hpp"
 #include "flatland/drivers/interfaces.hpp"
 #include "flatland/drivers/live.hpp"

@@ -1,5 +1,8 @@
 #include "flatland/render/renderer.hpp"
 
+#include "flatland/camera/board.hpp"
+#include "flatland/model/compile.hpp"
+#include "flatland/render/distortion_maps.hpp"
 #include "flatland/sim/curve.hpp"
 
 // Prototypes only, for decltype: every function is fetched from the context at run time.
@@ -426,7 +429,7 @@ Mesh table_mesh(double extent) {
 // A chessboard as exact geometry: a white board (one square of margin) and black squares, all in
 // the board plane z = 0 (the board is drawn with a polygon offset behind the squares). Board
 // frame: origin at the outer corner of the first square, x along columns, y along rows.
-Mesh chessboard_background(const TargetSpec& t) {
+Mesh chessboard_background(const camera::Board& t) {
   Mesh m;
   const double s = t.square;
   add_quad(m, {-s, -s, 0}, {(t.squares_x + 1) * s, -s, 0},
@@ -435,7 +438,7 @@ Mesh chessboard_background(const TargetSpec& t) {
   return m;
 }
 
-Mesh chessboard_squares(const TargetSpec& t) {
+Mesh chessboard_squares(const camera::Board& t) {
   Mesh m;
   const double s = t.square;
   for (int r = 0; r < t.squares_y; ++r)
@@ -478,21 +481,6 @@ cv::Matx33d rot_z(double a) {
 
 }  // namespace
 
-std::vector<cv::Point3d> target_corners(const TargetSpec& t) {
-  cv::Matx33d R;
-  cv::Rodrigues(cv::Vec3d(t.rotation[0], t.rotation[1], t.rotation[2]), R);
-  const cv::Vec3d p(t.position[0], t.position[1], t.position[2]);
-  std::vector<cv::Point3d> out;
-  // OpenCV's board frame (object points, ChArUco corner ids) runs y down the printed board with
-  // z into it; ours is seen from +z with y up: (x, y)_opencv = (x, rows * square - y)_ours.
-  for (int r = 1; r < t.squares_y; ++r)
-    for (int c = 1; c < t.squares_x; ++c) {
-      const cv::Vec3d q = R * cv::Vec3d(c * t.square, (t.squares_y - r) * t.square, 0) + p;
-      out.emplace_back(q[0], q[1], q[2]);
-    }
-  return out;
-}
-
 SceneState SceneState::from_sample(const sim::Sample& s) {
   SceneState st;
   st.t = s.t;
@@ -516,7 +504,7 @@ struct Renderer::Impl {
   };
 
   Scene scene;
-  CameraModel camera;
+  camera::CameraModel camera;
   DistortionMaps maps;
   int supersample = 1;
   double disk_radius = 0;
@@ -540,7 +528,7 @@ struct Renderer::Impl {
   cv::Mat ideal_bgr, ideal_f32, distorted_f32, subframe, linear_scratch;
 
   Impl(const Scene& s, GlBackend backend)
-      : scene(s), camera(CameraModel::from_spec(*s.camera)), rng(s.effects.seed) {
+      : scene(s), camera(model::compile_camera(*s.camera)), rng(s.effects.seed) {
     supersample = s.effects.supersample;
     if (supersample < 1 || supersample > 8)
       throw std::invalid_argument("effects.supersample: must be between 1 and 8");
@@ -559,7 +547,7 @@ struct Renderer::Impl {
     hand = upload(hand_mesh(shape, s.render.hand_thickness));
     disk = upload(disk_side_mesh(disk_radius, s.render.disk_thickness));
     disk_top = upload(disk_top_quad(disk_radius, s.render.disk_thickness));
-    for (const TargetSpec& t : s.targets) targets.push_back(make_target(t));
+    for (const TargetSpec& t : s.targets) targets.push_back(make_target(model::compile_target(t)));
     for (const Drawable& t : targets) textured_targets = textured_targets || t.texture != 0;
     readback.create(fbo_height, fbo_width, CV_8UC4);
     const float shade = static_cast<float>(kAmbient + (1.0 - kAmbient) * std::max(kLight[2], 0.0));
@@ -694,11 +682,12 @@ struct Renderer::Impl {
     return d;
   }
 
-  Drawable make_target(const TargetSpec& t) {
+  Drawable make_target(const camera::PlacedBoard& placed) {
     cv::Matx33d R;
-    cv::Rodrigues(cv::Vec3d(t.rotation[0], t.rotation[1], t.rotation[2]), R);
-    const cv::Vec3d p(t.position[0], t.position[1], t.position[2]);
-    if (t.kind == TargetSpec::Kind::kChessboard) {
+    cv::Rodrigues(placed.rotation, R);
+    const cv::Vec3d p = placed.position;
+    const camera::Board& t = placed.board;
+    if (t.kind == camera::Board::Kind::kChessboard) {
       Drawable back = upload(chessboard_background(t));
       back.model = rigid(R, p);
       back.behind = true;
@@ -711,7 +700,7 @@ struct Renderer::Impl {
     // border is not needed: the board image covers exactly cols x rows squares).
     const int px_per_square = 40;
     const auto dict = cv::aruco::getPredefinedDictionary(
-        cv::aruco::PREDEFINED_DICTIONARY_NAME(dictionary_id(t.dictionary)));
+        cv::aruco::PREDEFINED_DICTIONARY_NAME(*camera::aruco_dictionary_id(t.dictionary)));
     const auto board = cv::aruco::CharucoBoard::create(
         t.squares_x, t.squares_y, static_cast<float>(t.square), static_cast<float>(t.marker), dict);
     cv::Mat image;
@@ -731,19 +720,6 @@ struct Renderer::Impl {
     gl->glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
     d.model = rigid(R, p);
     return d;
-  }
-
-  static int dictionary_id(const std::string& name) {
-    static const std::vector<std::string> names = {
-        "DICT_4X4_50",         "DICT_4X4_100",       "DICT_4X4_250",       "DICT_4X4_1000",
-        "DICT_5X5_50",         "DICT_5X5_100",       "DICT_5X5_250",       "DICT_5X5_1000",
-        "DICT_6X6_50",         "DICT_6X6_100",       "DICT_6X6_250",       "DICT_6X6_1000",
-        "DICT_7X7_50",         "DICT_7X7_100",       "DICT_7X7_250",       "DICT_7X7_1000",
-        "DICT_ARUCO_ORIGINAL", "DICT_APRILTAG_16h5", "DICT_APRILTAG_25h9", "DICT_APRILTAG_36h10",
-        "DICT_APRILTAG_36h11"};  // cv::aruco::PREDEFINED_DICTIONARY_NAME order
-    for (std::size_t i = 0; i < names.size(); ++i)
-      if (names[i] == name) return static_cast<int>(i);
-    throw std::invalid_argument("targets.dictionary: unknown ArUco dictionary '" + name + "'");
   }
 
   // Projection of the ideal pinhole camera, OpenCV pixel convention (centres at integers), with
@@ -904,7 +880,7 @@ Renderer::Renderer(const Scene& scene, std::optional<GlBackend> backend) {
 
 Renderer::~Renderer() = default;
 
-const CameraModel& Renderer::camera() const { return impl_->camera; }
+const camera::CameraModel& Renderer::camera() const { return impl_->camera; }
 std::string Renderer::gl_description() const { return impl_->context->description(); }
 cv::Mat Renderer::render_linear(const SceneState& state) { return impl_->render_linear(state); }
 cv::Mat Renderer::render_8u(const SceneState& state) { return impl_->render_8u(state); }

@@ -1,13 +1,14 @@
 // The real-camera workflow end to end on a rendered session: render-calibration films what a lab
 // films, calibrate measures the intrinsics, the table pose and the joint from it, render films a
 // run, and track maps that run to s_h through the calibrated camera file, with no hand-written
-// file. The truth comes from the scene (CameraModel::from_spec, the hand pivoting at the table
+// file. The truth comes from the scene (camera::CameraModel::from_spec, the hand pivoting at the table
 // origin with its encoder reading the true angle), never from the code under test.
+#include "flatland/model/compile.hpp"
 #include "cli_support.hpp"
 
-#include "flatland/calibration/camera_file.hpp"
+#include "flatland/camera/camera_file.hpp"
 #include "flatland/calibration/session.hpp"
-#include "flatland/render/camera.hpp"
+#include "flatland/camera/camera_model.hpp"
 #include "flatland/scene/scene.hpp"
 
 #include <gtest/gtest.h>
@@ -95,9 +96,9 @@ TEST_F(CalibrationChain, RenderedSessionCalibratesAndTracksToTheTrueSh) {
 
   // Against the scene's camera, computed by the renderer's camera model from the scene file.
   const Scene scene = load_scene(camera_scene());
-  const render::CameraModel truth = render::CameraModel::from_spec(*scene.camera);
-  const calibration::CameraFile cal =
-      calibration::read_camera_file((dir_ / "camera.yaml").string());
+  const camera::CameraModel truth = flatland::model::compile_camera(*scene.camera);
+  const camera::CameraFile cal =
+      camera::read_camera_file((dir_ / "camera.yaml").string());
   ASSERT_TRUE(cal.has_table_pose);
   ASSERT_TRUE(cal.joint.has_value());
   ASSERT_TRUE(cal.table_report.has_value());
@@ -131,8 +132,8 @@ TEST_F(CalibrationChain, RenderedSessionCalibratesAndTracksToTheTrueSh) {
   EXPECT_LT(worst, 0.005);
 
   // render's own camera file is the scene's camera: pose, axis at the origin, offset 0.
-  const calibration::CameraFile rendered =
-      calibration::read_camera_file((dir_ / "frames" / "camera.yaml").string());
+  const camera::CameraFile rendered =
+      camera::read_camera_file((dir_ / "frames" / "camera.yaml").string());
   ASSERT_TRUE(rendered.has_table_pose);
   ASSERT_TRUE(rendered.joint.has_value());
   EXPECT_LT(rotation_angle(rendered.camera.R, truth.R), 1e-12);
@@ -153,7 +154,7 @@ TEST_F(CalibrationChain, CameraFileGrowsOneSectionAtATime) {
   Result r =
       run("calibrate --images 'sess/intrinsics/*.png' --board " + board_ + " --out camera.yaml");
   ASSERT_EQ(r.code, 0) << r.err;
-  calibration::CameraFile f = calibration::read_camera_file((dir_ / "camera.yaml").string());
+  camera::CameraFile f = camera::read_camera_file((dir_ / "camera.yaml").string());
   EXPECT_FALSE(f.has_table_pose);
   EXPECT_FALSE(f.joint.has_value());
   const cv::Matx33d K = f.camera.K;
@@ -166,7 +167,7 @@ TEST_F(CalibrationChain, CameraFileGrowsOneSectionAtATime) {
 
   r = run("calibrate --camera camera.yaml --table sess/table.csv --table-board " + board_);
   ASSERT_EQ(r.code, 0) << r.err;
-  f = calibration::read_camera_file((dir_ / "camera.yaml").string());
+  f = camera::read_camera_file((dir_ / "camera.yaml").string());
   EXPECT_TRUE(f.has_table_pose);
   EXPECT_EQ(f.camera.K, K);  // the intrinsics are kept as they were
   ASSERT_TRUE(f.report.has_value());
@@ -174,7 +175,7 @@ TEST_F(CalibrationChain, CameraFileGrowsOneSectionAtATime) {
   // --out naming the --camera file another way is the same update in place (no --force).
   r = run("calibrate --camera camera.yaml --joint sess/joint.csv --out ./camera.yaml" + scene);
   ASSERT_EQ(r.code, 0) << r.err;
-  f = calibration::read_camera_file((dir_ / "camera.yaml").string());
+  f = camera::read_camera_file((dir_ / "camera.yaml").string());
   EXPECT_TRUE(f.has_table_pose);
   ASSERT_TRUE(f.joint.has_value());
   EXPECT_LT(std::hypot(f.joint->axis_table.x, f.joint->axis_table.y), 0.5e-3);
@@ -183,7 +184,7 @@ TEST_F(CalibrationChain, CameraFileGrowsOneSectionAtATime) {
   r = run("calibrate --camera camera.yaml --images 'sess/intrinsics/*.png' --board " + board_);
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_NE(r.err.find("are dropped"), std::string::npos) << r.err;
-  f = calibration::read_camera_file((dir_ / "camera.yaml").string());
+  f = camera::read_camera_file((dir_ / "camera.yaml").string());
   EXPECT_FALSE(f.has_table_pose);
   EXPECT_FALSE(f.joint.has_value());
 }
@@ -297,8 +298,8 @@ TEST_F(CalibrationChain, RationalModelCalibratesAndTracks) {
   EXPECT_EQ(j.at("model"), "rational_polynomial");
   EXPECT_EQ(j.at("dist").size(), 8u);
   EXPECT_TRUE(j.at("std").contains("k6"));
-  const calibration::CameraFile cal =
-      calibration::read_camera_file((dir_ / "camera.yaml").string());
+  const camera::CameraFile cal =
+      camera::read_camera_file((dir_ / "camera.yaml").string());
   EXPECT_TRUE(cal.rational_model);
   // Through the rational file, track still maps the run to the true s_h.
   ASSERT_EQ(run("render --scene " + scene + " --duration 0.5 --out frames").code, 0);

@@ -1,9 +1,12 @@
 // Intrinsics calibration against known truth: 20 rendered chessboard views (σ = 1 DN noise) of a
 // distorted camera, the same corners through cv::calibrateCamera, outlier views, the bad-input
 // errors, ChArUco, and `flatland calibrate` end to end.
+#include "flatland/model/compile.hpp"
+#include "flatland/camera/board.hpp"
+#include "flatland/camera/camera_model.hpp"
 #include "cli_support.hpp"
 
-#include "flatland/calibration/camera_file.hpp"
+#include "flatland/camera/camera_file.hpp"
 #include "flatland/calibration/intrinsics.hpp"
 #include "flatland/render/effects.hpp"
 #include "flatland/render/renderer.hpp"
@@ -55,13 +58,13 @@ struct RenderedViews {
 // table, tilted 15-45 deg about a random in-plane axis and turned in-plane by up to 0.5 rad;
 // every corner of the printed board (with its margin) at least 12 px inside the image. Poses at
 // which the detector misses the board (rare: steep views near the image edge) are replaced.
-RenderedViews render_views(const TargetSpec& board_template, const BoardSpec& board, int n,
+RenderedViews render_views(const TargetSpec& board_template, const camera::Board& board, int n,
                            std::uint64_t seed) {
   RenderedViews out;
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> U(0.0, 1.0);
   const CameraSpec cam = truth_camera();
-  const render::CameraModel model = render::CameraModel::from_spec(cam);
+  const camera::CameraModel model = flatland::model::compile_camera(cam);
   const double w = board_template.squares_x * board_template.square;
   const double h = board_template.squares_y * board_template.square;
   const double m = board_template.kind == TargetSpec::Kind::kChessboard ? board_template.square : 0;
@@ -121,8 +124,8 @@ TargetSpec chessboard_target() {
 }
 
 // Rendered once for every test that needs them.
-const BoardSpec& chessboard_spec() {
-  static const BoardSpec b = BoardSpec::parse("chessboard:15x11:0.025");
+const camera::Board& chessboard_spec() {
+  static const camera::Board b = camera::Board::parse("chessboard:15x11:0.025");
   return b;
 }
 
@@ -190,41 +193,41 @@ std::string expect_invalid(const std::vector<BoardView>& views) {
 
 TEST(CalibrationIntrinsics, BoardSpecParsing) {
   // A chessboard counts inner corners (OpenCV's patternSize), so 9x6 is 10 x 7 squares.
-  const BoardSpec c = BoardSpec::parse("chessboard:9x6:0.02");
-  EXPECT_EQ(c.kind, BoardSpec::Kind::kChessboard);
+  const camera::Board c = camera::Board::parse("chessboard:9x6:0.02");
+  EXPECT_EQ(c.kind, camera::Board::Kind::kChessboard);
   EXPECT_EQ(c.squares_x, 10);
   EXPECT_EQ(c.squares_y, 7);
   EXPECT_EQ(c.pattern_size(), cv::Size(9, 6));
   EXPECT_DOUBLE_EQ(c.square, 0.02);
   EXPECT_EQ(c.corners().size(), 54u);
   EXPECT_EQ(c.notation(), "chessboard:9x6:0.02");
-  EXPECT_EQ(BoardSpec::parse("chessboard:3x3:0.5").corners().size(), 9u);
+  EXPECT_EQ(camera::Board::parse("chessboard:3x3:0.5").corners().size(), 9u);
   // A ChArUco board counts squares (cv::aruco::CharucoBoard), so 7x5 has 6 x 4 inner corners.
-  const BoardSpec a = BoardSpec::parse("charuco:7x5:0.04:0.03:DICT_5X5_100");
-  EXPECT_EQ(a.kind, BoardSpec::Kind::kCharuco);
+  const camera::Board a = camera::Board::parse("charuco:7x5:0.04:0.03:DICT_5X5_100");
+  EXPECT_EQ(a.kind, camera::Board::Kind::kCharuco);
   EXPECT_EQ(a.squares_x, 7);
   EXPECT_EQ(a.squares_y, 5);
   EXPECT_EQ(a.corners().size(), 24u);
   EXPECT_EQ(a.notation(), "charuco:7x5:0.04:0.03:DICT_5X5_100");
   EXPECT_DOUBLE_EQ(a.marker, 0.03);
   EXPECT_EQ(a.dictionary, "DICT_5X5_100");
-  EXPECT_EQ(BoardSpec::parse("charuco:7x5:0.04:0.03").dictionary, "DICT_4X4_50");
+  EXPECT_EQ(camera::Board::parse("charuco:7x5:0.04:0.03").dictionary, "DICT_4X4_50");
   for (const char* bad :
        {"chess:9x6:0.02", "chessboard:9x6", "chessboard:9by6:0.02", "chessboard:9x6:-1",
         "chessboard:1x6:0.02", "chessboard:2x6:0.02", "chessboard:9x1000:0.02",
         "charuco:1x5:0.04:0.03", "charuco:7x5:0.04", "charuco:7x5:0.04:0.05",
         "charuco:7x5:0.04:0.03:DICT_9X9_1", "chessboard:9x6:abc"})
-    EXPECT_THROW(BoardSpec::parse(bad), std::invalid_argument) << bad;
+    EXPECT_THROW(camera::Board::parse(bad), std::invalid_argument) << bad;
 }
 
 // The other count reads the same numbers the other way: a chessboard's as squares, a ChArUco
 // board's as inner corners.
 TEST(CalibrationIntrinsics, BoardOtherCount) {
-  const auto chess = BoardSpec::parse("chessboard:10x7:0.025").other_count();
+  const auto chess = camera::Board::parse("chessboard:10x7:0.025").other_count();
   ASSERT_TRUE(chess.has_value());
   EXPECT_EQ(chess->notation(), "chessboard:9x6:0.025");
-  EXPECT_FALSE(BoardSpec::parse("chessboard:3x5:0.025").other_count().has_value());
-  const auto charuco = BoardSpec::parse("charuco:6x4:0.04:0.03").other_count();
+  EXPECT_FALSE(camera::Board::parse("chessboard:3x5:0.025").other_count().has_value());
+  const auto charuco = camera::Board::parse("charuco:6x4:0.04:0.03").other_count();
   ASSERT_TRUE(charuco.has_value());
   EXPECT_EQ(charuco->notation(), "charuco:7x5:0.04:0.03:DICT_4X4_50");
 }
@@ -255,13 +258,13 @@ TEST(CalibrationIntrinsics, ChessboardNotationIsOpenCvsPatternSize) {
   EXPECT_TRUE(cv::findChessboardCorners(gray, cv::Size(9, 6), found));
   EXPECT_FALSE(cv::findChessboardCorners(gray, cv::Size(10, 7), found));
 
-  const BoardSpec board = BoardSpec::parse("chessboard:9x6:0.02");
+  const camera::Board board = camera::Board::parse("chessboard:9x6:0.02");
   EXPECT_EQ(board.pattern_size(), cv::Size(9, 6));
   const std::optional<BoardView> view = detect_board(image, board, "rendered");
   ASSERT_TRUE(view.has_value());
   ASSERT_EQ(view->image_points.size(), 54u);
   const std::vector<cv::Point2d> truth =
-      render::CameraModel::from_spec(truth_camera()).project(render::target_corners(s.targets[0]));
+      flatland::model::compile_camera(truth_camera()).project(camera::corners_in_table(flatland::model::compile_target(s.targets[0])));
   ASSERT_EQ(truth.size(), 54u);
   // OpenCV may list the grid from either end: match each true corner to its nearest detection.
   for (const cv::Point2d& t : truth) {
@@ -378,10 +381,10 @@ TEST(CalibrationIntrinsics, HeldParametersMatchOpenCvsFlags) {
 TEST(CalibrationIntrinsics, RationalModelMatchesOpenCvAndTheTruth) {
   // A wide-angle camera with OpenCV's rational model (k4..k6 nonzero), its corners synthesised by
   // cv::projectPoints with 0.05 px of noise: 20 views of a 15 x 11 board, tilted 20-45 deg.
-  render::CameraModel truth;
+  camera::CameraModel truth;
   truth.K = cv::Matx33d(300, 0, 322, 0, 300, 238, 0, 0, 1);
-  truth.dist = render::Distortion(1.5, 0.3, 0.001, -0.0005, 0.0, 1.9, 0.6, 0.02);
-  const BoardSpec board = BoardSpec::parse("chessboard:15x11:0.025");
+  truth.dist = camera::Distortion(1.5, 0.3, 0.001, -0.0005, 0.0, 1.9, 0.6, 0.02);
+  const camera::Board board = camera::Board::parse("chessboard:15x11:0.025");
   const std::vector<cv::Point3f> corners = board.corners();
   std::mt19937_64 rng(5);
   std::uniform_real_distribution<double> U(0, 1);
@@ -426,7 +429,7 @@ TEST(CalibrationIntrinsics, RationalModelMatchesOpenCvAndTheTruth) {
   EXPECT_NEAR(r.K(0, 0), 300, 0.01 * 300);
   // k4..k6 trade off against k1..k3, so compare what matters: where each camera sends a ray.
   // Over a grid of directions inside the view, the pixels agree with OpenCV's and the truth's.
-  render::CameraModel opencv;
+  camera::CameraModel opencv;
   opencv.K = cv::Matx33d(K);
   for (int k = 0; k < 8; ++k) opencv.dist[k] = dist.at<double>(k);
   std::vector<cv::Point3d> rays;
@@ -496,7 +499,7 @@ TEST(CalibrationIntrinsics, MixedImageSizesAreAnError) {
 TEST(CalibrationIntrinsics, BoardNotFoundInABlankImage) {
   const cv::Mat blank(480, 640, CV_8UC3, cv::Scalar(128, 128, 128));
   EXPECT_FALSE(detect_board(blank, chessboard_spec()).has_value());
-  EXPECT_FALSE(detect_board(blank, BoardSpec::parse("charuco:7x5:0.04:0.03")).has_value());
+  EXPECT_FALSE(detect_board(blank, camera::Board::parse("charuco:7x5:0.04:0.03")).has_value());
   EXPECT_FALSE(detect_board(cv::Mat(), chessboard_spec()).has_value());
 }
 
@@ -507,14 +510,14 @@ TEST(CalibrationIntrinsics, RenderedCharucoViewsCalibrate) {
   t.squares_y = 5;
   t.square = 0.05;
   t.marker = 0.037;
-  const BoardSpec board = BoardSpec::parse("charuco:7x5:0.05:0.037");
+  const camera::Board board = camera::Board::parse("charuco:7x5:0.05:0.037");
   const RenderedViews rendered = render_views(t, board, 12, 11);
   const std::vector<BoardView>& views = rendered.views;
-  // The detected ids map to the renderer's truth: corner id k is target_corners(t)[k].
+  // The detected ids map to the renderer's truth: corner id k is camera::corners_in_table(flatland::model::compile_target(t))[k].
   {
-    const render::CameraModel model = render::CameraModel::from_spec(truth_camera());
+    const camera::CameraModel model = flatland::model::compile_camera(truth_camera());
     const std::vector<cv::Point2d> truth =
-        model.project(render::target_corners(rendered.targets[0]));
+        model.project(camera::corners_in_table(flatland::model::compile_target(rendered.targets[0])));
     const std::vector<cv::Point3f> all = board.corners();
     double sum = 0;
     for (std::size_t k = 0; k < views[0].image_points.size(); ++k) {
@@ -583,7 +586,7 @@ TEST_F(CalibrateCli, CalibratesRenderedViewsAndWritesTheCameraFile) {
   EXPECT_NEAR(j["fx"].get<double>(), 800, 1.6);
   ASSERT_EQ(j["dist"].size(), 5u);
   for (const char* k : kNames) EXPECT_TRUE(j["std"].contains(k)) << k;
-  const CameraFile f = read_camera_file((dir_ / "camera.yaml").string());
+  const camera::CameraFile f = camera::read_camera_file((dir_ / "camera.yaml").string());
   EXPECT_DOUBLE_EQ(f.camera.K(0, 0), j["fx"].get<double>());
   EXPECT_EQ(f.camera.width, 640);
   ASSERT_TRUE(f.report.has_value());

@@ -1,6 +1,8 @@
 // Hand pose from the outline and the joint / table-pose calibration against the renderer's exact
 // truth: the hand pivots at the table origin, hand_angle = encoder + offset, and
-// render::CameraModel::from_spec gives the true table pose. Frames get 1 DN of read noise.
+// camera::CameraModel::from_spec gives the true table pose. Frames get 1 DN of read noise.
+#include "flatland/model/compile.hpp"
+#include "flatland/camera/camera_model.hpp"
 #include "flatland/calibration/joint.hpp"
 #include "flatland/render/renderer.hpp"
 #include "flatland/vision/hand_pose.hpp"
@@ -90,7 +92,7 @@ TEST(HandPose, ResolveHalfTurn) {
 }
 
 TEST(HandPose, NoHandOrWrongSizeThrows) {
-  const CameraModel cam = CameraModel::from_spec(*joint_scene().camera);
+  const camera::CameraModel cam = flatland::model::compile_camera(*joint_scene().camera);
   const cv::Mat table(480, 640, CV_8UC3, cv::Scalar(52, 52, 52));
   try {
     vision::measure_hand_pose(table, cam, 0.012);
@@ -120,7 +122,7 @@ TEST(JointCalibration, AxisAndOffsetAcceptance) {
       images.push_back(hand_frame(r, s, e + offset, rng));
     }
     calibration::JointReport report;
-    const calibration::JointCalibration j =
+    const camera::JointCalibration j =
         calibration::calibrate_joint(images, encoder, r.camera(), s.render.hand_thickness, &report);
     EXPECT_LT(std::hypot(j.axis_table.x, j.axis_table.y), 0.5e-3);
     EXPECT_NEAR(j.encoder_offset, offset, 0.1 * kDeg);
@@ -144,7 +146,7 @@ TEST(JointCalibration, RejectsMisreadEncoder) {
     encoder.push_back(i == 2 ? e + 3 * kDeg : e);  // one encoder reading is 3 degrees off
   }
   calibration::JointReport report;
-  const calibration::JointCalibration j =
+  const camera::JointCalibration j =
       calibration::calibrate_joint(images, encoder, r.camera(), s.render.hand_thickness, &report);
   EXPECT_NEAR(j.encoder_offset, offset, 0.1 * kDeg);
   EXPECT_FALSE(report.inlier[2]);
@@ -181,15 +183,22 @@ double rotation_error(const cv::Matx33d& a, const cv::Matx33d& b) {
 
 }  // namespace
 
+std::vector<camera::PlacedBoard> placed(const std::vector<TargetSpec>& boards) {
+  std::vector<camera::PlacedBoard> out;
+  for (const TargetSpec& b : boards) out.push_back(flatland::model::compile_target(b));
+  return out;
+}
+
 TEST(JointCalibration, TablePoseFromBoards) {
-  const CameraModel truth = CameraModel::from_spec(*joint_scene().camera);
+  const camera::CameraModel truth = flatland::model::compile_camera(*joint_scene().camera);
   EffectsRng rng(9);
   // One board 0.16 m wide fixes the table's tilt only to a few tenths of a degree (measured:
   // docs/JOINT.md); the second placement is the board turned by a half turn, which checks that
   // its corners are matched the right way round (a wrong match would be a 180-degree error).
   for (const TargetSpec& board : {board_at(0.11, -0.09, 0.15), board_at(0.30, 0.05, 3.29)}) {
     const calibration::TablePose pose =
-        calibration::estimate_table_pose(board_image(board, rng), board, truth.K, truth.dist);
+        calibration::estimate_table_pose(board_image(board, rng),
+                                         flatland::model::compile_target(board), truth.K, truth.dist);
     EXPECT_EQ(pose.corners, 40);
     EXPECT_LT(pose.rms_px, 0.25);
     EXPECT_LT(rotation_error(pose.R, truth.R), 0.4 * kDeg);
@@ -201,7 +210,7 @@ TEST(JointCalibration, TablePoseFromBoards) {
   std::vector<cv::Mat> images;
   for (const TargetSpec& b : boards) images.push_back(board_image(b, rng));
   const calibration::TablePose pose =
-      calibration::estimate_table_pose(images, boards, truth.K, truth.dist);
+      calibration::estimate_table_pose(images, placed(boards), truth.K, truth.dist);
   EXPECT_EQ(pose.corners, 160);
   EXPECT_LT(rotation_error(pose.R, truth.R), 0.1 * kDeg);
   EXPECT_LT(cv::norm(pose.t - truth.t), 1e-3);
@@ -212,7 +221,7 @@ TEST(JointCalibration, TablePoseFromBoards) {
   // And the joint calibrated through the estimated pose instead of the true one.
   const Scene s = joint_scene();
   Renderer r(s);
-  CameraModel estimated = r.camera();
+  camera::CameraModel estimated = r.camera();
   estimated.R = pose.R;
   estimated.t = pose.t;
   std::vector<cv::Mat> hands;
@@ -221,7 +230,7 @@ TEST(JointCalibration, TablePoseFromBoards) {
     encoder.push_back(i * std::numbers::pi / 8);
     hands.push_back(hand_frame(r, s, encoder.back() + 0.7 * kDeg, rng));
   }
-  const calibration::JointCalibration j =
+  const camera::JointCalibration j =
       calibration::calibrate_joint(hands, encoder, estimated, s.render.hand_thickness);
   EXPECT_LT(std::hypot(j.axis_table.x, j.axis_table.y), 0.5e-3);
   EXPECT_NEAR(j.encoder_offset, 0.7 * kDeg, 0.1 * kDeg);
@@ -229,7 +238,7 @@ TEST(JointCalibration, TablePoseFromBoards) {
 
 TEST(JointCalibration, BadInputThrows) {
   const Scene s = joint_scene();
-  const CameraModel cam = CameraModel::from_spec(*s.camera);
+  const camera::CameraModel cam = flatland::model::compile_camera(*s.camera);
   const cv::Mat table(480, 640, CV_8UC3, cv::Scalar::all(52));
   auto expect_one_line_throw = [](auto&& f, const std::string& needle) {
     try {
@@ -255,23 +264,23 @@ TEST(JointCalibration, BadInputThrows) {
         calibration::calibrate_joint({table, table, table}, {0.0, 1.0, 2.0}, cam, 0.012);
       },
       "image 0: measure_hand_pose: no hand found");
-  TargetSpec symmetric;
-  symmetric.squares_x = 8;
-  symmetric.squares_y = 6;
+  camera::PlacedBoard symmetric;
+  symmetric.board.squares_x = 8;
+  symmetric.board.squares_y = 6;
   expect_one_line_throw(
       [&] { calibration::estimate_table_pose(table, symmetric, cam.K, cam.dist); },
       "a chessboard of 7x5 inner corners looks the same turned by a half turn");
-  TargetSpec small;
-  small.squares_x = 3;
+  camera::PlacedBoard small;
+  small.board.squares_x = 3;
   expect_one_line_throw([&] { calibration::estimate_table_pose(table, small, cam.K, cam.dist); },
                         "at least 3x3 inner corners");
-  TargetSpec board;  // 9 x 6 inner corners, but there is none in the image
+  camera::PlacedBoard board;  // 9 x 6 inner corners, but there is none in the image
   expect_one_line_throw([&] { calibration::estimate_table_pose(table, board, cam.K, cam.dist); },
                         "no 9x6 inner-corner chessboard found");
   expect_one_line_throw(
       [&] {
         calibration::estimate_table_pose(std::vector<cv::Mat>{table, table},
-                                         std::vector<TargetSpec>{board}, cam.K, cam.dist);
+                                         std::vector<camera::PlacedBoard>{board}, cam.K, cam.dist);
       },
       "2 images but 1 board placements");
 }

@@ -1,6 +1,9 @@
 // Rendered images against exact truth: the disk's centroid and a chessboard's corners against
 // cv::projectPoints (also through a strongly distorted lens), determinism, backend agreement and
 // the GL error path.
+#include "flatland/model/compile.hpp"
+#include "flatland/camera/board.hpp"
+#include "flatland/camera/camera_model.hpp"
 #include "flatland/render/renderer.hpp"
 #include "flatland/sim/spec.hpp"
 
@@ -61,7 +64,7 @@ cv::Point2d face_centroid(const cv::Mat& bgr, cv::Point2d around, double radius_
   return {sx / sw, sy / sw};
 }
 
-double corner_rms(const cv::Mat& bgr, const TargetSpec& board, const CameraModel& cam) {
+double corner_rms(const cv::Mat& bgr, const TargetSpec& board, const camera::CameraModel& cam) {
   cv::Mat gray;
   cv::cvtColor(bgr, gray, cv::COLOR_BGR2GRAY);
   std::vector<cv::Point2f> found;
@@ -71,7 +74,7 @@ double corner_rms(const cv::Mat& bgr, const TargetSpec& board, const CameraModel
     return -1;
   cv::cornerSubPix(gray, found, cv::Size(5, 5), cv::Size(-1, -1),
                    cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 100, 1e-4));
-  const std::vector<cv::Point2d> truth = cam.project(target_corners(board));
+  const std::vector<cv::Point2d> truth = cam.project(camera::corners_in_table(flatland::model::compile_target(board)));
   // OpenCV may report the grid from either end: match each truth corner to its nearest detection.
   double sum = 0;
   for (const cv::Point2d& t : truth) {
@@ -258,7 +261,7 @@ TEST(Render, CharucoBoardIsDetectedWhereItIs) {
   // calibration pipeline would.
   cv::cornerSubPix(gray, corners, cv::Size(5, 5), cv::Size(-1, -1),
                    cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 100, 1e-4));
-  const std::vector<cv::Point2d> truth = r.camera().project(target_corners(board));
+  const std::vector<cv::Point2d> truth = r.camera().project(camera::corners_in_table(flatland::model::compile_target(board)));
   double sum = 0;
   for (std::size_t i = 0; i < ids.size(); ++i) {
     const cv::Point2d d = cv::Point2d(corners[i]) - truth[ids[i]];

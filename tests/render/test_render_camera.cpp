@@ -1,5 +1,7 @@
 // Camera model (pose, projection, validation, distortion maps) and image effects of the renderer.
-#include "flatland/render/camera.hpp"
+#include "flatland/camera/camera_model.hpp"
+#include "flatland/model/compile.hpp"
+#include "flatland/render/distortion_maps.hpp"
 #include "flatland/render/effects.hpp"
 
 #include <gtest/gtest.h>
@@ -14,8 +16,9 @@
 
 namespace {
 
+namespace camera = flatland::camera;
+namespace model = flatland::model;
 using flatland::CameraSpec;
-using flatland::render::CameraModel;
 using flatland::render::DistortionMaps;
 using flatland::render::EffectsRng;
 
@@ -38,7 +41,7 @@ CameraSpec oblique_spec(std::array<double, 5> distortion = {}) {
 /// Runs from_spec and returns the message of the std::invalid_argument it must throw.
 std::string validation_error(const CameraSpec& spec) {
   try {
-    CameraModel::from_spec(spec);
+    flatland::model::compile_camera(spec);
   } catch (const std::invalid_argument& e) {
     return e.what();
   }
@@ -55,7 +58,7 @@ void expect_error_names(const CameraSpec& spec, const std::string& field) {
 /// Brown-Conrady model written out, independent of OpenCV: camera-frame point -> pixel. With
 /// k4..k6 (d[5..7]) the rational model's denominator divides the radial term.
 cv::Point2d brown_conrady(const cv::Vec3d& pc, const cv::Matx33d& K,
-                          const flatland::render::Distortion& d) {
+                          const flatland::camera::Distortion& d) {
   const double x = pc[0] / pc[2], y = pc[1] / pc[2];
   const double r2 = x * x + y * y;
   const double radial = (1 + d[0] * r2 + d[1] * r2 * r2 + d[4] * r2 * r2 * r2) /
@@ -68,7 +71,7 @@ cv::Point2d brown_conrady(const cv::Vec3d& pc, const cv::Matx33d& K,
 // --- Camera pose and projection ------------------------------------------------------------------
 
 TEST(RenderCamera, OverheadViewShowsTableXRightAndYUp) {
-  const CameraModel cam = CameraModel::from_spec(CameraSpec{});  // (0,0,1) looking down, up +y
+  const camera::CameraModel cam = flatland::model::compile_camera(CameraSpec{});  // (0,0,1) looking down, up +y
   const cv::Point2d below = cam.project(cv::Point3d(0, 0, 0));
   EXPECT_NEAR(below.x, 319.5, 1e-9);
   EXPECT_NEAR(below.y, 239.5, 1e-9);
@@ -87,7 +90,7 @@ TEST(RenderCamera, OverheadViewShowsTableXRightAndYUp) {
 
 TEST(RenderCamera, PoseIsARotationAndRvecReproducesIt) {
   for (const CameraSpec& spec : {CameraSpec{}, oblique_spec()}) {
-    const CameraModel cam = CameraModel::from_spec(spec);
+    const camera::CameraModel cam = flatland::model::compile_camera(spec);
     EXPECT_LT(cv::norm(cam.R * cam.R.t() - cv::Matx33d::eye(), cv::NORM_INF), 1e-12);
     EXPECT_NEAR(cv::determinant(cam.R), 1.0, 1e-12);
     // The overhead camera is a half turn about x: the awkward case for Rodrigues.
@@ -102,7 +105,7 @@ TEST(RenderCamera, PoseIsARotationAndRvecReproducesIt) {
 
 TEST(RenderCamera, LookAtPointProjectsToPrincipalPointAndUpIsUp) {
   const CameraSpec spec = oblique_spec({-0.2, 0.05, 1e-3, -5e-4, 0.01});
-  const CameraModel cam = CameraModel::from_spec(spec);
+  const camera::CameraModel cam = flatland::model::compile_camera(spec);
   EXPECT_TRUE(cam.distorted());
   const cv::Point2d p = cam.project(cv::Point3d(spec.look_at[0], spec.look_at[1], 0));
   EXPECT_NEAR(p.x, spec.cx, 1e-9);
@@ -115,7 +118,7 @@ TEST(RenderCamera, LookAtPointProjectsToPrincipalPointAndUpIsUp) {
 TEST(RenderCamera, ProjectMatchesOpenCVAndTheModelWrittenOut) {
   for (const bool rational : {false, true}) {
     SCOPED_TRACE(rational ? "rational" : "plumb_bob");
-    CameraModel cam = CameraModel::from_spec(oblique_spec({-0.3, 0.1, 1e-3, -2e-3, 0.02}));
+    camera::CameraModel cam = flatland::model::compile_camera(oblique_spec({-0.3, 0.1, 1e-3, -2e-3, 0.02}));
     if (rational) {
       cam.dist[5] = 0.05;  // k4..k6: the rational model's denominator
       cam.dist[6] = -0.02;
@@ -199,7 +202,7 @@ TEST(RenderCameraValidation, RejectsBadIntrinsics) {
   }
   CameraSpec ok;
   ok.exposure = 1.0 / 30.0;
-  EXPECT_NO_THROW(CameraModel::from_spec(ok));
+  EXPECT_NO_THROW(flatland::model::compile_camera(ok));
 }
 
 TEST(RenderCameraValidation, RejectsBadPose) {
@@ -245,12 +248,12 @@ TEST(RenderCameraValidation, RejectsBadPose) {
   }
 }
 
-// --- Distortion maps -------------------------------------------------------------------------
+// --- camera::Distortion maps -------------------------------------------------------------------------
 
 /// Largest distance between output pixel centres and their map positions sent back through the
 /// camera model (ideal pixel -> normalised ray -> cv::projectPoints with K_s and dist), over every
 /// `step`-th pixel and the whole border.
-double map_round_trip_error(const CameraModel& cam, const DistortionMaps& maps, int step) {
+double map_round_trip_error(const camera::CameraModel& cam, const DistortionMaps& maps, int step) {
   const int s = maps.supersample;
   const cv::Matx33d K_s(cam.K(0, 0) * s, 0, (cam.K(0, 2) + 0.5) * s - 0.5, 0, cam.K(1, 1) * s,
                         (cam.K(1, 2) + 0.5) * s - 0.5, 0, 0, 1);
@@ -278,7 +281,7 @@ double map_round_trip_error(const CameraModel& cam, const DistortionMaps& maps, 
 TEST(RenderCameraDistortion, MapsRoundTripThroughTheCameraModel) {
   CameraSpec spec;  // 640 x 480, f = 700: corners at ~30 deg off axis
   spec.distortion = {-0.3, 0.1, 1e-3, 0.0, 0.0};
-  const CameraModel cam = CameraModel::from_spec(spec);
+  const camera::CameraModel cam = flatland::model::compile_camera(spec);
   for (int s : {1, 3}) {
     SCOPED_TRACE("supersample " + std::to_string(s));
     const DistortionMaps maps = flatland::render::make_distortion_maps(cam, s);
@@ -314,7 +317,7 @@ TEST(RenderCameraDistortion, MapsRoundTripThroughTheCameraModel) {
 TEST(RenderCameraDistortion, PincushionMapsStayInsideTheImage) {
   CameraSpec spec;
   spec.distortion = {0.25, 0.0, 0.0, -1e-3, 0.0};
-  const CameraModel cam = CameraModel::from_spec(spec);
+  const camera::CameraModel cam = flatland::model::compile_camera(spec);
   const DistortionMaps maps = flatland::render::make_distortion_maps(cam, 1);
   // The footprint shrinks towards the centre; the ideal image keeps at least the camera's size.
   EXPECT_GE(maps.ideal_width, 640);
@@ -325,7 +328,7 @@ TEST(RenderCameraDistortion, PincushionMapsStayInsideTheImage) {
 TEST(RenderCameraDistortion, MapsAgreeWithProjectOfTablePoints) {
   // The whole chain the renderer relies on: a table point drawn by the ideal pinhole camera and
   // remapped lands where project() says.
-  const CameraModel cam = CameraModel::from_spec(oblique_spec({-0.3, 0.1, 1e-3, -5e-4, 0.0}));
+  const camera::CameraModel cam = flatland::model::compile_camera(oblique_spec({-0.3, 0.1, 1e-3, -5e-4, 0.0}));
   const int s = 2;
   const DistortionMaps maps = flatland::render::make_distortion_maps(cam, s);
   std::vector<cv::Point3d> pts;
@@ -355,7 +358,7 @@ TEST(RenderCameraDistortion, MapsAgreeWithProjectOfTablePoints) {
 }
 
 TEST(RenderCameraDistortion, IdentityMapsWithoutDistortion) {
-  const CameraModel cam = CameraModel::from_spec(oblique_spec());
+  const camera::CameraModel cam = flatland::model::compile_camera(oblique_spec());
   for (int s : {1, 2}) {
     const DistortionMaps maps = flatland::render::make_distortion_maps(cam, s);
     EXPECT_EQ(maps.ideal_width, 800 * s);
@@ -380,14 +383,14 @@ TEST(RenderCameraDistortion, IdentityMapsWithoutDistortion) {
 TEST(RenderCameraDistortion, RejectsDistortionThatFoldsOverAndBadSupersample) {
   CameraSpec spec;
   spec.distortion = {-2.0, 0.0, 0.0, 0.0, 0.0};  // r(1 - 2 r^2) peaks inside the image
-  const CameraModel cam = CameraModel::from_spec(spec);
+  const camera::CameraModel cam = flatland::model::compile_camera(spec);
   try {
     flatland::render::make_distortion_maps(cam, 1);
     ADD_FAILURE() << "no error";
   } catch (const std::invalid_argument& e) {
     EXPECT_EQ(std::string(e.what()).rfind("camera.distortion: ", 0), 0u) << e.what();
   }
-  EXPECT_THROW(flatland::render::make_distortion_maps(CameraModel{}, 0), std::invalid_argument);
+  EXPECT_THROW(flatland::render::make_distortion_maps(camera::CameraModel{}, 0), std::invalid_argument);
 }
 
 // --- Effects ---------------------------------------------------------------------------------

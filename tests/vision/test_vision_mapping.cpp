@@ -1,6 +1,7 @@
 // Pixel -> table -> hand -> s_h against the simulator's truth: exact for the projected true centre
 // (also through a distorted, tilted camera), and within 0.005 from tracked centres of a noisy,
 // blurred rendered sequence.
+#include "flatland/model/compile.hpp"
 #include "flatland/render/renderer.hpp"
 #include "flatland/sim/spec.hpp"
 #include "flatland/vision/mapping.hpp"
@@ -24,7 +25,7 @@ Scene mapping_scene(double noise_dn, bool blur) {
   return flatland_test::air_table_experiment(noise_dn, blur, 11);
 }
 
-vision::HandMapping mapping_for(const Scene& s, const render::CameraModel& camera) {
+vision::HandMapping mapping_for(const Scene& s, const camera::CameraModel& camera) {
   vision::HandMapping m;
   m.camera = camera;
   m.plane_z = s.render.disk_thickness;  // the truth (and the tracked edge) is the top face
@@ -62,7 +63,7 @@ TEST(VisionMapping, PixelToTableInvertsProjection) {
   cam.distortion = {-0.28, 0.09, 0.001, -0.0008, -0.01};
   cam.position = {0.15, -0.3, 1.1};
   cam.look_at = {0.0, 0.05, 0.0};
-  const render::CameraModel model = render::CameraModel::from_spec(cam);
+  const camera::CameraModel model = flatland::model::compile_camera(cam);
   double worst = 0;
   for (double x = -0.3; x <= 0.3; x += 0.05)
     for (double y = -0.2; y <= 0.2; y += 0.05) {
@@ -79,7 +80,7 @@ TEST(VisionMapping, PixelToTableInvertsProjection) {
 // The projected true centre maps back to the simulator's s_h within 1e-6 over the whole run.
 TEST(VisionMapping, TruthCentreGivesSimulatorContactParameter) {
   const Scene s = mapping_scene(0, false);
-  const render::CameraModel camera = render::CameraModel::from_spec(*s.camera);
+  const camera::CameraModel camera = flatland::model::compile_camera(*s.camera);
   const vision::HandMapping m = mapping_for(s, camera);
   const sim::RunResult r = run(s);
   double worst = 0, worst_table = 0, guess = -1;

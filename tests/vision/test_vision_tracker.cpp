@@ -27,7 +27,7 @@ Scene experiment_scene(double noise_dn, bool blur) {
 
 struct Sequence {
   std::vector<render::Frame> frames;
-  render::CameraModel camera;
+  camera::CameraModel camera;
 };
 
 // Every 30 Hz frame of the 4 s run (121 frames), rendered once per configuration.

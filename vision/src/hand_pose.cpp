@@ -68,7 +68,7 @@ double resolve_half_turn(double axis_angle, double expected) {
   return axis_angle + pi * std::round((expected - axis_angle) / pi);
 }
 
-HandPose measure_hand_pose(const cv::Mat& image, const render::CameraModel& camera,
+HandPose measure_hand_pose(const cv::Mat& image, const camera::CameraModel& camera,
                            double plate_height, const HandPoseOptions& options) {
   const cv::Mat gray = to_gray_float(image);
   if (gray.cols != camera.width || gray.rows != camera.height) {

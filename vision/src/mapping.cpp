@@ -11,7 +11,7 @@
 
 namespace flatland::vision {
 
-cv::Point2d undistort_pixel(const render::CameraModel& camera, cv::Point2d px) {
+cv::Point2d undistort_pixel(const camera::CameraModel& camera, cv::Point2d px) {
   const std::vector<cv::Point2d> in{px};
   std::vector<cv::Point2d> out;
   // Without distortion the inverse is exact in closed form; cv::undistortPoints' iteration
@@ -28,7 +28,7 @@ cv::Point2d undistort_pixel(const render::CameraModel& camera, cv::Point2d px) {
   return out[0];
 }
 
-std::optional<cv::Point2d> pixel_to_table(const render::CameraModel& camera, cv::Point2d px,
+std::optional<cv::Point2d> pixel_to_table(const camera::CameraModel& camera, cv::Point2d px,
                                           double plane_z) {
   const cv::Point2d n = undistort_pixel(camera, px);
   // Camera centre and ray direction in the table frame: x_table = R^T (x_cam - t).
@@ -41,7 +41,7 @@ std::optional<cv::Point2d> pixel_to_table(const render::CameraModel& camera, cv:
   return cv::Point2d(origin[0] + lambda * dir[0], origin[1] + lambda * dir[1]);
 }
 
-std::vector<cv::Point2d> pixels_to_table(const render::CameraModel& camera,
+std::vector<cv::Point2d> pixels_to_table(const camera::CameraModel& camera,
                                          const std::vector<cv::Point2d>& px, double plane_z) {
   std::vector<cv::Point2d> n;
   if (px.empty()) return n;

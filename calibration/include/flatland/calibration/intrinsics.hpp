@@ -4,8 +4,9 @@
 // covariance.
 #pragma once
 
-#include "flatland/calibration/camera_file.hpp"
-#include "flatland/render/camera.hpp"
+#include "flatland/camera/board.hpp"
+#include "flatland/camera/camera_file.hpp"
+#include "flatland/camera/camera_model.hpp"
 
 #include <opencv2/core.hpp>
 
@@ -15,36 +16,6 @@
 #include <vector>
 
 namespace flatland::calibration {
-
-/// A planar calibration board. Its size is kept in squares (as cv::aruco::CharucoBoard's
-/// squaresX, squaresY), so it has (squares_x - 1) x (squares_y - 1) inner corners. The notation
-/// counts as OpenCV does: a chessboard by its inner corners (patternSize of
-/// cv::findChessboardCorners, ROS camera_calibration --size), a ChArUco board by its squares.
-struct BoardSpec {
-  enum class Kind { kChessboard, kCharuco };
-  Kind kind = Kind::kChessboard;
-  int squares_x = 10, squares_y = 7;       ///< OpenCV's sample chessboard: 9x6 inner corners
-  double square = 0.02;                    ///< m
-  double marker = 0.015;                   ///< m (ChArUco marker side)
-  std::string dictionary = "DICT_4X4_50";  ///< OpenCV predefined dictionary (ChArUco)
-
-  /// "chessboard:COLSxROWS:SQUARE_M" (COLS x ROWS inner corners, each at least 3, as
-  /// cv::findChessboardCorners needs) or "charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT]" (squares).
-  /// Throws std::invalid_argument naming what is wrong.
-  static BoardSpec parse(const std::string& text);
-  /// The notation parse() reads, e.g. "chessboard:9x6:0.025".
-  std::string notation() const;
-  /// The board the same notation means in the other count: for a chessboard given in inner
-  /// corners, the one whose squares those are (one corner fewer each way); for a ChArUco board
-  /// given in squares, the one whose inner corners those are (one square more). For the hint when
-  /// a board is found nowhere. nullopt when that board would be too small to detect.
-  std::optional<BoardSpec> other_count() const;
-  /// Inner corners per row and rows of them: cv::findChessboardCorners' patternSize.
-  cv::Size pattern_size() const { return {squares_x - 1, squares_y - 1}; }
-  /// Inner corners in the board plane (z = 0), OpenCV's order: corner k at
-  /// ((k % (squares_x-1)) + 1, (k / (squares_x-1)) + 1) * square; for ChArUco corner id k.
-  std::vector<cv::Point3f> corners() const;
-};
 
 /// One view's correspondences.
 struct BoardView {
@@ -58,7 +29,7 @@ struct BoardView {
 /// through cv::aruco::detectMarkers + interpolateCornersCharuco, refined by cv::cornerSubPix
 /// (OpenCV 4.6's interpolated corners are ~0.5 px off). nullopt when the board is not found (a
 /// ChArUco view needs at least 6 corners). Accepts 8-bit gray or BGR images.
-std::optional<BoardView> detect_board(const cv::Mat& image, const BoardSpec& board,
+std::optional<BoardView> detect_board(const cv::Mat& image, const camera::Board& board,
                                       const std::string& name = "");
 
 struct IntrinsicsOptions {
@@ -88,7 +59,7 @@ struct IntrinsicsOptions {
 
 struct IntrinsicsResult {
   cv::Matx33d K = cv::Matx33d::eye();
-  render::Distortion dist = render::Distortion::all(0);  ///< k1 k2 p1 p2 k3 (k4 k5 k6)
+  camera::Distortion dist = camera::Distortion::all(0);  ///< k1 k2 p1 p2 k3 (k4 k5 k6)
   bool rational = false;  ///< calibrated with the rational model (k4, k5, k6 free)
   cv::Size image_size;
   double rms_px = 0;  ///< over the views used
@@ -105,8 +76,8 @@ struct IntrinsicsResult {
   std::array<double, 9> params() const;  ///< fx fy cx cy k1 k2 p1 p2 k3
   int views_used() const;
   /// The camera (intrinsics only; pose identity) and the report for the camera file.
-  render::CameraModel camera() const;
-  CalibrationReport report() const;
+  camera::CameraModel camera() const;
+  camera::CalibrationReport report() const;
 };
 
 /// Calibrate from views of one board. Initialisation is independent of cv::calibrateCamera:

@@ -3,9 +3,9 @@
 // (from images of the hand at known encoder angles). Method and measured accuracy: docs/JOINT.md.
 #pragma once
 
-#include "flatland/calibration/camera_file.hpp"
-#include "flatland/render/camera.hpp"
-#include "flatland/scene/scene.hpp"
+#include "flatland/camera/board.hpp"
+#include "flatland/camera/camera_file.hpp"
+#include "flatland/camera/camera_model.hpp"
 #include "flatland/vision/hand_pose.hpp"
 
 #include <opencv2/core.hpp>
@@ -14,7 +14,7 @@
 
 namespace flatland::calibration {
 
-/// The table pose in the camera: x_cam = R x_table + t (as render::CameraModel::R, t).
+/// The table pose in the camera: x_cam = R x_table + t (as camera::CameraModel::R, t).
 struct TablePose {
   cv::Matx33d R = cv::Matx33d::eye();
   cv::Vec3d t{0, 0, 0};
@@ -25,18 +25,18 @@ struct TablePose {
 /// The table pose from one image of a chessboard lying on the table. `board` says what the board
 /// is (type chessboard; squares_x x squares_y squares of side `square`) and where it lies in the
 /// table frame (`position`, Rodrigues `rotation`, as a scene's `targets` entry:
-/// render::target_corners gives its inner corners in the table frame). The board must not look
+/// camera::corners_in_table gives its inner corners in the table frame). The board must not look
 /// the same turned by a half turn (squares_x + squares_y odd, as is inner corners' sum), or its
 /// corners could be matched the wrong way round. Throws
 /// std::invalid_argument (one line) for a ChArUco or symmetric board, bad K, or no board found.
-TablePose estimate_table_pose(const cv::Mat& image, const TargetSpec& board, const cv::Matx33d& K,
-                              const render::Distortion& dist);
+TablePose estimate_table_pose(const cv::Mat& image, const camera::PlacedBoard& board, const cv::Matx33d& K,
+                              const camera::Distortion& dist);
 /// The same from several images of boards at known places (one board per image, the camera
 /// fixed): all corners in one pose fit. Spread placements determine the table's tilt better.
 /// Errors name the image index.
 TablePose estimate_table_pose(const std::vector<cv::Mat>& images,
-                              const std::vector<TargetSpec>& boards, const cv::Matx33d& K,
-                              const render::Distortion& dist);
+                              const std::vector<camera::PlacedBoard>& boards, const cv::Matx33d& K,
+                              const camera::Distortion& dist);
 
 /// Per-image results of calibrate_joint, for reports and for rejecting outliers.
 struct JointReport {
@@ -58,9 +58,9 @@ struct JointReport {
 /// give the best offset; the axis needs no spread. Needs at least 3 images. Throws
 /// std::invalid_argument (one line) for fewer than 3 images, a size mismatch, non-finite angles,
 /// or an image where no hand is found (naming the image index).
-JointCalibration calibrate_joint(const std::vector<cv::Mat>& images,
+camera::JointCalibration calibrate_joint(const std::vector<cv::Mat>& images,
                                  const std::vector<double>& encoder_angles,
-                                 const render::CameraModel& camera, double plate_height,
+                                 const camera::CameraModel& camera, double plate_height,
                                  JointReport* report = nullptr);
 
 }  // namespace flatland::calibration

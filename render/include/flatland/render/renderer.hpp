@@ -3,7 +3,7 @@
 // targets, seen by the scene's camera with exact geometry and optional image effects.
 #pragma once
 
-#include "flatland/render/camera.hpp"
+#include "flatland/camera/camera_model.hpp"
 #include "flatland/render/effects.hpp"
 #include "flatland/render/gl_context.hpp"
 #include "flatland/scene/scene.hpp"
@@ -44,13 +44,6 @@ struct Frame {
   FrameTruth truth;
 };
 
-/// Inner corners of a target's square grid in the table frame (on the board plane), in OpenCV's
-/// order: corner k is OpenCV's object point k (ChArUco corner id k), i.e. row by row from the
-/// board's printed top-left. Our board frame (scene `targets`) is seen from +z with x along the
-/// columns and y up; OpenCV's runs y down the printed board: (x, y)_opencv = (x, squares_y*square -
-/// y). The truth for chessboard and ChArUco corner detection and calibration.
-std::vector<cv::Point3d> target_corners(const TargetSpec& target);
-
 class Renderer {
  public:
   /// Needs scene.camera. Creates the GL context (backend from scene.render.backend unless
@@ -61,7 +54,7 @@ class Renderer {
   Renderer(const Renderer&) = delete;
   Renderer& operator=(const Renderer&) = delete;
 
-  const CameraModel& camera() const;
+  const camera::CameraModel& camera() const;
   std::string gl_description() const;
 
   /// One geometric image of the state: anti-aliasing and distortion applied, no noise/blur/

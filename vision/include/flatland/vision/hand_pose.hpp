@@ -7,7 +7,7 @@
 // x axis. The outline therefore gives the angle only modulo pi: the encoder resolves it.
 #pragma once
 
-#include "flatland/render/camera.hpp"
+#include "flatland/camera/camera_model.hpp"
 
 #include <opencv2/core.hpp>
 
@@ -41,7 +41,7 @@ struct HandPoseOptions {
 /// face above the table (render.hand_thickness). The hand is the largest bright blob; it must lie
 /// entirely inside the image. Throws std::invalid_argument (one line) when no hand is found, the
 /// hand touches the image border or the camera does not match the image.
-HandPose measure_hand_pose(const cv::Mat& image, const render::CameraModel& camera,
+HandPose measure_hand_pose(const cv::Mat& image, const camera::CameraModel& camera,
                            double plate_height, const HandPoseOptions& options = {});
 
 /// The angle congruent to `axis_angle` modulo pi that is nearest to `expected` (e.g. the encoder

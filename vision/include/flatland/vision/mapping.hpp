@@ -2,7 +2,7 @@
 // disk centre into the quantity the controller compares with its plan (docs/VISION.md).
 #pragma once
 
-#include "flatland/render/camera.hpp"
+#include "flatland/camera/camera_model.hpp"
 #include "flatland/sim/curve.hpp"
 
 #include <opencv2/core.hpp>
@@ -14,17 +14,17 @@ namespace flatland::vision {
 
 /// Normalised, undistorted image coordinates (x/z, y/z in the camera frame) of a pixel
 /// (cv::undistortPoints with the camera's K and distortion).
-cv::Point2d undistort_pixel(const render::CameraModel& camera, cv::Point2d px);
+cv::Point2d undistort_pixel(const camera::CameraModel& camera, cv::Point2d px);
 
 /// The table-frame point on the plane z = plane_z (m) seen at pixel px: the undistorted ray
 /// intersected with the plane. nullopt when the ray is parallel to the plane or meets it behind
 /// the camera.
-std::optional<cv::Point2d> pixel_to_table(const render::CameraModel& camera, cv::Point2d px,
+std::optional<cv::Point2d> pixel_to_table(const camera::CameraModel& camera, cv::Point2d px,
                                           double plane_z);
 
 /// The same for many pixels at once (one cv::undistortPoints call, 30 fixed iterations: for the
 /// tracker's edge points); NaN points where the ray misses the plane.
-std::vector<cv::Point2d> pixels_to_table(const render::CameraModel& camera,
+std::vector<cv::Point2d> pixels_to_table(const camera::CameraModel& camera,
                                          const std::vector<cv::Point2d>& px, double plane_z);
 
 /// Table frame -> hand frame: the hand pivots about `axis_table` and is turned by theta (rad,
@@ -46,7 +46,7 @@ ContactEstimate contact_parameter(const sim::PolynomialHand& hand, double disk_r
 
 /// Everything needed to map a tracked centre to s_h.
 struct HandMapping {
-  render::CameraModel camera;    ///< K, dist and the table pose R, t
+  camera::CameraModel camera;    ///< K, dist and the table pose R, t
   cv::Point2d axis_table{0, 0};  ///< m, joint axis in the table frame
   double plane_z = 0;            ///< m, height of the tracked point (the disk's top face)
   double disk_radius = 0;        ///< m

@@ -10,7 +10,7 @@
 // down-weighted rather than averaged in.
 #pragma once
 
-#include "flatland/render/camera.hpp"
+#include "flatland/camera/camera_model.hpp"
 
 #include <opencv2/core.hpp>
 
@@ -54,7 +54,7 @@ struct TrackerConfig {
   /// centre: exact for an oblique or distorted camera, where the image of the circle is not a
   /// circle and the centre of its image is not the image of its centre. The result does not
   /// depend on plane_z (planes parallel to the table map onto each other by a homothety).
-  std::optional<render::CameraModel> camera;
+  std::optional<camera::CameraModel> camera;
   double plane_z = 0;  ///< m
 };
 

@@ -1,7 +1,7 @@
 // Camera files (see camera_file.hpp). The ROS camera_info keys come first and are exactly what
 // camera_calibration_parsers reads; everything flatland adds lives under one `flatland` mapping
 // so that ROS tools ignore it.
-#include "flatland/calibration/camera_file.hpp"
+#include "flatland/camera/camera_file.hpp"
 
 #include <yaml-cpp/yaml.h>
 #include <opencv2/calib3d.hpp>
@@ -20,7 +20,7 @@
 
 #include <unistd.h>
 
-namespace flatland::calibration {
+namespace flatland::camera {
 
 namespace {
 
@@ -195,7 +195,7 @@ CameraFile read_fields(const YAML::Node& root, const Reader& rd) {
   if (!root.IsMap()) rd.fail("(document)", "not a mapping");
 
   CameraFile file;
-  render::CameraModel& m = file.camera;
+  CameraModel& m = file.camera;
   m.width = rd.integer(rd.require(root, "image_width", "image_width"), "image_width");
   m.height = rd.integer(rd.require(root, "image_height", "image_height"), "image_height");
   if (m.width <= 0) rd.fail("image_width", "must be positive, got " + std::to_string(m.width));
@@ -300,7 +300,7 @@ CameraFile read_fields(const YAML::Node& root, const Reader& rd) {
 }  // namespace
 
 void write_camera_file(const std::string& path, const CameraFile& file) {
-  const render::CameraModel& m = file.camera;
+  const CameraModel& m = file.camera;
   cv::FileStorage fs(
       ".yaml", cv::FileStorage::WRITE | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
   fs << "image_width" << m.width << "image_height" << m.height;
@@ -423,4 +423,4 @@ CameraFile parse_camera_file(const std::string& text, const std::string& origin)
   }
 }
 
-}  // namespace flatland::calibration
+}  // namespace flatland::camera

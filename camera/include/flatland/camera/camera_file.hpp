@@ -4,7 +4,7 @@
 // flavour), read with yaml-cpp: OpenCV 4.6's YAML reader hangs on some malformed files.
 #pragma once
 
-#include "flatland/render/camera.hpp"
+#include "flatland/camera/camera_model.hpp"
 
 #include <opencv2/core.hpp>
 
@@ -12,7 +12,7 @@
 #include <optional>
 #include <string>
 
-namespace flatland::calibration {
+namespace flatland::camera {
 
 /// The joint seen from the table frame (from `calibrate_joint`).
 struct JointCalibration {
@@ -49,7 +49,7 @@ struct JointFitReport {
 
 struct CameraFile {
   std::string camera_name = "flatland";
-  render::CameraModel camera;  ///< width, height, K, dist; R, t = table pose when known
+  CameraModel camera;  ///< width, height, K, dist; R, t = table pose when known
   /// distortion_model rational_polynomial (8 coefficients) rather than plumb_bob (5); written so
   /// whenever camera.rational() too.
   bool rational_model = false;
@@ -69,4 +69,4 @@ CameraFile read_camera_file(const std::string& path);
 /// Throws only std::invalid_argument, whatever the bytes (fuzzed: fuzz/camera_file_fuzzer.cpp).
 CameraFile parse_camera_file(const std::string& text, const std::string& origin = "<string>");
 
-}  // namespace flatland::calibration
+}  // namespace flatland::camera

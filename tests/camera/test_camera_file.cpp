@@ -1,6 +1,6 @@
 // Camera files: round trip of every field, the ROS camera_info keys, atomic writes and the
 // validation errors ("<path>: <field>: <reason>").
-#include "flatland/calibration/camera_file.hpp"
+#include "flatland/camera/camera_file.hpp"
 
 #include <gtest/gtest.h>
 #include <opencv2/calib3d.hpp>
@@ -14,7 +14,7 @@
 #include <unistd.h>
 
 using namespace flatland;
-using namespace flatland::calibration;
+using namespace flatland::camera;
 namespace fs = std::filesystem;
 
 namespace {
@@ -45,7 +45,7 @@ class CameraFileTest : public ::testing::Test {
   std::string error_of(const std::string& text) const {
     const std::string p = write("bad.yaml", text);
     try {
-      read_camera_file(p);
+      camera::read_camera_file(p);
     } catch (const std::invalid_argument& e) {
       return e.what();
     }
@@ -55,20 +55,20 @@ class CameraFileTest : public ::testing::Test {
   fs::path dir_;
 };
 
-CameraFile full_file() {
-  CameraFile f;
+camera::CameraFile full_file() {
+  camera::CameraFile f;
   f.camera_name = "overhead";
   f.camera.width = 640;
   f.camera.height = 480;
   f.camera.K = cv::Matx33d(801.25, 0, 322.5, 0, 799.75, 237.25, 0, 0, 1);
-  f.camera.dist = render::Distortion(-0.2, 0.08, 0.001, -0.0005, 0.0125, 0, 0, 0);
+  f.camera.dist = camera::Distortion(-0.2, 0.08, 0.001, -0.0005, 0.0125, 0, 0, 0);
   cv::Rodrigues(cv::Vec3d(3.1, 0.05, -0.02), f.camera.R);
   f.camera.t = cv::Vec3d(0.01, -0.02, 1.2);
   f.camera.fps = 30;
   f.camera.exposure = 0.004;
   f.has_table_pose = true;
-  f.joint = JointCalibration{{0.012, -0.034}, 0.0123};
-  CalibrationReport r;
+  f.joint = camera::JointCalibration{{0.012, -0.034}, 0.0123};
+  camera::CalibrationReport r;
   r.rms_px = 0.0789;
   r.view_rms_px = {0.07, 0.08, 0.09};
   r.views_used = 3;
@@ -102,13 +102,13 @@ std::string replace(std::string s, const std::string& from, const std::string& t
 }  // namespace
 
 TEST_F(CameraFileTest, RoundTripsEveryField) {
-  const CameraFile f = full_file();
-  write_camera_file(path("camera.yaml"), f);
+  const camera::CameraFile f = full_file();
+  camera::write_camera_file(path("camera.yaml"), f);
   // Atomic: nothing but the file itself is left behind.
   int entries = 0;
   for ([[maybe_unused]] const auto& e : fs::directory_iterator(dir_)) ++entries;
   EXPECT_EQ(entries, 1);
-  const CameraFile g = read_camera_file(path("camera.yaml"));
+  const camera::CameraFile g = camera::read_camera_file(path("camera.yaml"));
   EXPECT_EQ(g.camera_name, "overhead");
   EXPECT_EQ(g.camera.width, 640);
   EXPECT_EQ(g.camera.height, 480);
@@ -133,14 +133,14 @@ TEST_F(CameraFileTest, RoundTripsEveryField) {
 }
 
 TEST_F(CameraFileTest, RationalModelRoundTripsAsRosRationalPolynomial) {
-  CameraFile f = full_file();
-  f.camera.dist = render::Distortion(1.5, 0.3, 0.001, -0.0005, 0.01, 1.9, 0.6, 0.02);
+  camera::CameraFile f = full_file();
+  f.camera.dist = camera::Distortion(1.5, 0.3, 0.001, -0.0005, 0.01, 1.9, 0.6, 0.02);
   f.rational_model = true;
   f.report->std_rational = std::array<double, 3>{0.1, 0.2, 0.3};
-  write_camera_file(path("camera.yaml"), f);
+  camera::write_camera_file(path("camera.yaml"), f);
   const std::string text = read("camera.yaml");
   EXPECT_NE(text.find("distortion_model: rational_polynomial"), std::string::npos) << text;
-  const CameraFile g = read_camera_file(path("camera.yaml"));
+  const camera::CameraFile g = camera::read_camera_file(path("camera.yaml"));
   EXPECT_TRUE(g.rational_model);
   for (int i = 0; i < 8; ++i) EXPECT_DOUBLE_EQ(g.camera.dist[i], f.camera.dist[i]) << i;
   ASSERT_TRUE(g.report->std_rational.has_value());
@@ -151,12 +151,12 @@ TEST_F(CameraFileTest, RationalModelRoundTripsAsRosRationalPolynomial) {
   EXPECT_EQ(error_of(five),
             path("bad.yaml") + ": distortion_coefficients: must be 1 x 8, got 1 x 5");
   // A plumb_bob camera stays plumb_bob.
-  write_camera_file(path("plain.yaml"), full_file());
-  EXPECT_FALSE(read_camera_file(path("plain.yaml")).rational_model);
+  camera::write_camera_file(path("plain.yaml"), full_file());
+  EXPECT_FALSE(camera::read_camera_file(path("plain.yaml")).rational_model);
 }
 
 TEST_F(CameraFileTest, UsesTheRosCameraInfoLayout) {
-  write_camera_file(path("camera.yaml"), full_file());
+  camera::write_camera_file(path("camera.yaml"), full_file());
   const std::string text = read("camera.yaml");
   for (const char* key : {"image_width: 640", "image_height: 480", "camera_name: overhead",
                           "camera_matrix:", "distortion_model: plumb_bob",
@@ -166,7 +166,7 @@ TEST_F(CameraFileTest, UsesTheRosCameraInfoLayout) {
 }
 
 TEST_F(CameraFileTest, ReadsAMinimalRosFileWithoutExtras) {
-  const CameraFile f = read_camera_file(write("ros.yaml", kMinimal));
+  const camera::CameraFile f = camera::read_camera_file(write("ros.yaml", kMinimal));
   EXPECT_EQ(f.camera_name, "cam");
   EXPECT_DOUBLE_EQ(f.camera.K(0, 0), 800);
   EXPECT_DOUBLE_EQ(f.camera.dist[0], -0.1);
@@ -203,7 +203,7 @@ TEST_F(CameraFileTest, ValidationErrorsNameTheField) {
   const std::string garbage = error_of("image_width: [1, 2\n");
   EXPECT_EQ(garbage.rfind(p + ": (document): invalid YAML", 0), 0u) << garbage;
   try {
-    read_camera_file(path("missing.yaml"));
+    camera::read_camera_file(path("missing.yaml"));
     ADD_FAILURE() << "no error for a missing file";
   } catch (const std::invalid_argument& e) {
     EXPECT_EQ(std::string(e.what()), path("missing.yaml") + ": (file): cannot read camera file");
@@ -211,7 +211,7 @@ TEST_F(CameraFileTest, ValidationErrorsNameTheField) {
 }
 
 TEST_F(CameraFileTest, WriteFailureIsARuntimeError) {
-  EXPECT_THROW(write_camera_file(path("no/such/dir/camera.yaml"), full_file()), std::runtime_error);
+  EXPECT_THROW(camera::write_camera_file(path("no/such/dir/camera.yaml"), full_file()), std::runtime_error);
 }
 
 // OpenCV 4.6's YAML reader (cv::FileStorage) loops forever on some malformed text, reads out of
@@ -233,7 +233,7 @@ TEST_F(CameraFileTest, TextThatHangsOpenCvsYamlReaderIsAClearError) {
   EXPECT_EQ(error_of(big), p + ": (document): larger than 1 MiB; a camera file is a few kB");
   // A device that never ends is read only to one byte past the limit.
   try {
-    read_camera_file("/dev/zero");
+    camera::read_camera_file("/dev/zero");
     ADD_FAILURE() << "/dev/zero read as a camera file";
   } catch (const std::invalid_argument& e) {
     EXPECT_STREQ(e.what(), "/dev/zero: (document): larger than 1 MiB; a camera file is a few kB");
@@ -243,7 +243,7 @@ TEST_F(CameraFileTest, TextThatHangsOpenCvsYamlReaderIsAClearError) {
 // What OpenCV's reader accepted, yaml-cpp reads the same way: the "%YAML:1.0" header, numbers
 // written as "8.0e+02" or "0.", OpenCV's ".Nan" and ".Inf"; a quoted number is a string.
 TEST_F(CameraFileTest, ReadsOpenCvsYamlFlavour) {
-  const CameraFile f = read_camera_file(
+  const camera::CameraFile f = camera::read_camera_file(
       write("cv.yaml",
             "%YAML:1.0\n---\n" + replace(kMinimal, "[800, 0, 320", "[ 8.0e+02, 0., +320.") +
                 "flatland:\n   rms_px: 0.5\n   std: { fx: .Nan, fy: .Inf, cx: -.inf, cy: 1.5 }\n"));
@@ -267,7 +267,7 @@ TEST_F(CameraFileTest, ReadsOpenCvsYamlFlavour) {
   EXPECT_EQ(error_of(replace(kMinimal, "camera_name: cam", "camera_name: [a, b]")),
             p + ": camera_name: must be a string");
   // Colons inside quoted and plain scalars and comments are not keys.
-  const CameraFile g = read_camera_file(
+  const camera::CameraFile g = camera::read_camera_file(
       write("ok.yaml", replace(kMinimal, "camera_name: cam",
                                "camera_name: \": odd, name: \"  # note: a comment, : too\n"
                                "frame_id: 'a: b'\nurl: http://x/y")));

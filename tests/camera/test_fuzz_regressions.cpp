@@ -2,7 +2,7 @@
 // (tests/fuzz/<target>/) and every input a fuzzer once crashed on
 // (tests/fuzz/regressions/<target>/) either parses or is rejected with the one-line error of its
 // reader; no other exception.
-#include "flatland/calibration/camera_file.hpp"
+#include "flatland/camera/camera_file.hpp"
 #include "flatland/scene/scene.hpp"
 
 #include <gtest/gtest.h>
@@ -69,7 +69,7 @@ TEST(FuzzRegressions, SceneInputsParseOrThrowSceneError) {
 
 TEST(FuzzRegressions, CameraFileInputsParseOrThrowInvalidArgument) {
   const int parsed = check_all<std::invalid_argument>("camera_file", [](const std::string& s) {
-    (void)flatland::calibration::parse_camera_file(s, "fuzz.yaml");
+    (void)flatland::camera::parse_camera_file(s, "fuzz.yaml");
   });
   EXPECT_GE(parsed, 2);  // the minimal ROS file and the full flatland one
 }
