@@ -430,7 +430,7 @@ void run_experiment(const ExperimentOptions& o) {
   j["frames"] = loop.frames;
   j["frames_lost"] = loop.frames_lost;
   j["safe_stop"] = loop.safe_stop;
-  j["stop_reason"] = nullable(loop.stop_reason);
+  j["stop_reason"] = loop.stop_reason ? Json(loop.stop_reason->detail) : Json(nullptr);
   j["failure"] = truth ? nullable(synthetic->failure) : Json(nullptr);
   j["finished"] = loop.finished;
   j["k"] = number(loop.k);
@@ -507,7 +507,7 @@ void run_experiment(const ExperimentOptions& o) {
   os
      << "  frames             " << loop.frames << " received, " << loop.frames_lost
      << " not usable, " << loop.measurements << " measurements\n"
-     << "  safe stop          " << (loop.safe_stop ? "yes (" + loop.stop_reason + ")" : "no")
+     << "  safe stop          " << (loop.stop_reason ? "yes (" + loop.stop_reason->detail + ")" : "no")
      << "\n";
   if (log_joint_driver)
     os << "  replay             " << log_joint_driver->mismatches()

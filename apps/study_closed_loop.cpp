@@ -46,7 +46,7 @@ struct Cell {
 struct RunSummary {
   bool success = false;
   drivers::Outcome outcome = drivers::Outcome::kNotFinished;
-  std::string stop_reason;  // the safe stop's reason (outcome kSafeStop)
+  std::optional<control::StopCause> stop_cause;  // why it stopped safely (outcome kSafeStop)
   double fn_min = NAN, duration = NAN, est_rms = NAN, nees = NAN;
   long frames = 0, frames_lost = 0;
 };
@@ -63,13 +63,11 @@ struct CellResult {
 };
 
 /// A short class for how a run failed, for the breakdown per cell: the outcome, and for a safe
-/// stop what triggered it (the first word of the safety monitor's reason).
+/// stop what triggered it.
 std::string failure_class(const RunSummary& r) {
   if (r.outcome != drivers::Outcome::kSafeStop) return drivers::to_string(r.outcome);
-  const auto starts = [&](const char* p) { return r.stop_reason.rfind(p, 0) == 0; };
-  for (const char* why : {"camera", "tracking", "estimator", "joint", "timeout"})
-    if (starts(why)) return std::string("safe_stop (") + why + ")";
-  return "safe_stop (other)";
+  if (!r.stop_cause) return "safe_stop (other)";
+  return std::string("safe_stop (") + control::to_string(*r.stop_cause) + ")";
 }
 
 /// The CSV's failure columns: classes folded into five.
@@ -169,7 +167,7 @@ CellResult run_cell(const Scene& nominal, const Cell& cell, int n, unsigned thre
         RunSummary s;
         s.success = r.success;
         s.outcome = r.outcome;
-        s.stop_reason = r.loop.stop_reason;
+        if (r.loop.stop_reason) s.stop_cause = r.loop.stop_reason->cause;
         s.fn_min = r.fn_min_ratio;
         s.duration = r.success ? r.loop.duration_s : NAN;
         const ServoStats servo = servo_stats(r.loop);

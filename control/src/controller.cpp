@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <utility>
 #include <sstream>
 #include <stdexcept>
 
@@ -108,10 +109,22 @@ double ButterflyController::plan_acceleration(double tau) const {
   return plan_->hand(tau + 0.5 * config_.dt).angular_acceleration;
 }
 
-void ButterflyController::safe_stop(double t, const std::string& reason) {
+const char* to_string(StopCause cause) {
+  switch (cause) {
+    case StopCause::kJoint: return "joint";
+    case StopCause::kEstimator: return "estimator";
+    case StopCause::kCamera: return "camera";
+    case StopCause::kTracking: return "tracking";
+    case StopCause::kDisk: return "disk";
+    case StopCause::kTimeout: return "timeout";
+  }
+  return "unknown";
+}
+
+void ButterflyController::safe_stop(double t, StopReason reason) {
   if (stage_ == Stage::kSafeStop) return;
   stage_ = Stage::kSafeStop;
-  stop_reason_ = reason;
+  stop_reason_ = std::move(reason);
   t_end_.reset();
   (void)t;
 }
@@ -219,17 +232,18 @@ SafetyMonitor::SafetyMonitor(SafetyConfig config, double t_start)
       t_last_frame_(t_start),
       t_last_fresh_(t_start) {}
 
-std::optional<std::string> SafetyMonitor::check_joint(const JointReading& joint) {
+std::optional<StopReason> SafetyMonitor::check_joint(const JointReading& joint) {
   if (!std::isfinite(joint.theta) || !std::isfinite(joint.theta_dot))
-    return "joint: non-finite reading at t = " + fmt(joint.t) + " s";
+    return StopReason{StopCause::kJoint, "joint: non-finite reading at t = " + fmt(joint.t) + " s"};
   if (last_joint_) {
     const double predicted =
         last_joint_->theta + last_joint_->theta_dot * (joint.t - last_joint_->t);
     const double jump = joint.theta - predicted;
     if (std::abs(jump) > config_.max_joint_jump)
-      return "joint: encoder glitch at t = " + fmt(joint.t) + " s (reading " + fmt(joint.theta) +
-             " rad, " + fmt(jump) + " rad from the prediction; limit " +
-             fmt(config_.max_joint_jump) + ")";
+      return StopReason{StopCause::kJoint,
+                        "joint: encoder glitch at t = " + fmt(joint.t) + " s (reading " +
+                            fmt(joint.theta) + " rad, " + fmt(jump) +
+                            " rad from the prediction; limit " + fmt(config_.max_joint_jump) + ")"};
   }
   last_joint_ = joint;
   return std::nullopt;
@@ -242,27 +256,31 @@ void SafetyMonitor::frame(double t, bool fresh, bool tracked) {
   if (fresh && tracked) t_last_measurement_ = t;
 }
 
-std::optional<std::string> SafetyMonitor::innovation(double nis) {
+std::optional<StopReason> SafetyMonitor::innovation(double nis) {
   if (nis > config_.innovation_gate) {
     if (++strikes_ >= config_.innovation_strikes)
-      return "estimator: " + std::to_string(strikes_) +
-             " implausible innovations in a row (NIS " + fmt(nis) + " > " +
-             fmt(config_.innovation_gate) + ")";
+      return StopReason{StopCause::kEstimator, "estimator: " + std::to_string(strikes_) +
+                                                   " implausible innovations in a row (NIS " +
+                                                   fmt(nis) + " > " +
+                                                   fmt(config_.innovation_gate) + ")"};
   } else {
     strikes_ = 0;
   }
   return std::nullopt;
 }
 
-std::optional<std::string> SafetyMonitor::check_time(double t) const {
+std::optional<StopReason> SafetyMonitor::check_time(double t) const {
   const double since = t - t_last_measurement_;
   if (since <= config_.lost_timeout) return std::nullopt;
   if (!any_frame_ || t - t_last_frame_ > config_.lost_timeout)
-    return "camera: no frames for " + fmt(t - t_last_frame_, 3) + " s (at t = " + fmt(t) + " s)";
+    return StopReason{StopCause::kCamera, "camera: no frames for " + fmt(t - t_last_frame_, 3) +
+                                              " s (at t = " + fmt(t) + " s)"};
   if (t - t_last_fresh_ > config_.lost_timeout)
-    return "camera: stalled, no new image for " + fmt(t - t_last_fresh_, 3) + " s (at t = " +
-           fmt(t) + " s)";
-  return "tracking: disk lost for " + fmt(since, 3) + " s (at t = " + fmt(t) + " s)";
+    return StopReason{StopCause::kCamera, "camera: stalled, no new image for " +
+                                              fmt(t - t_last_fresh_, 3) + " s (at t = " + fmt(t) +
+                                              " s)"};
+  return StopReason{StopCause::kTracking,
+                    "tracking: disk lost for " + fmt(since, 3) + " s (at t = " + fmt(t) + " s)"};
 }
 
 }  // namespace flatland::control

@@ -208,9 +208,11 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
     if (auto why = safety.check_time(t)) controller.safe_stop(t, *why);
     // Synthetic runs: the disk has left the hand's reach for good; stop the hand safely.
     if (options.world && options.world->failure())
-      controller.safe_stop(t, "disk: " + options.world->failure_detail());
-    if (t > t_limit) controller.safe_stop(t, "timeout: the motion did not finish by t = " +
-                                                 fmt(t_limit) + " s");
+      controller.safe_stop(
+          t, {control::StopCause::kDisk, "disk: " + options.world->failure_detail()});
+    if (t > t_limit)
+      controller.safe_stop(t, {control::StopCause::kTimeout,
+                               "timeout: the motion did not finish by t = " + fmt(t_limit) + " s"});
 
     control::Estimate est;
     if (estimating) est = estimator.estimate();
@@ -257,7 +259,7 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
   }
   out.finished = controller.finished();
   out.safe_stop = controller.stopped_safely();
-  if (out.safe_stop) out.stop_reason = controller.stop_reason();
+  out.stop_reason = controller.stop_reason();
   if (controller.t_motion_end()) out.duration_s = *controller.t_motion_end();
   out.t_stage2 = controller.t_stage2();
   out.t_stage3 = controller.t_stage3();
@@ -309,7 +311,7 @@ SyntheticResult run_synthetic(const LoopSetup& setup, const Scene& truth,
     r.failure = world.failure_detail();
   } else if (r.loop.safe_stop) {
     r.outcome = Outcome::kSafeStop;
-    r.failure = "safe stop: " + r.loop.stop_reason;
+    r.failure = "safe stop: " + r.loop.stop_reason->detail;
   } else if (!r.loop.finished) {
     r.outcome = Outcome::kNotFinished;
     r.failure = "the motion did not finish";

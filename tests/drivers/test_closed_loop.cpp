@@ -12,6 +12,8 @@
 #include <filesystem>
 #include <numbers>
 #include <random>
+#include <string>
+#include <tuple>
 
 using namespace flatland;
 namespace fs = std::filesystem;
@@ -276,10 +278,11 @@ TEST(ClosedLoop, EstimatorIsConsistentInTheLoop) {
 }
 
 // Faults stop the hand safely with the reason logged; nothing crashes.
-class ClosedLoopFault : public ::testing::TestWithParam<std::pair<const char*, const char*>> {};
+class ClosedLoopFault
+    : public ::testing::TestWithParam<std::tuple<const char*, const char*, control::StopCause>> {};
 
 TEST_P(ClosedLoopFault, SafeStop) {
-  const auto [fault, expected_reason] = GetParam();
+  const auto [fault, expected_reason, expected_cause] = GetParam();
   Scene scene = feedback_scene();
   const std::string f = fault;
   if (f == "camera_stop") scene.faults.camera_stop = 1.5;
@@ -290,7 +293,15 @@ TEST_P(ClosedLoopFault, SafeStop) {
   const drivers::SyntheticResult r = drivers::run_synthetic(setup, scene);
   EXPECT_FALSE(r.success);
   EXPECT_TRUE(r.loop.safe_stop) << r.failure;
-  EXPECT_NE(r.loop.stop_reason.find(expected_reason), std::string::npos) << r.loop.stop_reason;
+  ASSERT_TRUE(r.loop.stop_reason.has_value()) << r.failure;
+  EXPECT_EQ(r.loop.stop_reason->cause, expected_cause) << r.loop.stop_reason->detail;
+  EXPECT_NE(r.loop.stop_reason->detail.find(expected_reason), std::string::npos)
+      << r.loop.stop_reason->detail;
+  // The sentence starts with the cause's name, as the CLI and the logs print it.
+  EXPECT_EQ(r.loop.stop_reason->detail.rfind(std::string(control::to_string(expected_cause)) + ":",
+                                             0),
+            0u)
+      << r.loop.stop_reason->detail;
   ASSERT_FALSE(r.loop.log.empty());
   const drivers::TickLog& last = r.loop.log.back();
   EXPECT_EQ(last.stage, control::Stage::kSafeStop);
@@ -306,13 +317,14 @@ TEST_P(ClosedLoopFault, SafeStop) {
   for (const auto& row : r.loop.log)
     if (row.stage == control::Stage::kSafeStop) worst = std::max(worst, std::abs(row.command));
   EXPECT_LE(worst, scene.controller.stop_deceleration + 1e-9);
-  std::fprintf(stderr, "[ fault %s ] %s\n", fault, r.loop.stop_reason.c_str());
+  std::fprintf(stderr, "[ fault %s ] %s\n", fault, r.loop.stop_reason->detail.c_str());
 }
 
 INSTANTIATE_TEST_SUITE_P(
     Faults, ClosedLoopFault,
-    ::testing::Values(std::make_pair("camera_stop", "no frames"),
-                      std::make_pair("camera_stall", "stalled"),
-                      std::make_pair("occlusion", "disk lost"),
-                      std::make_pair("encoder_glitch", "encoder glitch")),
-    [](const auto& info) { return std::string(info.param.first); });
+    ::testing::Values(std::make_tuple("camera_stop", "no frames", control::StopCause::kCamera),
+                      std::make_tuple("camera_stall", "stalled", control::StopCause::kCamera),
+                      std::make_tuple("occlusion", "disk lost", control::StopCause::kTracking),
+                      std::make_tuple("encoder_glitch", "encoder glitch",
+                                      control::StopCause::kJoint)),
+    [](const auto& info) { return std::string(std::get<0>(info.param)); });

@@ -70,17 +70,35 @@ struct ControllerConfig {
   double dt = 1e-3;                 ///< s, the control period
 };
 
+/// What made the loop stop safely: a value to count and compare, with the sentence for people.
+enum class StopCause {
+  kJoint,      ///< an implausible joint reading (non-finite, an encoder glitch)
+  kEstimator,  ///< too many implausible innovations in a row
+  kCamera,     ///< no frames, or frames that stopped changing
+  kTracking,   ///< frames, but no disk measured in them for too long
+  kDisk,       ///< the world's disk failed (dropped, slid off)
+  kTimeout,    ///< the motion did not finish in time
+};
+/// "joint", "estimator", "camera", "tracking", "disk", "timeout".
+const char* to_string(StopCause cause);
+
+struct StopReason {
+  StopCause cause = StopCause::kTimeout;
+  std::string detail;  ///< one sentence, starting with to_string(cause) and a colon
+};
+
 class ButterflyController {
  public:
   ButterflyController(std::shared_ptr<const Plan> plan, ControllerConfig config);
   /// The command for the tick starting at t. `estimate` is ignored in open-loop mode.
   Command step(double t, const JointReading& joint, const Estimate& estimate);
-  /// Switch to the safe stop (stays there). `reason` is kept for the log.
-  void safe_stop(double t, const std::string& reason);
+  /// Switch to the safe stop (stays there). `reason` is kept for the log; the first one counts.
+  void safe_stop(double t, StopReason reason);
   Stage stage() const { return stage_; }
   bool finished() const { return stage_ == Stage::kDone; }
   bool stopped_safely() const { return stage_ == Stage::kSafeStop; }
-  const std::string& stop_reason() const { return stop_reason_; }
+  /// Why it stopped safely (nullopt unless stopped_safely()).
+  const std::optional<StopReason>& stop_reason() const { return stop_reason_; }
   std::optional<double> t_motion_end() const { return t_end_; }  ///< when the hand stopped
   std::optional<double> t_stage2() const { return t_stage2_; }
   std::optional<double> t_stage3() const { return t_stage3_; }
@@ -90,7 +108,7 @@ class ButterflyController {
   std::shared_ptr<const Plan> plan_;
   ControllerConfig config_;
   Stage stage_ = Stage::kWaiting;
-  std::string stop_reason_;
+  std::optional<StopReason> stop_reason_;
   std::optional<double> t_end_, t_stage2_, t_stage3_;
   // Stage 3: plan time at its start and the cubic correction's coefficients.
   double tau3_ = 0, t3_ = 0, c2_ = 0, c3_ = 0;
@@ -108,14 +126,14 @@ class SafetyMonitor {
  public:
   SafetyMonitor(SafetyConfig config, double t_start);
   /// Per tick, with the joint reading. Returns a reason when the joint reading is implausible.
-  std::optional<std::string> check_joint(const JointReading& joint);
+  std::optional<StopReason> check_joint(const JointReading& joint);
   /// A camera frame arrived: `fresh` if its capture time is newer than the last one, `tracked`
   /// if the disk was found and mapped to s_h.
   void frame(double t, bool fresh, bool tracked);
   /// A measurement was folded in with this NIS. Returns a reason after too many strikes.
-  std::optional<std::string> innovation(double nis);
+  std::optional<StopReason> innovation(double nis);
   /// Per tick: a reason when nothing usable has been measured for too long.
-  std::optional<std::string> check_time(double t) const;
+  std::optional<StopReason> check_time(double t) const;
 
  private:
   SafetyConfig config_;

@@ -67,9 +67,9 @@ struct LoopResult {
   double duration_s = 0;  ///< from t = 0 until the hand stopped (NaN if it never finished)
   bool finished = false;  ///< the controller completed its motion
   bool safe_stop = false;
-  std::string stop_reason;  ///< safe-stop or failure reason
-  long frames = 0;          ///< frames received
-  long frames_lost = 0;     ///< received but not usable (disk not found, stale, not mapped)
+  std::optional<control::StopReason> stop_reason;  ///< why it stopped safely (with safe_stop)
+  long frames = 0;  ///< frames received
+  long frames_lost = 0;  ///< received but not usable (disk not found, stale, not mapped)
   long measurements = 0;
   std::optional<double> t_stage2, t_stage3;
   double k = 0, period = 0;  ///< the plan used
