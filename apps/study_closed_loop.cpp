@@ -8,6 +8,7 @@
 
 #include "flatland/drivers/experiment.hpp"
 #include "flatland/drivers/montecarlo.hpp"
+#include "flatland/sim/parallel.hpp"
 
 #include <algorithm>
 #include <atomic>
@@ -152,16 +153,12 @@ CellResult run_cell(const Scene& nominal, const Cell& cell, int n, unsigned thre
   const drivers::LoopSetup setup(assumed);
   out.runs.resize(static_cast<std::size_t>(n));
 
-  std::atomic<int> next{0};
-  std::atomic<bool> stop{false};
-  std::mutex mutex;
-  std::exception_ptr error;
-  const auto worker = [&] {
-    for (;;) {
-      if (stop.load()) return;
-      const int run = next.fetch_add(1);
-      if (run >= n) return;
-      try {
+  const auto wall0 = std::chrono::steady_clock::now();
+  const double cpu0 = cpu_now();
+  sim::parallel_for(
+      n, std::max(1u, threads),
+      [&](long index) {
+        const int run = static_cast<int>(index);
         const Scene truth = drivers::perturb(assumed, p, kSeed, run);
         const drivers::SyntheticResult r = drivers::run_synthetic(setup, truth);
         RunSummary s;
@@ -176,27 +173,8 @@ CellResult run_cell(const Scene& nominal, const Cell& cell, int n, unsigned thre
         s.frames = r.loop.frames;
         s.frames_lost = r.loop.frames_lost;
         out.runs[static_cast<std::size_t>(run)] = std::move(s);
-      } catch (...) {
-        std::lock_guard lock(mutex);
-        if (!error) error = std::current_exception();
-        stop = true;
-        return;
-      }
-      std::lock_guard lock(mutex);
-      tick();
-    }
-  };
-  const auto wall0 = std::chrono::steady_clock::now();
-  const double cpu0 = cpu_now();
-  const unsigned nt = std::max(1u, std::min(threads, static_cast<unsigned>(n)));
-  if (nt == 1) {
-    worker();
-  } else {
-    std::vector<std::thread> pool;
-    for (unsigned i = 0; i < nt; ++i) pool.emplace_back(worker);
-    for (std::thread& t : pool) t.join();
-  }
-  if (error) std::rethrow_exception(error);
+      },
+      [&](long) { tick(); });
   out.cpu = cpu_now() - cpu0;
   out.wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
 

@@ -1,5 +1,7 @@
 #include "flatland/drivers/montecarlo.hpp"
 
+#include "flatland/sim/parallel.hpp"
+
 #include "flatland/drivers/experiment.hpp"
 
 #include <algorithm>
@@ -141,19 +143,13 @@ MonteCarloResult run_montecarlo(const Scene& nominal, const Perturbations& p, in
   out.runs = n;
   out.records.resize(static_cast<std::size_t>(total));
 
-  std::atomic<long> next{0}, done{0};
-  std::atomic<bool> stop{false};
-  std::mutex mutex;  // guards `error` and the progress callback
-  std::exception_ptr error;
-  const auto worker = [&] {
-    for (;;) {
-      if (stop.load()) return;
-      const long job = next.fetch_add(1);
-      if (job >= total) return;
-      // Experiment `job` is run job / nc under controller job % nc, whichever thread takes it.
-      const int run = static_cast<int>(job / static_cast<long>(nc));
-      const std::size_t ci = static_cast<std::size_t>(job % static_cast<long>(nc));
-      try {
+  const auto start = std::chrono::steady_clock::now();
+  // Experiment `job` is run job / nc under controller job % nc, whichever thread takes it.
+  sim::parallel_for(
+      total, threads,
+      [&](long job) {
+        const int run = static_cast<int>(job / static_cast<long>(nc));
+        const std::size_t ci = static_cast<std::size_t>(job % static_cast<long>(nc));
         RunRecord rec;
         rec.run = run;
         rec.controller = controllers[ci];
@@ -173,32 +169,10 @@ MonteCarloResult run_montecarlo(const Scene& nominal, const Perturbations& p, in
         rec.frames = r.loop.frames;
         rec.frames_lost = r.loop.frames_lost;
         out.records[static_cast<std::size_t>(job)] = std::move(rec);
-      } catch (...) {
-        std::lock_guard lock(mutex);
-        if (!error) error = std::current_exception();
-        stop = true;
-        return;
-      }
-      const long d = done.fetch_add(1) + 1;
-      if (progress) {
-        std::lock_guard lock(mutex);
-        progress(d, total);
-      }
-    }
-  };
-
-  const auto start = std::chrono::steady_clock::now();
-  unsigned nt = threads ? threads : std::max(1u, std::thread::hardware_concurrency());
-  nt = static_cast<unsigned>(std::min<long>(nt, total));
-  if (nt <= 1) {
-    worker();
-  } else {
-    std::vector<std::thread> pool;
-    pool.reserve(nt);
-    for (unsigned i = 0; i < nt; ++i) pool.emplace_back(worker);
-    for (std::thread& t : pool) t.join();
-  }
-  if (error) std::rethrow_exception(error);
+      },
+      [&](long finished) {
+        if (progress) progress(finished, total);
+      });
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
   int ok_open = 0, ok_feedback = 0;

@@ -1,5 +1,7 @@
 #include "flatland/sim/search.hpp"
 
+#include "flatland/sim/parallel.hpp"
+
 #include "flatland/sim/roots.hpp"
 
 #include <algorithm>
@@ -7,11 +9,9 @@
 #include <cmath>
 #include <functional>
 #include <limits>
-#include <mutex>
 #include <sstream>
 #include <stdexcept>
 #include <string>
-#include <thread>
 
 namespace flatland::sim {
 
@@ -309,36 +309,22 @@ SurfaceResult surface(const SimulationSpec& spec, double k_lo, double k_hi, int 
   for (int j = 0; j < np; ++j) res.period.push_back(p_lo + (p_hi - p_lo) * j / (np - 1));
   res.s_T.assign(static_cast<std::size_t>(nk) * np, kNaN);
   const long total = static_cast<long>(nk) * np;
-  std::atomic<long> next{0}, done{0}, rhs{0};
-  std::mutex progress_mutex, error_mutex;
-  std::string error;
-  auto worker = [&] {
-    long local_rhs = 0;
-    for (long idx; (idx = next.fetch_add(1)) < total;) {
-      const int i = static_cast<int>(idx / np), j = static_cast<int>(idx % np);
-      try {
-        res.s_T[idx] = s_at_half_period(base, s, res.period[j], res.k[i], &local_rhs);
-      } catch (const std::exception& e) {
-        std::lock_guard lock(error_mutex);
-        if (error.empty()) error = e.what();
-        next = total;
-      }
-      const long d = ++done;
-      if (progress) {
-        std::lock_guard lock(progress_mutex);
-        progress(d, total);
-      }
-    }
-    rhs += local_rhs;
-  };
-  int nthreads =
-      threads > 0 ? threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-  nthreads = static_cast<int>(std::min<long>(nthreads, total));
-  std::vector<std::thread> pool;
-  for (int t = 1; t < nthreads; ++t) pool.emplace_back(worker);
-  worker();
-  for (auto& t : pool) t.join();
-  if (!error.empty()) throw std::runtime_error("surface: " + error);
+  std::atomic<long> rhs{0};
+  try {
+    parallel_for(
+        total, threads > 0 ? static_cast<unsigned>(threads) : 0u,
+        [&](long idx) {
+          const int i = static_cast<int>(idx / np), j = static_cast<int>(idx % np);
+          long evals = 0;
+          res.s_T[idx] = s_at_half_period(base, s, res.period[j], res.k[i], &evals);
+          rhs += evals;
+        },
+        [&](long finished) {
+          if (progress) progress(finished, total);
+        });
+  } catch (const std::exception& e) {
+    throw std::runtime_error(std::string("surface: ") + e.what());
+  }
   res.rhs_evals = rhs;
   return res;
 }
