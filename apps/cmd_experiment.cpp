@@ -8,6 +8,7 @@
 #include "flatland/drivers/live.hpp"
 #include "flatland/drivers/recorded.hpp"
 #include "flatland/drivers/synthetic.hpp"
+#include "flatland/render/video_writer.hpp"
 
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -275,22 +276,8 @@ void run_experiment(const ExperimentOptions& o) {
   std::string codec;
   if (o.video) {
     video_tmp = outputs.reserve_keep_extension(out / "video.mp4");
-    for (const char* fourcc : {"avc1", "mp4v"}) {
-      writer.open(video_tmp.string(), cv::CAP_FFMPEG,
-                  cv::VideoWriter::fourcc(fourcc[0], fourcc[1], fourcc[2], fourcc[3]), cam.fps,
-                  size, true);
-      if (writer.isOpened()) {
-        codec = fourcc;
-        break;
-      }
-      if (std::string(fourcc) == "avc1")
-        std::cerr << "flatland: OpenCV's FFmpeg backend cannot encode H.264 (avc1) here; falling "
-                     "back to MPEG-4 part 2 (mp4v)\n";
-    }
-    if (!writer.isOpened())
-      throw std::runtime_error(
-          "--video: cannot open an MP4 writer: neither H.264 (avc1) nor MPEG-4 part 2 (mp4v) can "
-          "be encoded through OpenCV's FFmpeg backend (Debian: libavcodec59 with libx264)");
+    codec = render::open_mp4(writer, video_tmp.string(), cam.fps, size,
+                             "--video: cannot open an MP4 writer: ");
   }
 
   // The recording (its own atomic directory; finished only when the run completed).

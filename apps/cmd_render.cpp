@@ -5,6 +5,7 @@
 #include "flatland/camera/camera_file.hpp"
 
 #include "flatland/render/renderer.hpp"
+#include "flatland/render/video_writer.hpp"
 #include "flatland/sim/curve.hpp"
 
 #include <opencv2/core.hpp>
@@ -269,23 +270,9 @@ void run_render(const RenderOptions& o) {
   if (mp4) {
     outputs.ensure_directory(out.parent_path());
     video_tmp = outputs.reserve_keep_extension(out);
-    for (const char* fourcc : {"avc1", "mp4v"}) {
-      writer.open(video_tmp.string(), cv::CAP_FFMPEG,
-                  cv::VideoWriter::fourcc(fourcc[0], fourcc[1], fourcc[2], fourcc[3]), fps, size,
-                  true);
-      if (writer.isOpened()) {
-        codec = fourcc;
-        break;
-      }
-      if (std::string(fourcc) == "avc1")
-        std::cerr << "flatland: OpenCV's FFmpeg backend cannot encode H.264 (avc1) here; falling "
-                     "back to MPEG-4 part 2 (mp4v)\n";
-    }
-    if (!writer.isOpened())
-      throw std::runtime_error(
-          "cannot open an MP4 writer for " + out_text +
-          ": neither H.264 (avc1) nor MPEG-4 part 2 (mp4v) can be encoded through OpenCV's FFmpeg "
-          "backend (Debian: libavcodec59 with libx264); --out DIR writes PNG frames instead");
+    codec = render::open_mp4(writer, video_tmp.string(), fps, size,
+                             "cannot open an MP4 writer for " + out_text + ": ",
+                             "; --out DIR writes PNG frames instead");
     const fs::path dir = out.parent_path();
     truth_path = dir / (out.stem().string() + ".truth.csv");
     meta_path = dir / (out.stem().string() + ".json");
