@@ -23,7 +23,7 @@ packages=(
   cmake g++ ninja-build pkg-config
   libeigen3-dev libyaml-cpp-dev libcli11-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
-  gnuplot-nox
+  gnuplot-nox python3
   libopencv-dev libavutil-dev libosmesa6-dev mesa-common-dev libegl-dev libegl-mesa0 ffmpeg
   libceres-dev
   clang libclang-rt-14-dev
