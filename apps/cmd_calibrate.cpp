@@ -352,7 +352,7 @@ void run_calibrate(const CalibrateOptions& o) {
   std::optional<camera::Board> board;
   if (!o.board.empty()) board = camera::Board::parse(o.board);
   std::optional<camera::Board> table_board = board;
-  if (!o.table_board.empty()) table_board = camera::Board::parse(o.table_board);
+  if (!o.table_board.empty()) table_board = camera::Board::parse(o.table_board, "--table-board");
   if (!o.table.empty() && !table_board)
     throw UsageError("--table: needs the board: --table-board SPEC (or --board)");
   std::optional<camera::CameraFile> start;

@@ -13,7 +13,7 @@ namespace flatland::camera {
 
 namespace {
 
-int parse_int(const std::string& s, const std::string& what) {
+int parse_int(const std::string& s, const std::string& what, const std::string& option) {
   std::size_t used = 0;
   int v = 0;
   try {
@@ -22,11 +22,11 @@ int parse_int(const std::string& s, const std::string& what) {
     used = 0;
   }
   if (used == 0 || used != s.size())
-    throw std::invalid_argument("--board: " + what + ": not an integer: '" + s + "'");
+    throw std::invalid_argument(option + ": " + what + ": not an integer: '" + s + "'");
   return v;
 }
 
-double parse_double(const std::string& s, const std::string& what) {
+double parse_double(const std::string& s, const std::string& what, const std::string& option) {
   std::size_t used = 0;
   double v = 0;
   try {
@@ -35,7 +35,7 @@ double parse_double(const std::string& s, const std::string& what) {
     used = 0;
   }
   if (used == 0 || used != s.size() || !std::isfinite(v))
-    throw std::invalid_argument("--board: " + what + ": not a number: '" + s + "'");
+    throw std::invalid_argument(option + ": " + what + ": not a number: '" + s + "'");
   return v;
 }
 
@@ -67,21 +67,21 @@ std::string fmt(double v, int precision) {
 
 }  // namespace
 
-Board Board::parse(const std::string& text) {
+Board Board::parse(const std::string& text, const std::string& option) {
   const std::vector<std::string> f = split(text, ':');
   Board b;
   if (f[0] == "chessboard") {
     b.kind = Kind::kChessboard;
     if (f.size() != 3)
-      throw std::invalid_argument("--board: expected chessboard:COLSxROWS:SQUARE_M, got '" + text +
-                                  "'");
+      throw std::invalid_argument(option + ": expected chessboard:COLSxROWS:SQUARE_M, got '" +
+                                  text + "'");
   } else if (f[0] == "charuco") {
     b.kind = Kind::kCharuco;
     if (f.size() != 4 && f.size() != 5)
       throw std::invalid_argument(
-          "--board: expected charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT], got '" + text + "'");
+          option + ": expected charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT], got '" + text + "'");
   } else {
-    throw std::invalid_argument("--board: unknown board type '" + f[0] +
+    throw std::invalid_argument(option + ": unknown board type '" + f[0] +
                                 "' (chessboard or charuco)");
   }
   // Counted as OpenCV counts them: a chessboard by its inner corners (the patternSize of
@@ -91,29 +91,28 @@ Board Board::parse(const std::string& text) {
   const char* unit = chessboard ? "inner corners" : "squares";
   const std::vector<std::string> dims = split(f[1], 'x');
   if (dims.size() != 2)
-    throw std::invalid_argument(std::string("--board: expected COLSxROWS (") + unit + "), got '" +
-                                f[1] + "'");
-  const int cols = parse_int(dims[0], "COLS");
-  const int rows = parse_int(dims[1], "ROWS");
+    throw std::invalid_argument(option + ": expected COLSxROWS (" + unit + "), got '" + f[1] + "'");
+  const int cols = parse_int(dims[0], "COLS", option);
+  const int rows = parse_int(dims[1], "ROWS", option);
   // cv::findChessboardCorners refuses a pattern narrower than 3 corners; a ChArUco board needs
   // 2x2 squares for one inner corner.
   const int least = chessboard ? 3 : 2;
   constexpr int kMost = 999;
   if (cols < least || rows < least || cols > kMost || rows > kMost)
-    throw std::invalid_argument("--board: COLSxROWS counts " + std::string(unit) + " and must be " +
-                                std::to_string(least) + " to " + std::to_string(kMost) +
-                                " each, got " + f[1]);
+    throw std::invalid_argument(option + ": COLSxROWS counts " + std::string(unit) +
+                                " and must be " + std::to_string(least) + " to " +
+                                std::to_string(kMost) + " each, got " + f[1]);
   b.squares_x = chessboard ? cols + 1 : cols;
   b.squares_y = chessboard ? rows + 1 : rows;
-  b.square = parse_double(f[2], "SQUARE_M");
-  if (!(b.square > 0)) throw std::invalid_argument("--board: SQUARE_M must be positive (m)");
+  b.square = parse_double(f[2], "SQUARE_M", option);
+  if (!(b.square > 0)) throw std::invalid_argument(option + ": SQUARE_M must be positive (m)");
   if (b.kind == Kind::kCharuco) {
-    b.marker = parse_double(f[3], "MARKER_M");
+    b.marker = parse_double(f[3], "MARKER_M", option);
     if (!(b.marker > 0 && b.marker < b.square))
-      throw std::invalid_argument("--board: MARKER_M must be in (0, SQUARE_M) (m)");
+      throw std::invalid_argument(option + ": MARKER_M must be in (0, SQUARE_M) (m)");
     if (f.size() == 5) {
       if (!aruco_dictionary_id(f[4]))
-        throw std::invalid_argument("--board: unknown ArUco dictionary '" + f[4] + "'");
+        throw std::invalid_argument(option + ": unknown ArUco dictionary '" + f[4] + "'");
       b.dictionary = f[4];
     }
   }

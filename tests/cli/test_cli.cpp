@@ -481,6 +481,34 @@ TEST_F(CliBadInput, ContactOptionsAndScene) {
                    "out");
 }
 
+// The calibration workflow's options: each bad value exits 2 with one line naming its option.
+TEST_F(CliBadInput, CalibrationWorkflowOptions) {
+  const std::string camera_file = std::string(FLATLAND_FUZZ_DIR) + "/camera_file/minimal-ros.yaml";
+  const std::string scene = std::string(FLATLAND_ASSET_DIR) + "/scenes/butterfly-camera.yaml";
+  for (const char* q : {"1.5", "-0.1", "nan"})
+    expect_bad_input("track --camera " + quote(camera_file) + " --images 'x/*.png' --min-quality " +
+                         q + " --out out/t.csv",
+                     "--min-quality", "out");
+  expect_bad_input("render-calibration --scene " + quote(scene) + " --seed -1 --out out", "--seed",
+                   "out");
+  expect_bad_input("render-calibration --scene " + quote(scene) + " --intrinsics-views 2 --out out",
+                   "--intrinsics-views", "out");
+  expect_bad_input("render-calibration --scene " + quote(scene) + " --table-views 51 --out out",
+                   "--table-views", "out");
+  expect_bad_input("render-calibration --scene " + quote(scene) + " --joint-views 2 --out out",
+                   "--joint-views", "out");
+  expect_bad_input("calibrate --rational --table t.csv --camera " + quote(camera_file) +
+                       " --out out/c.yaml",
+                   "--rational", "out");
+  // The table's board is named as the option it came from, not as --board.
+  const Result r = run("calibrate --images 'x/*.png' --board chessboard:9x6:0.02 --table-board "
+                       "bogus --table t.csv --out out/c.yaml");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_EQ(lines_of(r.err).size(), 1u) << r.err;
+  EXPECT_EQ(r.err.rfind("flatland: error: --table-board: ", 0), 0u) << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "out"));
+}
+
 // Inputs that once ran without limit: each is refused at once, in little memory (1 GB of address
 // space, where the sanitizers allow a limit) and bounded time (a 20 s watchdog; they take ~0.2 s).
 TEST_F(CliBadInput, UnboundedInputsAreRefused) {

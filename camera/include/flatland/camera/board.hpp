@@ -26,8 +26,9 @@ struct Board {
 
   /// "chessboard:COLSxROWS:SQUARE_M" (COLS x ROWS inner corners, each at least 3, as
   /// cv::findChessboardCorners needs) or "charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT]" (squares).
-  /// Throws std::invalid_argument "--board: ..." naming what is wrong.
-  static Board parse(const std::string& text);
+  /// Throws std::invalid_argument "OPTION: ..." naming what is wrong (`option`: the command-line
+  /// option or field the text came from).
+  static Board parse(const std::string& text, const std::string& option = "--board");
   /// The notation parse() reads, e.g. "chessboard:9x6:0.025".
   std::string notation() const;
   /// The board the same notation means in the other count: for a chessboard given in inner
