@@ -7,6 +7,7 @@
 #include "flatland/sim/hybrid.hpp"
 #include "flatland/sim/search.hpp"
 #include "flatland/sim/simulate.hpp"
+#include "flatland/sim/trajectory_csv.hpp"
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
@@ -96,15 +97,11 @@ Json number(double v);
 /// Print the one JSON object on stdout.
 void emit_json(const Json& j);
 
-/// Shortest round-trip text for a double; "nan", "inf", "-inf" for non-finite values.
-std::string format_number(double v);
-
-/// Columns of a trajectory CSV (one per Sample field; SI units).
-const std::vector<std::string>& sample_columns();
-/// 1-based column of `name` in sample_columns() (for gnuplot `using`).
-int sample_column(const std::string& name);
-/// The whole CSV (header + one row per sample).
-std::string samples_csv(const std::vector<sim::Sample>& samples);
+// The trajectory CSV and its number format are sim's (sim/trajectory_csv.hpp).
+using sim::format_number;
+using sim::sample_column;
+using sim::sample_columns;
+using sim::samples_csv;
 
 /// --force on `cmd`: replace existing outputs (each command's help names which).
 void add_force_option(CLI::App& cmd, bool& force);

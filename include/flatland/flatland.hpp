@@ -9,11 +9,13 @@
 #include "flatland/sim/hybrid.hpp"
 #include "flatland/sim/motion.hpp"
 #include "flatland/sim/object.hpp"
+#include "flatland/sim/parallel.hpp"
 #include "flatland/sim/rolling.hpp"
 #include "flatland/sim/roots.hpp"
 #include "flatland/sim/search.hpp"
 #include "flatland/sim/simulate.hpp"
 #include "flatland/sim/spec.hpp"
+#include "flatland/sim/trajectory_csv.hpp"
 
 #include "flatland/scene/scene.hpp"
 
@@ -27,6 +29,7 @@
 #include "flatland/render/effects.hpp"
 #include "flatland/render/gl_context.hpp"
 #include "flatland/render/renderer.hpp"
+#include "flatland/render/video_writer.hpp"
 
 #include "flatland/vision/hand_pose.hpp"
 #include "flatland/vision/image_file.hpp"

@@ -1,0 +1,23 @@
+// The trajectory CSV: one row per sim::Sample, one column per field (SI units; the contact mode
+// as a word), numbers in their shortest round-trip form. What `flatland simulate/solve --out`
+// write, and what a library user writes the same way.
+#pragma once
+
+#include "flatland/sim/simulate.hpp"
+
+#include <string>
+#include <vector>
+
+namespace flatland::sim {
+
+/// Shortest text that reads back as exactly v (std::to_chars); "nan", "inf", "-inf" otherwise.
+std::string format_number(double v);
+
+/// Columns of a trajectory CSV, in order (one per Sample field).
+const std::vector<std::string>& sample_columns();
+/// 1-based column of `name` in sample_columns() (for gnuplot `using`); std::logic_error if none.
+int sample_column(const std::string& name);
+/// The whole CSV: the header and one row per sample.
+std::string samples_csv(const std::vector<Sample>& samples);
+
+}  // namespace flatland::sim

@@ -1,0 +1,96 @@
+// Trajectory CSV (sample_columns, samples_csv) and shortest round-trip numbers.
+#include "flatland/sim/trajectory_csv.hpp"
+
+#include <charconv>
+#include <cmath>
+#include <stdexcept>
+
+namespace flatland::sim {
+
+std::string format_number(double v) {
+  if (std::isnan(v)) return "nan";
+  if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
+  char buf[64];
+  const auto res = std::to_chars(buf, buf + sizeof buf, v);
+  return std::string(buf, res.ptr);
+}
+
+const std::vector<std::string>& sample_columns() {
+  static const std::vector<std::string> columns = {"t",
+                                                   "theta",
+                                                   "theta_dot",
+                                                   "theta_ddot",
+                                                   "s_h",
+                                                   "sdot_h",
+                                                   "sddot_h",
+                                                   "s_o",
+                                                   "sdot_o",
+                                                   "x",
+                                                   "y",
+                                                   "object_angle",
+                                                   "vx",
+                                                   "vy",
+                                                   "omega",
+                                                   "f_n",
+                                                   "f_t",
+                                                   "fn_ratio",
+                                                   "ft_ratio",
+                                                   "mu_required",
+                                                   "constraint_residual",
+                                                   "redundant_residual",
+                                                   "mode",
+                                                   "slip_velocity",
+                                                   "gap",
+                                                   "rolling_couple"};
+  return columns;
+}
+
+int sample_column(const std::string& name) {
+  const auto& c = sample_columns();
+  for (std::size_t i = 0; i < c.size(); ++i)
+    if (c[i] == name) return static_cast<int>(i) + 1;
+  throw std::logic_error("no sample column " + name);
+}
+
+std::string samples_csv(const std::vector<Sample>& samples) {
+  std::string out;
+  const auto& cols = sample_columns();
+  for (std::size_t i = 0; i < cols.size(); ++i) out += (i ? "," : "") + cols[i];
+  out += '\n';
+  for (const Sample& s : samples) {
+    const double v[] = {s.t,
+                        s.theta,
+                        s.theta_dot,
+                        s.theta_ddot,
+                        s.s_h,
+                        s.sdot_h,
+                        s.sddot_h,
+                        s.s_o,
+                        s.sdot_o,
+                        s.object_position.x(),
+                        s.object_position.y(),
+                        s.object_angle,
+                        s.object_velocity.x(),
+                        s.object_velocity.y(),
+                        s.object_angular_velocity,
+                        s.force_normal,
+                        s.force_tangential,
+                        s.fn_ratio,
+                        s.ft_ratio,
+                        s.mu_required,
+                        s.constraint_residual,
+                        s.redundant_residual};
+    static_assert(sizeof v / sizeof v[0] == 22);
+    for (std::size_t i = 0; i < sizeof v / sizeof v[0]; ++i) {
+      if (i) out += ',';
+      out += format_number(v[i]);
+    }
+    // The contact mode (a word) and what the hybrid model adds.
+    out += ',' + to_string(s.mode) + ',' + format_number(s.slip_velocity) + ',' +
+           format_number(s.gap) + ',' + format_number(s.rolling_couple);
+    out += '\n';
+  }
+  return out;
+}
+
+}  // namespace flatland::sim
