@@ -123,11 +123,12 @@ int run_cli(int argc, char** argv, const std::map<std::string, AddCommand>& prog
       commands.push_back(it->second(app));
       continue;
     }
-    // Listed for the help; the other program runs it.
-    CLI::App* stub = add_command(app, info.name);
-    stub->allow_extras();
+    // Listed so that the help names every command; the other program runs it (main_flatland.cpp
+    // executes flatland-camera before parsing), so reaching it here is a wiring mistake.
+    CLI::App* listed = add_command(app, info.name);
+    listed->allow_extras();
     const std::string name = info.name;
-    commands.push_back({stub, [name] {
+    commands.push_back({listed, [name] {
                           throw std::logic_error(
                               "the " + name + " command is run by " +
                               (command_info(name).camera_stack ? "flatland-camera" : "flatland"));

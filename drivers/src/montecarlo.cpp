@@ -5,16 +5,13 @@
 #include "flatland/drivers/experiment.hpp"
 
 #include <algorithm>
-#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <exception>
 #include <memory>
-#include <mutex>
 #include <numbers>
 #include <random>
 #include <stdexcept>
-#include <thread>
 
 namespace flatland::drivers {
 namespace {

@@ -11,8 +11,7 @@ namespace flatland::model {
 
 namespace {
 
-// Larger images are almost certainly a unit mistake and would exhaust memory in the renderer.
-constexpr int kMaxImageSide = 16384;
+using camera::kMaxImageSide;
 std::string num(double v) {
   std::ostringstream os;
   os.precision(9);

@@ -22,8 +22,7 @@ namespace flatland::render {
 
 namespace {
 
-// Larger images are almost certainly a unit mistake and would exhaust memory in the renderer.
-constexpr int kMaxImageSide = 16384;
+using camera::kMaxImageSide;
 // Pixels of margin around the undistorted footprint: bilinear remapping reads one neighbour, and
 // one more keeps the edge pixels away from whatever the renderer clears the border to.
 constexpr int kIdealMargin = 2;

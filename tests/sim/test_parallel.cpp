@@ -74,7 +74,7 @@ TEST(ParallelFor, FirstExceptionIsRethrownAndStopsTheLoop) {
   }
 }
 
-TEST(ParallelFor, NothingToDoCallsNothing) {
+TEST(ParallelFor, NoItemsMeansNoCalls) {
   bool called = false;
   parallel_for(
       0, 4, [&](long) { called = true; }, [&](long) { called = true; });

@@ -14,6 +14,10 @@ namespace flatland::camera {
 /// both with the same formula, so a 5-coefficient camera projects identically either way).
 using Distortion = cv::Vec<double, 8>;
 
+/// The largest image side a camera may have, px: larger is almost certainly a unit mistake and
+/// would exhaust memory in the renderer (the scene's camera and the distortion maps check it).
+constexpr int kMaxImageSide = 16384;
+
 struct CameraModel {
   int width = 640, height = 480;
   cv::Matx33d K = cv::Matx33d::eye();
