@@ -237,7 +237,8 @@ void run_experiment(const ExperimentOptions& o) {
 
   // The loop's own view of the experiment (plan, mapping, estimator, controller): bad scene
   // fields are std::invalid_argument here.
-  const drivers::LoopSetup setup(scene);
+  const std::shared_ptr<const model::Model> nominal = model::compile(scene);
+  const drivers::LoopSetup setup(nominal);
   const control::Plan& plan = *setup.plan.plan;
   if (kind == CameraKind::kSynthetic) drivers::require_friction(scene);
 
@@ -335,7 +336,7 @@ void run_experiment(const ExperimentOptions& o) {
     so.recorder = recorder.get();
     so.on_frame = on_frame;
     so.progress = progress;
-    synthetic = drivers::run_synthetic(setup, scene, so);
+    synthetic = drivers::run_synthetic(setup, nominal, so);
     loop = synthetic->loop;
   } else {
     loop_options.recorder = recorder.get();

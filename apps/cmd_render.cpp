@@ -217,8 +217,8 @@ void run_render(const RenderOptions& o) {
   if (scene.render.view == "side") camera = side_camera(camera);
   if (o.gl_opt->count()) scene.render.backend = o.gl;
   const render::GlBackend backend = render::parse_backend(scene.render.backend);
-  build_problem_checked(spec, {});
-  sim::resolve_formulation(*sim::build_problem(spec), spec.run.formulation);
+  const std::shared_ptr<const model::Model> compiled = model::compile(scene);
+  sim::resolve_formulation(*compiled->plant, spec.run.formulation);
   // The frames the run will write, known before it runs: bounded, like every output.
   const double frames_wanted = std::floor((spec.end_time() - spec.initial.t0) * camera.fps) + 1;
   if (frames_wanted > kMaxRenderFrames)
@@ -256,7 +256,7 @@ void run_render(const RenderOptions& o) {
 
   // The renderer validates the camera and effects (bad input) and makes the GL context (a
   // runtime failure), both before any file exists.
-  render::Renderer renderer(scene, backend);
+  render::Renderer renderer(compiled, backend);
   const camera::CameraModel& model = renderer.camera();
   const std::string gl = renderer.gl_description();
 
@@ -305,7 +305,7 @@ void run_render(const RenderOptions& o) {
 
   // ---- render
   const long n = static_cast<long>(std::floor((t_end - t0) * fps + 1e-9)) + 1;
-  const sim::PolynomialHand hand(spec.hand.a, spec.hand.b, spec.hand.c, spec.hand.d);
+  const sim::PolynomialHand& hand = *compiled->hand;
   std::string truth_csv = std::string(kTruthColumns) + "\n";
   long written = 0, dropped = 0;
   std::vector<unsigned char> png;

@@ -62,7 +62,7 @@ void run_render_calibration(const RenderCalibrationOptions& o) {
     ProgressBar bar("render-calibration");
     std::vector<unsigned char> png;
     session = drivers::render_calibration_session(
-        scene, so, [&](const std::string& path, const cv::Mat& image) {
+        *model::compile(scene), so, [&](const std::string& path, const cv::Mat& image) {
           if (!cv::imencode(".png", image, png))
             throw std::runtime_error("cannot encode " + path + " as PNG");
           outputs.stage(out / path, std::string(png.begin(), png.end()));

@@ -5,6 +5,7 @@
 
 #include "flatland/camera/camera_file.hpp"
 #include "flatland/vision/image_file.hpp"
+#include "flatland/model/model.hpp"
 #include "flatland/vision/mapping.hpp"
 #include "flatland/vision/tracker.hpp"
 #include "flatland/vision/video_reader.hpp"
@@ -169,14 +170,8 @@ void run_track(const TrackOptions& o) {
     encoder = read_encoder(o.encoder);
     if (scene.sim.object.kind != sim::ObjectSpec::Kind::kDisk)
       throw UsageError(scene.origin + ": object: track maps a disk's centre (object.type: disk)");
-    vision::HandMapping m;
-    m.camera = camera;
-    m.plane_z = scene.render.disk_thickness;  // the tracked edge lies on the disk's top face
-    m.disk_radius = scene.sim.object.radius;
-    m.hand =
-        sim::PolynomialHand(scene.sim.hand.a, scene.sim.hand.b, scene.sim.hand.c, scene.sim.hand.d);
-    if (camfile.joint) m.axis_table = camfile.joint->axis_table;
-    mapping = m;
+    mapping = model::hand_mapping(*model::compile(scene), camera,
+                                  camfile.joint ? camfile.joint->axis_table : cv::Point2d(0, 0));
   }
 
   std::vector<std::string> files;

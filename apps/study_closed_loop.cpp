@@ -148,7 +148,7 @@ CellResult run_cell(const Scene& nominal, const Cell& cell, int n, unsigned thre
   drivers::Perturbations p;
   p.latency = cell.latency;
   p.latency_jitter = cell.jitter;
-  const drivers::LoopSetup setup(assumed);
+  const drivers::LoopSetup setup(model::compile(assumed));
   out.runs.resize(static_cast<std::size_t>(n));
 
   const auto wall0 = std::chrono::steady_clock::now();
@@ -157,8 +157,8 @@ CellResult run_cell(const Scene& nominal, const Cell& cell, int n, unsigned thre
       n, std::max(1u, threads),
       [&](long index) {
         const int run = static_cast<int>(index);
-        const Scene truth = drivers::perturb(assumed, p, kSeed, run);
-        const drivers::SyntheticResult r = drivers::run_synthetic(setup, truth);
+        const drivers::SyntheticResult r =
+            drivers::run_synthetic(setup, model::compile(drivers::perturb(assumed, p, kSeed, run)));
         RunSummary s;
         s.success = r.success;
         s.outcome = r.outcome;
@@ -365,7 +365,7 @@ void run_closed_loop_study(const StudyOptions& o) {
   cells.push_back({fps0, latency0, jitter(latency0), "open-loop"});
   // Every cell's loop set-up is built now, so that a scene the loop cannot run is bad input
   // (exit 2) rather than a failure half-way through.
-  for (const Cell& c : cells) drivers::LoopSetup check(cell_scene(scene, c));
+  for (const Cell& c : cells) drivers::LoopSetup check(model::compile(cell_scene(scene, c)));
 
   const int n = o.quick ? kRunsQuick : kRunsFull;
   const unsigned threads = std::max(1u, std::thread::hardware_concurrency());

@@ -198,7 +198,7 @@ void run_tracker_study(const StudyOptions& o) {
       s.effects.quantize = false;
       s.effects.jitter_s = 0;
       s.effects.drop_probability = 0;
-      render::Renderer renderer(s);
+      render::Renderer renderer(model::compile(std::move(s)));
       gl = renderer.gl_description();
       // One noise stream per level, all seeded alike: a frame's noise is the same normal
       // variates times sigma at every level (common random numbers), at every exposure too.

@@ -70,7 +70,7 @@ const std::vector<BoardView>& views() {
       s.camera = cam;
       s.effects.supersample = 4;
       s.targets = {t};
-      render::Renderer r(s);
+      render::Renderer r(flatland::model::compile(s));
       render::SceneState state;
       state.disk_center = {5.0, 5.0};
       cv::Mat linear = r.render_linear(state);
@@ -124,7 +124,7 @@ void BM_DetectChessboard(benchmark::State& state) {
   s.camera = cam;
   s.effects.supersample = 2;
   s.targets = {t};
-  render::Renderer r(s);
+  render::Renderer r(flatland::model::compile(s));
   render::SceneState st;
   st.disk_center = {5.0, 5.0};
   const cv::Mat image = r.render_8u(st);

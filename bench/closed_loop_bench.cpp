@@ -26,7 +26,7 @@ const Scene& scene() {
 }
 
 const drivers::LoopSetup& setup() {
-  static const drivers::LoopSetup s(scene());
+  static const drivers::LoopSetup s(flatland::model::compile(scene()));
   return s;
 }
 
@@ -47,9 +47,9 @@ void BM_ControlTick(benchmark::State& state) {
     accel[i] = h.angular_acceleration;
   }
   const auto fresh = [&] {
-    control::Estimator e(model, su.estimator);
+    control::Estimator e(model, su.model->estimator);
     e.reset(kT0, s_plan[0], (s_plan[1] - s_plan[0]) / kDt);
-    control::ButterflyController c(su.plan.plan, su.controller);
+    control::ButterflyController c(su.plan.plan, su.model->controller);
     control::Estimate dip;
     dip.s_h = -0.5;  // past dip_until: the first step switches to the servo stage
     (void)c.step(0.0, joint[0], dip);
@@ -86,7 +86,7 @@ void BM_SyntheticExperiment(benchmark::State& state) {
   long frames = 0;
   for (auto _ : state) {
     const auto t0 = std::chrono::steady_clock::now();
-    const drivers::SyntheticResult r = drivers::run_synthetic(su, scene());
+    const drivers::SyntheticResult r = drivers::run_synthetic(su, flatland::model::compile(scene()));
     wall += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     simulated += r.loop.log.back().t - r.loop.log.front().t;
     frames += r.loop.frames;

@@ -36,7 +36,7 @@ const cv::Mat& frame() {
     s.effects.blur_subframes = 8;
     s.effects.noise_read_dn = 2;
     const sim::RunResult run = sim::run_spec(s.sim);
-    render::Renderer renderer(s);
+    render::Renderer renderer(flatland::model::compile(s));
     return renderer.capture(run.trajectory, 2.0).image;
   }();
   return image;

@@ -2,7 +2,7 @@
 #include "flatland/drivers/calibration_session.hpp"
 
 #include "flatland/calibration/intrinsics.hpp"
-#include "flatland/model/compile.hpp"
+#include "flatland/model/model.hpp"
 #include "flatland/render/effects.hpp"
 #include "flatland/render/renderer.hpp"
 #include "flatland/sim/curve.hpp"
@@ -29,8 +29,8 @@ namespace {
 
 constexpr double kEdgeMarginPx = 12;  // every board corner (with its border) this far inside
 
-// A placed board as the scene's `targets` entry the renderer draws (model::compile_target's
-// inverse).
+// A placed board as a scene's `targets` entry (model::compile_target's inverse): each view is
+// the scene with its boards, compiled again.
 TargetSpec target_spec(const camera::PlacedBoard& p) {
   TargetSpec t;
   t.kind = p.board.kind == camera::Board::Kind::kChessboard ? TargetSpec::Kind::kChessboard
@@ -46,7 +46,8 @@ TargetSpec target_spec(const camera::PlacedBoard& p) {
 }
 
 struct SessionRenderer {
-  const Scene& scene;
+  const model::Model& model;
+  const Scene& scene;  // model.spec
   const camera::CameraModel camera;
   std::uint64_t seed;
   std::uint64_t images = 0;
@@ -57,13 +58,13 @@ struct SessionRenderer {
     Scene s = scene;
     s.targets.clear();
     for (const camera::PlacedBoard& b : boards) s.targets.push_back(target_spec(b));
-    render::Renderer r(s);
+    render::Renderer r(model::compile(std::move(s)));
     render::SceneState st;
     st.hand_angle = hand_angle;
     st.disk_center = {50.0, 50.0};
     cv::Mat linear = r.render_linear(st);
     render::EffectsRng rng(seed * 1000003 + images++);
-    render::apply_noise(linear, s.effects.noise_read_dn, s.effects.noise_shot_gain, rng);
+    render::apply_noise(linear, scene.effects.noise_read_dn, scene.effects.noise_shot_gain, rng);
     return render::quantize(linear);
   }
 
@@ -105,9 +106,7 @@ camera::Board default_board(const camera::CameraModel& camera) {
 
 // The hand turned to `angle`: its outline's axis-aligned bounding box in the table frame,
 // widened by `margin`.
-cv::Rect2d hand_box(const Scene& scene, double angle, double margin) {
-  const sim::PolynomialHand hand(scene.sim.hand.a, scene.sim.hand.b, scene.sim.hand.c,
-                                 scene.sim.hand.d);
+cv::Rect2d hand_box(const sim::PolynomialHand& hand, double angle, double margin) {
   double x0 = 1e9, y0 = 1e9, x1 = -1e9, y1 = -1e9;
   const double c = std::cos(angle), s = std::sin(angle);
   for (int i = 0; i < 400; ++i) {
@@ -182,7 +181,7 @@ std::string numbered(const std::string& dir, const std::string& stem, int i) {
 std::vector<TablePlacement> spread_placements(const SessionRenderer& sr, const camera::Board& board,
                                               double hand_angle, int n, std::mt19937_64& rng) {
   const Scene& scene = sr.scene;
-  const cv::Rect2d hand = hand_box(scene, hand_angle, board.square);
+  const cv::Rect2d hand = hand_box(*sr.model.hand, hand_angle, board.square);
   const double extent = scene.render.table_extent;
   const double board_z = 0.0005;  // a printed sheet: half a millimetre thick
   std::uniform_real_distribution<double> U(0.0, 1.0);
@@ -233,13 +232,15 @@ std::vector<TablePlacement> spread_placements(const SessionRenderer& sr, const c
 
 }  // namespace
 
-CalibrationSession render_calibration_session(const Scene& scene, const SessionOptions& options,
+CalibrationSession render_calibration_session(const model::Model& model,
+                                              const SessionOptions& options,
                                               const SessionImageSink& sink) {
-  if (!scene.camera) throw std::invalid_argument(scene.origin + ": camera: missing");
+  const Scene& scene = model.spec;
+  if (!model.camera) throw std::invalid_argument(scene.origin + ": camera: missing");
   check_count(options.intrinsics_views, 3, 200, "intrinsics views");
   check_count(options.table_views, 1, 50, "table views");
   check_count(options.joint_views, 3, 100, "joint views");
-  SessionRenderer sr{scene, flatland::model::compile_camera(*scene.camera), options.seed};
+  SessionRenderer sr{model, scene, *model.camera, options.seed};
   const camera::CameraModel& cam = sr.camera;
 
   CalibrationSession session;

@@ -1,8 +1,6 @@
 #include "flatland/drivers/experiment.hpp"
 
 #include "flatland/drivers/recorded.hpp"
-#include "flatland/camera/camera_model.hpp"
-#include "flatland/model/compile.hpp"
 #include "flatland/sim/search.hpp"
 #include "flatland/sim/spec.hpp"
 
@@ -52,7 +50,8 @@ class AngleHistory {
 
 }  // namespace
 
-PlanInfo make_plan(const Scene& nominal) {
+PlanInfo make_plan(const model::Model& nominal_model) {
+  const Scene& nominal = nominal_model.spec;
   const sim::SimulationSpec& spec = nominal.sim;
   if (spec.motion.kind != sim::MotionSpec::Kind::kButterfly)
     throw std::invalid_argument(nominal.origin +
@@ -81,49 +80,22 @@ PlanInfo make_plan(const Scene& nominal) {
   return info;
 }
 
-LoopSetup::LoopSetup(const Scene& nominal) : scene(nominal) {
-  if (!nominal.camera)
-    throw std::invalid_argument(nominal.origin +
+LoopSetup::LoopSetup(std::shared_ptr<const model::Model> nominal) : model(std::move(nominal)) {
+  const Scene& scene = model->spec;
+  if (!model->camera)
+    throw std::invalid_argument(scene.origin +
                                 ": camera: the closed loop needs a camera section (its model "
                                 "maps tracked pixels to the table)");
-  if (nominal.sim.object.kind != sim::ObjectSpec::Kind::kDisk)
-    throw std::invalid_argument(nominal.origin +
+  if (!model->mapping)
+    throw std::invalid_argument(scene.origin +
                                 ": object: the closed loop rolls a disk (object.type: disk)");
-  plan = make_plan(nominal);
-  const camera::CameraModel camera = flatland::model::compile_camera(*nominal.camera);
-  mapping.camera = camera;
-  mapping.plane_z = nominal.render.disk_thickness;  // the tracked edge is the disk's top face
-  mapping.disk_radius = nominal.sim.object.radius;
-  const sim::HandSpec& h = nominal.sim.hand;
-  mapping.hand = sim::PolynomialHand(h.a, h.b, h.c, h.d);
-  tracker.camera = camera;
-  tracker.plane_z = nominal.render.disk_thickness;
-
-  estimator.model = control::parse_estimator_model(nominal.estimator.model);
-  estimator.latency_compensation = nominal.estimator.latency_compensation;
-  estimator.process_noise = nominal.estimator.process_noise;
-  estimator.history = std::max(estimator.history, 3.0 * (nominal.camera->latency +
-                                                          nominal.camera->latency_jitter) +
-                                                      2.0 / nominal.camera->fps);
-
-  const ControllerSpec& c = nominal.controller;
-  controller.feedback = c.mode == "feedback";
-  controller.law = control::parse_servo_law(c.law);
-  controller.kp = c.kp;
-  controller.kd = c.kd;
-  controller.dip_until = c.dip_until;
-  controller.finish_after = c.finish_after;
-  controller.stop_deceleration = c.stop_deceleration;
-  controller.dt = 1.0 / nominal.joint.rate;
-  safety.lost_timeout = c.lost_timeout;
-  safety.innovation_gate = c.innovation_gate;
-  safety.innovation_strikes = c.innovation_strikes;
-  safety.max_joint_jump = c.max_joint_jump;
+  plan = make_plan(*model);
 }
 
 LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint& joint,
                     const LoopOptions& options) {
-  const Scene& scene = setup.scene;
+  const model::Model& model = *setup.model;
+  const Scene& scene = model.spec;
   const double dt = 1.0 / scene.joint.rate;
   const double t_start = options.t_start;
   const control::Plan& plan = *setup.plan.plan;
@@ -134,11 +106,10 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
   out.period = setup.plan.period;
   out.duration_s = kNaN;
   // The estimator knows what the planner knew: the paper's rolling model, without losses.
-  auto nominal_problem = sim::build_problem(sim::paper_model(scene.sim));
-  control::Estimator estimator(nominal_problem, setup.estimator);
-  control::ButterflyController controller(setup.plan.plan, setup.controller);
-  control::SafetyMonitor safety(setup.safety, t_start);
-  vision::Tracker tracker(setup.tracker);
+  control::Estimator estimator(model.paper_plant, model.estimator);
+  control::ButterflyController controller(setup.plan.plan, model.controller);
+  control::SafetyMonitor safety(model.safety, t_start);
+  vision::Tracker tracker(model.tracker);
   AngleHistory angles;
   bool estimating = false;
   double last_capture = -std::numeric_limits<double>::infinity();
@@ -171,14 +142,14 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
         const std::optional<double> theta = angles.at(frame->t_capture);
         if (tr.ok() && theta) {
           const double guess = estimating ? estimator.estimate().s_h : scene.sim.initial.s_h;
-          const auto c = vision::pixel_to_contact(setup.mapping, tr.center, *theta, guess, 0.5);
+          const auto c = vision::pixel_to_contact(*model.mapping, tr.center, *theta, guess, 0.5);
           if (c) {
             // The tracker's 1-sigma per pixel coordinate, carried through the mapping by finite
             // differences (a floor for what the tracker's own estimate leaves out).
             const double sp = std::max(tr.sigma_px, 0.02);
-            const auto cx = vision::pixel_to_contact(setup.mapping, tr.center + cv::Point2d(sp, 0),
+            const auto cx = vision::pixel_to_contact(*model.mapping, tr.center + cv::Point2d(sp, 0),
                                                      *theta, c->s_h, 0.05);
-            const auto cy = vision::pixel_to_contact(setup.mapping, tr.center + cv::Point2d(0, sp),
+            const auto cy = vision::pixel_to_contact(*model.mapping, tr.center + cv::Point2d(0, sp),
                                                      *theta, c->s_h, 0.05);
             double sigma = 1e-4;
             if (cx && cy) sigma = std::max(std::hypot(cx->s_h - c->s_h, cy->s_h - c->s_h), 1e-6);
@@ -268,12 +239,12 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
   return out;
 }
 
-SyntheticResult run_synthetic(const LoopSetup& setup, const Scene& truth,
+SyntheticResult run_synthetic(const LoopSetup& setup, std::shared_ptr<const model::Model> truth,
                               const SyntheticOptions& options) {
   LoopOptions lo;
   SimWorld world(truth, lo.t_start);
   SimClock clock(&world, lo.t_start);
-  SimJoint joint(world, truth.faults);
+  SimJoint joint(world, truth->spec.faults);
   SyntheticCamera camera(truth, world, lo.t_start);
   lo.world = &world;
   lo.recorder = options.recorder;

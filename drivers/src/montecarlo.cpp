@@ -108,9 +108,10 @@ Interval wilson_interval(long k, long n, double z) {
   return {std::max(0.0, centre - half), std::min(1.0, centre + half)};
 }
 
-MonteCarloResult run_montecarlo(const Scene& nominal, const Perturbations& p, int n,
+MonteCarloResult run_montecarlo(const model::Model& nominal_model, const Perturbations& p, int n,
                                 std::uint64_t seed, const std::vector<std::string>& controllers,
                                 unsigned threads, const MonteCarloProgress& progress) {
+  const Scene& nominal = nominal_model.spec;
   validate(p);
   if (n < 1) throw std::invalid_argument("run_montecarlo: n must be >= 1");
   if (controllers.empty()) throw std::invalid_argument("run_montecarlo: no controller given");
@@ -131,7 +132,7 @@ MonteCarloResult run_montecarlo(const Scene& nominal, const Perturbations& p, in
   for (const std::string& c : controllers) {
     Scene assumed = nominal;
     assumed.controller.mode = c;
-    setups.push_back(std::make_unique<const LoopSetup>(assumed));
+    setups.push_back(std::make_unique<const LoopSetup>(model::compile(std::move(assumed))));
   }
 
   const std::size_t nc = controllers.size();
@@ -150,8 +151,9 @@ MonteCarloResult run_montecarlo(const Scene& nominal, const Perturbations& p, in
         RunRecord rec;
         rec.run = run;
         rec.controller = controllers[ci];
-        const Scene truth = perturb(nominal, p, seed, run, &rec.drawn);
-        const SyntheticResult r = run_synthetic(*setups[ci], truth);
+        // Each world is its perturbed scene compiled anew (as MuJoCo edits a spec and recompiles).
+        const SyntheticResult r =
+            run_synthetic(*setups[ci], model::compile(perturb(nominal, p, seed, run, &rec.drawn)));
         rec.success = r.success;
         rec.outcome = r.outcome;
         rec.failure = r.failure;

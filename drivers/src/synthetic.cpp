@@ -63,8 +63,13 @@ std::string to_string(Outcome o) {
   return "?";
 }
 
-SimWorld::SimWorld(const Scene& truth, double t_start)
-    : scene_(truth), dt_(1.0 / truth.joint.rate), t_start_(t_start), t_(t_start) {
+SimWorld::SimWorld(std::shared_ptr<const model::Model> truth_model, double t_start)
+    : model_(std::move(truth_model)),
+      scene_(model_->spec),
+      dt_(1.0 / scene_.joint.rate),
+      t_start_(t_start),
+      t_(t_start) {
+  const Scene& truth = scene_;
   if (truth.sim.object.kind != sim::ObjectSpec::Kind::kDisk)
     throw std::invalid_argument(truth.origin +
                                 ": object: the closed loop rolls a disk (object.type: disk)");
@@ -73,7 +78,7 @@ SimWorld::SimWorld(const Scene& truth, double t_start)
   // caught again where the real table would.
   sim::SimulationSpec spec = truth.sim;
   spec.run.model = sim::ContactModel::kHybrid;
-  problem_ = sim::build_problem(spec);
+  problem_ = model_->plant;
   step_options_ = sim::run_options(spec);
   step_options_.formulation = sim::Formulation::kReduced;
   step_options_.record = false;
@@ -392,17 +397,19 @@ control::JointReading SimJoint::read(double t) {
 
 // ---------------------------------------------------------------------------------------------
 
-SyntheticCamera::SyntheticCamera(const Scene& scene, const SimWorld& world, double t_start)
+SyntheticCamera::SyntheticCamera(std::shared_ptr<const model::Model> model, const SimWorld& world,
+                                 double t_start)
     : world_(world),
-      camera_(scene.camera ? *scene.camera
-                           : throw std::invalid_argument(
-                                 scene.origin + ": camera: a synthetic camera needs a camera "
-                                                "section in the scene")),
-      faults_(scene.faults),
-      renderer_(scene),
+      camera_(model->spec.camera ? *model->spec.camera
+                                 : throw std::invalid_argument(
+                                       model->spec.origin +
+                                       ": camera: a synthetic camera needs a camera section in "
+                                       "the scene")),
+      faults_(model->spec.faults),
+      renderer_(model),
       t_start_(t_start),
-      capture_jitter_(scene.effects.jitter_s),
-      latency_rng_(scene.effects.seed ^ 0x9e3779b97f4a7c15ULL) {}
+      capture_jitter_(model->spec.effects.jitter_s),
+      latency_rng_(model->spec.effects.seed ^ 0x9e3779b97f4a7c15ULL) {}
 
 std::optional<CameraFrame> SyntheticCamera::poll(double now) {
   // A frame is rendered once the world has been simulated past its exposure, allowing for the

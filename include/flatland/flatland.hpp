@@ -24,6 +24,7 @@
 #include "flatland/camera/camera_model.hpp"
 
 #include "flatland/model/compile.hpp"
+#include "flatland/model/model.hpp"
 
 #include "flatland/render/distortion_maps.hpp"
 #include "flatland/render/effects.hpp"

@@ -1,9 +1,11 @@
-// The compile step's camera and boards (compile.hpp).
+// The compile step: a Scene into a Model (model.hpp), its camera and boards (compile.hpp).
 #include "flatland/model/compile.hpp"
+#include "flatland/model/model.hpp"
 
+#include "flatland/sim/spec.hpp"
+
+#include <algorithm>
 #include <array>
-#include <cmath>
-#include <sstream>
 #include <stdexcept>
 #include <string>
 
@@ -11,29 +13,8 @@ namespace flatland::model {
 
 namespace {
 
-using camera::kMaxImageSide;
-std::string num(double v) {
-  std::ostringstream os;
-  os.precision(9);
-  os << v;
-  return os.str();
-}
-
-// Streamed rather than built with `"(" + ...`, which trips GCC 12's -Wrestrict false positive.
-std::string vec3(const std::array<double, 3>& v) {
-  std::ostringstream os;
-  os.precision(9);
-  os << '(' << v[0] << ", " << v[1] << ", " << v[2] << ')';
-  return os.str();
-}
-
 [[noreturn]] void fail(const std::string& field, const std::string& reason) {
   throw std::invalid_argument(field + ": " + reason);
-}
-
-void require_finite3(const std::array<double, 3>& v, const std::string& field) {
-  for (double c : v)
-    if (!std::isfinite(c)) fail(field, "must be finite, got " + vec3(v));
 }
 
 cv::Vec3d to_vec(const std::array<double, 3>& v) { return {v[0], v[1], v[2]}; }
@@ -41,52 +22,14 @@ cv::Vec3d to_vec(const std::array<double, 3>& v) { return {v[0], v[1], v[2]}; }
 }  // namespace
 
 camera::CameraModel compile_camera(const CameraSpec& spec) {
-  if (spec.width <= 0 || spec.width > kMaxImageSide)
-    fail("camera.width", "must be in [1, " + std::to_string(kMaxImageSide) + "] px, got " +
-                             std::to_string(spec.width));
-  if (spec.height <= 0 || spec.height > kMaxImageSide)
-    fail("camera.height", "must be in [1, " + std::to_string(kMaxImageSide) + "] px, got " +
-                              std::to_string(spec.height));
-  // `!(x > 0)` rather than `x <= 0` so that NaN is rejected too.
-  if (!(spec.fx > 0) || !std::isfinite(spec.fx))
-    fail("camera.fx", "must be positive and finite, got " + num(spec.fx));
-  if (!(spec.fy > 0) || !std::isfinite(spec.fy))
-    fail("camera.fy", "must be positive and finite, got " + num(spec.fy));
-  if (!std::isfinite(spec.cx)) fail("camera.cx", "must be finite, got " + num(spec.cx));
-  if (!std::isfinite(spec.cy)) fail("camera.cy", "must be finite, got " + num(spec.cy));
-  for (double d : spec.distortion)
-    if (!std::isfinite(d)) fail("camera.distortion", "coefficients must be finite, got " + num(d));
-  if (!(spec.fps > 0) || !std::isfinite(spec.fps))
-    fail("camera.fps", "must be positive and finite, got " + num(spec.fps));
-  if (!(spec.exposure >= 0) || !(spec.exposure <= 1.0 / spec.fps))
-    fail("camera.exposure",
-         "must be in [0, 1/fps] = [0, " + num(1.0 / spec.fps) + "] s, got " + num(spec.exposure));
-  require_finite3(spec.position, "camera.position");
-  require_finite3(spec.look_at, "camera.look_at");
-  require_finite3(spec.up, "camera.up");
-  if (!(spec.position[2] > 0))
-    fail("camera.position",
-         "the camera must be above the table (z > 0), got z = " + num(spec.position[2]));
-
+  static_assert(kMaxCameraSide == camera::kMaxImageSide);
+  if (auto problem = camera_problem(spec)) fail("camera." + problem->field, problem->reason);
   const cv::Vec3d position = to_vec(spec.position);
   const cv::Vec3d view = to_vec(spec.look_at) - position;
-  const double view_norm = cv::norm(view);
-  if (!(view_norm > 1e-9))
-    fail("camera.look_at", "must differ from camera.position, both are " + vec3(spec.position));
-  const cv::Vec3d z_c = view / view_norm;
-  // Looking level or upwards would put the table plane behind the camera (or at the horizon).
-  if (!(z_c[2] < 0))
-    fail("camera.look_at", "must be below the camera so that the table is in front of it, got " +
-                               vec3(spec.look_at) + " from camera.position " + vec3(spec.position));
+  const cv::Vec3d z_c = view / cv::norm(view);
   const cv::Vec3d up = to_vec(spec.up);
-  const double up_norm = cv::norm(up);
-  if (!(up_norm > 0)) fail("camera.up", "must be a non-zero vector, got " + vec3(spec.up));
-  const cv::Vec3d side = z_c.cross(up / up_norm);
+  const cv::Vec3d side = z_c.cross(up / cv::norm(up));
   const double side_norm = cv::norm(side);
-  // sin of the angle between `up` and the viewing direction; below ~0.06 deg the image
-  // orientation would hinge on rounding.
-  if (!(side_norm > 1e-6))
-    fail("camera.up", "must not be parallel to the viewing direction, got " + vec3(spec.up));
   // x_c = z_c x up points to the image right when `up` is the image up: for a camera above the
   // origin looking down with up = +y this gives x_c = +x, y_c = z_c x x_c = -y (image rows grow
   // towards table -y), i.e. the natural overhead view with table +y up in the image.
@@ -120,6 +63,83 @@ camera::PlacedBoard compile_target(const TargetSpec& target) {
   placed.position = {target.position[0], target.position[1], target.position[2]};
   placed.rotation = {target.rotation[0], target.rotation[1], target.rotation[2]};
   return placed;
+}
+
+namespace {
+
+void compile_loop(Model& m) {
+  const Scene& scene = m.spec;
+  const EstimatorSpec& e = scene.estimator;
+  m.estimator.model = control::parse_estimator_model(e.model);
+  m.estimator.latency_compensation = e.latency_compensation;
+  m.estimator.process_noise = e.process_noise;
+  // The estimator re-propagates from the capture time of a late frame: its history must reach
+  // back past the worst latency and a frame or two.
+  if (scene.camera)
+    m.estimator.history =
+        std::max(m.estimator.history,
+                 3.0 * (scene.camera->latency + scene.camera->latency_jitter) +
+                     2.0 / scene.camera->fps);
+
+  const ControllerSpec& c = scene.controller;
+  m.controller.feedback = c.mode == "feedback";
+  m.controller.law = control::parse_servo_law(c.law);
+  m.controller.kp = c.kp;
+  m.controller.kd = c.kd;
+  m.controller.dip_until = c.dip_until;
+  m.controller.finish_after = c.finish_after;
+  m.controller.stop_deceleration = c.stop_deceleration;
+  m.controller.dt = 1.0 / scene.joint.rate;
+  m.safety.lost_timeout = c.lost_timeout;
+  m.safety.innovation_gate = c.innovation_gate;
+  m.safety.innovation_strikes = c.innovation_strikes;
+  m.safety.max_joint_jump = c.max_joint_jump;
+}
+
+void compile_vision(Model& m) {
+  const Scene& scene = m.spec;
+  if (!m.camera) return;
+  // The tracked edge is the disk's top face.
+  m.tracker.camera = *m.camera;
+  m.tracker.plane_z = scene.render.disk_thickness;
+  if (scene.sim.object.kind == sim::ObjectSpec::Kind::kDisk) m.mapping = hand_mapping(m, *m.camera);
+}
+
+}  // namespace
+
+vision::HandMapping hand_mapping(const Model& model, const camera::CameraModel& camera,
+                                 cv::Point2d axis_table) {
+  const Scene& scene = model.spec;
+  if (scene.sim.object.kind != sim::ObjectSpec::Kind::kDisk)
+    throw std::invalid_argument(scene.origin +
+                                ": object: the mapping finds a disk's centre (object.type: disk)");
+  vision::HandMapping mapping;
+  mapping.camera = camera;
+  mapping.axis_table = axis_table;
+  // The tracked edge lies on the disk's top face.
+  mapping.plane_z = scene.render.disk_thickness;
+  mapping.disk_radius = scene.sim.object.radius;
+  mapping.hand = *model.hand;
+  return mapping;
+}
+
+std::shared_ptr<const Model> compile(Scene scene) {
+  auto m = std::make_shared<Model>();
+  m->spec = std::move(scene);
+  const Scene& s = m->spec;
+  m->plant = sim::build_problem(s.sim);
+  m->hand = std::dynamic_pointer_cast<const sim::PolynomialHand>(m->plant->hand);
+  if (!m->hand) throw std::logic_error("compile: the plant's hand is not the polynomial hand");
+  // The paper's model differs from the scene's in its contact law alone (no losses): the same
+  // hand, object and motion, not built (and checked) twice.
+  auto paper = std::make_shared<sim::RollingProblem>(*m->plant);
+  paper->contact = sim::paper_model(s.sim).contact;
+  m->paper_plant = std::move(paper);
+  if (s.camera) m->camera = compile_camera(*s.camera);
+  for (const TargetSpec& t : s.targets) m->boards.push_back(compile_target(t));
+  compile_loop(*m);
+  compile_vision(*m);
+  return m;
 }
 
 }  // namespace flatland::model

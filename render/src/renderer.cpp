@@ -1,7 +1,6 @@
 #include "flatland/render/renderer.hpp"
 
 #include "flatland/camera/board.hpp"
-#include "flatland/model/compile.hpp"
 #include "flatland/render/distortion_maps.hpp"
 #include "flatland/sim/curve.hpp"
 
@@ -503,7 +502,8 @@ struct Renderer::Impl {
     bool behind = false;  // drawn with a polygon offset: coplanar geometry drawn later wins
   };
 
-  Scene scene;
+  std::shared_ptr<const model::Model> model;
+  const Scene& scene;  // model->spec
   camera::CameraModel camera;
   DistortionMaps maps;
   int supersample = 1;
@@ -527,8 +527,9 @@ struct Renderer::Impl {
   // image before quantisation: reused.
   cv::Mat ideal_bgr, ideal_f32, distorted_f32, subframe, linear_scratch;
 
-  Impl(const Scene& s, GlBackend backend)
-      : scene(s), camera(model::compile_camera(*s.camera)), rng(s.effects.seed) {
+  Impl(std::shared_ptr<const model::Model> m, GlBackend backend)
+      : model(std::move(m)), scene(model->spec), camera(*model->camera), rng(scene.effects.seed) {
+    const Scene& s = scene;
     supersample = s.effects.supersample;
     if (supersample < 1 || supersample > 8)
       throw std::invalid_argument("effects.supersample: must be between 1 and 8");
@@ -543,11 +544,10 @@ struct Renderer::Impl {
     build_program();
     build_framebuffer();
     table = upload(table_mesh(s.render.table_extent));
-    const sim::PolynomialHand shape(s.sim.hand.a, s.sim.hand.b, s.sim.hand.c, s.sim.hand.d);
-    hand = upload(hand_mesh(shape, s.render.hand_thickness));
+    hand = upload(hand_mesh(*model->hand, s.render.hand_thickness));
     disk = upload(disk_side_mesh(disk_radius, s.render.disk_thickness));
     disk_top = upload(disk_top_quad(disk_radius, s.render.disk_thickness));
-    for (const TargetSpec& t : s.targets) targets.push_back(make_target(model::compile_target(t)));
+    for (const camera::PlacedBoard& b : model->boards) targets.push_back(make_target(b));
     for (const Drawable& t : targets) textured_targets = textured_targets || t.texture != 0;
     readback.create(fbo_height, fbo_width, CV_8UC4);
     const float shade = static_cast<float>(kAmbient + (1.0 - kAmbient) * std::max(kLight[2], 0.0));
@@ -872,10 +872,12 @@ struct Renderer::Impl {
   }
 };
 
-Renderer::Renderer(const Scene& scene, std::optional<GlBackend> backend) {
-  if (!scene.camera)
+Renderer::Renderer(std::shared_ptr<const model::Model> model, std::optional<GlBackend> backend) {
+  if (!model) throw std::invalid_argument("render: no model");
+  if (!model->camera)
     throw std::invalid_argument("camera: the scene has no camera section (needed to render)");
-  impl_ = std::make_unique<Impl>(scene, backend ? *backend : parse_backend(scene.render.backend));
+  const GlBackend chosen = backend ? *backend : parse_backend(model->spec.render.backend);
+  impl_ = std::make_unique<Impl>(std::move(model), chosen);
 }
 
 Renderer::~Renderer() = default;

@@ -465,8 +465,7 @@ double non_negative(const MapReader& m, const char* key, double fallback) {
 
 // ---- camera, effects, render, targets (the renderer's plain data) ------------------------------
 
-/// What the renderer's camera model needs and plain data can tell: positive focal lengths and
-/// image size, a camera above the table that looks somewhere, an exposure within one frame.
+/// What the renderer's camera model needs (the rules are camera_problem's, below).
 void read_camera(const MapReader& root, Scene& scene) {
   const auto c =
       root.optional_section("camera", {"width", "height", "fx", "fy", "cx", "cy", "distortion",
@@ -474,9 +473,8 @@ void read_camera(const MapReader& root, Scene& scene) {
                                        "latency_jitter"});
   if (!c) return;
   CameraSpec cam;
-  constexpr long long kMaxSide = 16384;  // px; beyond any GL framebuffer this renders into
-  cam.width = static_cast<int>(c->integer_or("width", 1, kMaxSide, cam.width));
-  cam.height = static_cast<int>(c->integer_or("height", 1, kMaxSide, cam.height));
+  cam.width = static_cast<int>(c->integer_or("width", 1, kMaxCameraSide, cam.width));
+  cam.height = static_cast<int>(c->integer_or("height", 1, kMaxCameraSide, cam.height));
   // The renderer keeps a few float images of the frame: bounded, so that a frame fits in memory.
   if (static_cast<long long>(cam.width) * cam.height > kMaxCameraPixels)
     c->fail_at("width", "width x height = " +
@@ -500,28 +498,7 @@ void read_camera(const MapReader& root, Scene& scene) {
                                      " s): a frame cannot arrive before it is taken, got " +
                                      c->node("latency_jitter").Scalar());
 
-  if (!(cam.position[2] > 0))
-    c->fail_at("position", "the camera must be above the table (z > 0), got z = " +
-                               format_value(cam.position[2]));
-  const double view[3] = {cam.look_at[0] - cam.position[0], cam.look_at[1] - cam.position[1],
-                          cam.look_at[2] - cam.position[2]};
-  const double view_len = std::hypot(view[0], view[1], view[2]);
-  if (!(view_len > 1e-9))
-    c->fail_at("look_at", "must differ from camera.position (the camera looks nowhere)");
-  const double up_len = std::hypot(cam.up[0], cam.up[1], cam.up[2]);
-  if (!(up_len > 0)) c->fail_at("up", "must not be the zero vector");
-  // |view x up| / (|view| |up|) = sin of the angle between them.
-  const double cross[3] = {view[1] * cam.up[2] - view[2] * cam.up[1],
-                           view[2] * cam.up[0] - view[0] * cam.up[2],
-                           view[0] * cam.up[1] - view[1] * cam.up[0]};
-  if (!(std::hypot(cross[0], cross[1], cross[2]) > 1e-6 * view_len * up_len))
-    c->fail_at("up", "must not be parallel to the viewing direction (look_at - position)");
-  if (!(cam.exposure >= 0))
-    c->fail_at("exposure", "must be >= 0 s, got " + c->node("exposure").Scalar());
-  if (!(cam.exposure <= 1.0 / cam.fps))
-    c->fail_at("exposure",
-               "must not exceed the frame interval 1/fps = " + format_value(1.0 / cam.fps) +
-                   " s, got " + c->node("exposure").Scalar());
+  if (auto problem = camera_problem(cam)) c->fail_at(problem->field, problem->reason);
   scene.camera = cam;
 }
 
@@ -743,6 +720,65 @@ int count_documents_up_to_two(const std::string& text) {
 }
 
 }  // namespace
+
+std::optional<FieldProblem> camera_problem(const CameraSpec& cam) {
+  const auto problem = [](std::string field, std::string reason) {
+    return std::optional<FieldProblem>(FieldProblem{std::move(field), std::move(reason)});
+  };
+  const auto size_rule = "must be in [1, " + std::to_string(kMaxCameraSide) + "] px, got ";
+  if (cam.width < 1 || cam.width > kMaxCameraSide)
+    return problem("width", size_rule + std::to_string(cam.width));
+  if (cam.height < 1 || cam.height > kMaxCameraSide)
+    return problem("height", size_rule + std::to_string(cam.height));
+  // `!(x > 0)` rather than `x <= 0` so that NaN breaks the rule too.
+  if (!(cam.fx > 0) || !std::isfinite(cam.fx))
+    return problem("fx", "must be positive and finite, got " + format_value(cam.fx));
+  if (!(cam.fy > 0) || !std::isfinite(cam.fy))
+    return problem("fy", "must be positive and finite, got " + format_value(cam.fy));
+  if (!std::isfinite(cam.cx)) return problem("cx", "must be finite, got " + format_value(cam.cx));
+  if (!std::isfinite(cam.cy)) return problem("cy", "must be finite, got " + format_value(cam.cy));
+  for (double d : cam.distortion)
+    if (!std::isfinite(d))
+      return problem("distortion", "coefficients must be finite, got " + format_value(d));
+  if (!(cam.fps > 0) || !std::isfinite(cam.fps))
+    return problem("fps", "must be positive and finite, got " + format_value(cam.fps));
+  const auto vec3 = [](const std::array<double, 3>& v) {
+    return "(" + format_value(v[0]) + ", " + format_value(v[1]) + ", " + format_value(v[2]) + ")";
+  };
+  for (const auto& [field, v] : {std::pair{"position", &cam.position},
+                                 std::pair{"look_at", &cam.look_at}, std::pair{"up", &cam.up}})
+    for (double x : *v)
+      if (!std::isfinite(x)) return problem(field, "must be finite, got " + vec3(*v));
+  if (!(cam.position[2] > 0))
+    return problem("position", "the camera must be above the table (z > 0), got z = " +
+                                   format_value(cam.position[2]));
+  const double view[3] = {cam.look_at[0] - cam.position[0], cam.look_at[1] - cam.position[1],
+                          cam.look_at[2] - cam.position[2]};
+  const double view_len = std::hypot(view[0], view[1], view[2]);
+  if (!(view_len > 1e-9))
+    return problem("look_at", "must differ from camera.position (the camera looks nowhere)");
+  // Looking level or upwards would put the table plane behind the camera (or at the horizon).
+  if (!(view[2] < 0))
+    return problem("look_at", "must be below the camera so that the table is in front of it, got " +
+                                  vec3(cam.look_at) + " from camera.position " +
+                                  vec3(cam.position));
+  const double up_len = std::hypot(cam.up[0], cam.up[1], cam.up[2]);
+  if (!(up_len > 0)) return problem("up", "must not be the zero vector");
+  // |view x up| / (|view| |up|) = sin of the angle between them; below ~0.06 deg the image's
+  // orientation would hinge on rounding.
+  const double cross[3] = {view[1] * cam.up[2] - view[2] * cam.up[1],
+                           view[2] * cam.up[0] - view[0] * cam.up[2],
+                           view[0] * cam.up[1] - view[1] * cam.up[0]};
+  if (!(std::hypot(cross[0], cross[1], cross[2]) > 1e-6 * view_len * up_len))
+    return problem("up", "must not be parallel to the viewing direction (look_at - position)");
+  if (!(cam.exposure >= 0))
+    return problem("exposure", "must be >= 0 s, got " + format_value(cam.exposure));
+  if (!(cam.exposure <= 1.0 / cam.fps))
+    return problem("exposure", "must not exceed the frame interval 1/fps = " +
+                                   format_value(1.0 / cam.fps) + " s, got " +
+                                   format_value(cam.exposure));
+  return std::nullopt;
+}
 
 Scene parse_scene(const std::string& yaml_text, const std::string& origin) {
   if (yaml_text.size() > kMaxSceneBytes)

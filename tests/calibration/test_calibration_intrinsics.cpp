@@ -99,7 +99,7 @@ RenderedViews render_views(const TargetSpec& board_template, const camera::Board
     s.effects.supersample = kSupersample;
     s.effects.noise_read_dn = 1.0;
     s.targets = {t};
-    render::Renderer r(s);
+    render::Renderer r(flatland::model::compile(s));
     render::SceneState state;
     state.disk_center = {5.0, 5.0};  // the disk out of view
     cv::Mat linear = r.render_linear(state);
@@ -248,7 +248,7 @@ TEST(CalibrationIntrinsics, ChessboardNotationIsOpenCvsPatternSize) {
   s.camera = truth_camera();
   s.effects.supersample = 2;
   s.targets = parsed.targets;
-  render::Renderer r(s);
+  render::Renderer r(flatland::model::compile(s));
   render::SceneState state;
   state.disk_center = {5.0, 5.0};  // the disk out of view
   const cv::Mat image = r.render_8u(state);
@@ -662,7 +662,7 @@ TEST_F(CalibrateCli, FrontoParallelImagesExitTwo) {
     s.camera = truth_camera();
     s.effects.supersample = 2;
     s.targets = {t};
-    render::Renderer rr(s);
+    render::Renderer rr(flatland::model::compile(s));
     render::SceneState st;
     st.disk_center = {5.0, 5.0};
     cv::imwrite((dir_ / "imgs" / ("flat" + std::to_string(i) + ".png")).string(), rr.render_8u(st));

@@ -1,7 +1,6 @@
 // Uses flatland as a library from its installed prefix: loads the bundled scenes from the
 // installed data, solves the paper's butterfly (sim) and projects the disk's start through the
-// scene's camera (render). Prints one JSON object; exit 1 on any error.
-#include "flatland/model/compile.hpp"
+// scene's camera, compiled into a Model. Prints one JSON object; exit 1 on any error.
 #include <flatland/flatland.hpp>
 
 #include <cstdio>
@@ -12,9 +11,9 @@ int main() {
     const flatland::Scene butterfly = flatland::load_scene(DATA_DIR "/scenes/butterfly.yaml");
     const flatland::sim::SolveReport solved =
         flatland::sim::solve_k(butterfly.sim, butterfly.sim.motion.period, {});
-    const flatland::Scene filmed = flatland::load_scene(DATA_DIR "/scenes/butterfly-camera.yaml");
-    const auto camera = flatland::model::compile_camera(*filmed.camera);
-    const cv::Point2d origin = camera.project(cv::Point3d(0, 0, 0));
+    const std::shared_ptr<const flatland::model::Model> filmed =
+        flatland::model::compile(flatland::load_scene(DATA_DIR "/scenes/butterfly-camera.yaml"));
+    const cv::Point2d origin = filmed->camera->project(cv::Point3d(0, 0, 0));
     std::printf("{\"k\": %.17g, \"origin_px\": [%.6f, %.6f], \"default_scene\": \"%s\"}\n",
                 solved.k, origin.x, origin.y, flatland::default_scene_path().c_str());
     return 0;

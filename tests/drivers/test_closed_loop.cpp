@@ -99,14 +99,14 @@ TEST(ClosedLoop, PaperRunSucceedsWithFeedback) {
   ASSERT_NEAR(scene.sim.motion.period, 4.0, 1e-12);
   ASSERT_NEAR(scene.sim.motion.k, -1.1393, 1e-12);
   ASSERT_TRUE(scene.sim.contact.has_losses());
-  const drivers::LoopSetup setup(scene);
+  const drivers::LoopSetup setup(flatland::model::compile(scene));
   Scene lossless = scene;
   lossless.sim.contact.rolling_resistance = lossless.sim.contact.drag =
       lossless.sim.contact.drag_angular = 0;
   for (const Scene* world : {static_cast<const Scene*>(&lossless), &scene}) {
     const bool losses = world == &scene;
     SCOPED_TRACE(losses ? "the air table's losses" : "lossless");
-    const drivers::SyntheticResult r = drivers::run_synthetic(setup, *world);
+    const drivers::SyntheticResult r = drivers::run_synthetic(setup, flatland::model::compile(*world));
     ASSERT_TRUE(r.success) << r.failure;
     EXPECT_EQ(r.outcome, drivers::Outcome::kSuccess);
     EXPECT_FALSE(r.loop.safe_stop);
@@ -141,12 +141,12 @@ TEST(ClosedLoop, PaperRunSucceedsWithFeedback) {
 TEST(ClosedLoop, OutcomeSaysWhereTheDiskEnded) {
   Scene scene = feedback_scene();
   scene.controller.mode = "open-loop";
-  const drivers::LoopSetup setup(scene);
+  const drivers::LoopSetup setup(flatland::model::compile(scene));
   Scene slippery = scene;
   slippery.sim.contact.mu = 0.05;
   slippery.sim.contact.mu_kinetic = 0.04;
   slippery.sim.contact.rolling_resistance = 1e-5;  // below mu_k r
-  const drivers::SyntheticResult r = drivers::run_synthetic(setup, slippery);
+  const drivers::SyntheticResult r = drivers::run_synthetic(setup, flatland::model::compile(slippery));
   EXPECT_FALSE(r.success);
   EXPECT_TRUE(r.outcome == drivers::Outcome::kSlidOff || r.outcome == drivers::Outcome::kDropped)
       << drivers::to_string(r.outcome) << ": " << r.failure;
@@ -156,7 +156,7 @@ TEST(ClosedLoop, OutcomeSaysWhereTheDiskEnded) {
   ASSERT_FALSE(r.contact_events.empty());
   EXPECT_EQ(r.contact_events.back().kind, sim::EventKind::kDropped);
   // The nominal world succeeds open loop, and the disk is trapped in the back well.
-  const drivers::SyntheticResult ok = drivers::run_synthetic(setup, scene);
+  const drivers::SyntheticResult ok = drivers::run_synthetic(setup, flatland::model::compile(scene));
   EXPECT_EQ(ok.outcome, drivers::Outcome::kSuccess) << ok.failure;
   EXPECT_TRUE(ok.goal.trapped);
   EXPECT_TRUE(ok.goal.well_faces_up);
@@ -168,8 +168,8 @@ TEST(ClosedLoop, OutcomeSaysWhereTheDiskEnded) {
 TEST(ClosedLoop, OpenLoopPlaybackTracksThePlan) {
   Scene scene = feedback_scene();
   scene.controller.mode = "open-loop";
-  const drivers::LoopSetup setup(scene);
-  const drivers::SyntheticResult r = drivers::run_synthetic(setup, scene);
+  const drivers::LoopSetup setup(flatland::model::compile(scene));
+  const drivers::SyntheticResult r = drivers::run_synthetic(setup, flatland::model::compile(scene));
   ASSERT_TRUE(r.loop.finished) << r.failure;
   EXPECT_NEAR(r.loop.duration_s, 4.0, 1e-9);
   double worst = 0;
@@ -187,7 +187,7 @@ TEST(ClosedLoop, OpenLoopPlaybackTracksThePlan) {
 // estimator and controller to the same commands, bit for bit.
 TEST(ClosedLoop, ReplayGivesTheSameCommandsBitForBit) {
   const Scene scene = feedback_scene();
-  const drivers::LoopSetup setup(scene);
+  const drivers::LoopSetup setup(flatland::model::compile(scene));
   TempDir tmp;
   const fs::path rec = tmp.path / "rec";
   drivers::SyntheticResult original;
@@ -200,7 +200,7 @@ TEST(ClosedLoop, ReplayGivesTheSameCommandsBitForBit) {
     drivers::Recorder recorder(rec, meta);
     drivers::SyntheticOptions opt;
     opt.recorder = &recorder;
-    original = drivers::run_synthetic(setup, scene, opt);
+    original = drivers::run_synthetic(setup, flatland::model::compile(scene), opt);
     recorder.finish();
   }
   ASSERT_TRUE(original.success) << original.failure;
@@ -233,7 +233,7 @@ TEST(ClosedLoop, EstimatorIsConsistentInTheLoop) {
   const auto run_all = [&](bool compensate, int worlds) {
     Scene assumed = nominal;
     assumed.estimator.latency_compensation = compensate;
-    const drivers::LoopSetup setup(assumed);
+    const drivers::LoopSetup setup(flatland::model::compile(assumed));
     double sum = 0;
     long n = 0;
     int failures = 0;
@@ -248,7 +248,7 @@ TEST(ClosedLoop, EstimatorIsConsistentInTheLoop) {
       truth.sim.object.radius *= 1.0 + 0.02 * u(rng);
       truth.sim.initial.s_h += 0.02 * u(rng);
       truth.camera->latency_jitter = 0.005;
-      const drivers::SyntheticResult r = drivers::run_synthetic(setup, truth);
+      const drivers::SyntheticResult r = drivers::run_synthetic(setup, flatland::model::compile(truth));
       // Only up to the end of the motion: afterwards the disk rests, the estimate is exact and
       // samples pile up where there is nothing to test.
       const double t_end =
@@ -289,8 +289,8 @@ TEST_P(ClosedLoopFault, SafeStop) {
   if (f == "camera_stall") scene.faults.camera_stall = 1.5;
   if (f == "occlusion") scene.faults.occlusion = 1.5;
   if (f == "encoder_glitch") scene.faults.encoder_glitch = 1.5;
-  const drivers::LoopSetup setup(scene);
-  const drivers::SyntheticResult r = drivers::run_synthetic(setup, scene);
+  const drivers::LoopSetup setup(flatland::model::compile(scene));
+  const drivers::SyntheticResult r = drivers::run_synthetic(setup, flatland::model::compile(scene));
   EXPECT_FALSE(r.success);
   EXPECT_TRUE(r.loop.safe_stop) << r.failure;
   ASSERT_TRUE(r.loop.stop_reason.has_value()) << r.failure;

@@ -168,11 +168,11 @@ TEST(MonteCarloWilson, MatchesHandComputedIntervals) {
 
 TEST(MonteCarloRun, RejectsBadArguments) {
   const Scene s0 = nominal();
-  EXPECT_THROW(drivers::run_montecarlo(s0, {}, 0, 1, {"feedback"}), std::invalid_argument);
-  EXPECT_THROW(drivers::run_montecarlo(s0, {}, 1, 1, {"closed"}), std::invalid_argument);
-  EXPECT_THROW(drivers::run_montecarlo(s0, {}, 1, 1, {"feedback", "feedback"}),
+  EXPECT_THROW(drivers::run_montecarlo(*flatland::model::compile(s0), {}, 0, 1, {"feedback"}), std::invalid_argument);
+  EXPECT_THROW(drivers::run_montecarlo(*flatland::model::compile(s0), {}, 1, 1, {"closed"}), std::invalid_argument);
+  EXPECT_THROW(drivers::run_montecarlo(*flatland::model::compile(s0), {}, 1, 1, {"feedback", "feedback"}),
                std::invalid_argument);
-  EXPECT_THROW(drivers::run_montecarlo(s0, {}, 1, 1, {}), std::invalid_argument);
+  EXPECT_THROW(drivers::run_montecarlo(*flatland::model::compile(s0), {}, 1, 1, {}), std::invalid_argument);
 }
 
 TEST(MonteCarloRun, ResultsDoNotDependOnTheThreadCount) {
@@ -184,7 +184,7 @@ TEST(MonteCarloRun, ResultsDoNotDependOnTheThreadCount) {
   const long records = 2L * runs;
   long calls = 0, last_done = 0, last_total = 0;
   const auto one =
-      drivers::run_montecarlo(s0, p, runs, 2024, controllers, 1, [&](long done, long total) {
+      drivers::run_montecarlo(*flatland::model::compile(s0), p, runs, 2024, controllers, 1, [&](long done, long total) {
         ++calls;
         EXPECT_EQ(done, last_done + 1);
         last_done = done;
@@ -192,7 +192,7 @@ TEST(MonteCarloRun, ResultsDoNotDependOnTheThreadCount) {
       });
   EXPECT_EQ(calls, records);
   EXPECT_EQ(last_total, records);
-  const auto two = drivers::run_montecarlo(s0, p, runs, 2024, controllers, 2);
+  const auto two = drivers::run_montecarlo(*flatland::model::compile(s0), p, runs, 2024, controllers, 2);
   ASSERT_EQ(one.records.size(), static_cast<std::size_t>(records));
   ASSERT_EQ(two.records.size(), static_cast<std::size_t>(records));
   EXPECT_EQ(one.runs, runs);
@@ -235,7 +235,7 @@ TEST(MonteCarloRun, ResultsDoNotDependOnTheThreadCount) {
 
 TEST(MonteCarloRun, OneControllerLeavesTheOtherUncounted) {
   const Scene s0 = nominal();
-  const auto r = drivers::run_montecarlo(s0, {}, 1, 3, {"feedback"}, 1);
+  const auto r = drivers::run_montecarlo(*flatland::model::compile(s0), {}, 1, 3, {"feedback"}, 1);
   EXPECT_EQ(r.success_open_loop, -1);
   EXPECT_GE(r.success_feedback, 0);
   ASSERT_EQ(r.records.size(), 1u);

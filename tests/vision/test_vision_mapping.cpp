@@ -113,7 +113,7 @@ TEST(VisionMapping, TruthCentreGivesSimulatorContactParameter) {
 // Tracked centres (noise 2 DN, 30 Hz exposure blur) give s_h within 0.005.
 TEST(VisionMapping, TrackedCentreContactParameterError) {
   const Scene s = mapping_scene(2.0, true);
-  render::Renderer renderer(s);
+  render::Renderer renderer(flatland::model::compile(s));
   const vision::HandMapping m = mapping_for(s, renderer.camera());
   const sim::RunResult r = run(s);
   vision::Tracker tracker;

@@ -39,7 +39,7 @@ const Sequence& sequence(double noise_dn, bool blur) {
   sim::SimulationSpec spec = scene.sim;
   spec.run.record = true;
   const sim::RunResult run = sim::run_spec(spec);
-  render::Renderer renderer(scene);
+  render::Renderer renderer(flatland::model::compile(scene));
   Sequence seq;
   seq.camera = renderer.camera();
   const double t_end = run.trajectory.t_end();
@@ -141,7 +141,7 @@ TEST(VisionTracker, LostAndReacquired) {
   sim::SimulationSpec spec = scene.sim;
   spec.run.record = true;
   const sim::RunResult run = sim::run_spec(spec);
-  render::Renderer renderer(scene);
+  render::Renderer renderer(flatland::model::compile(scene));
   std::map<int, render::Frame> frames;
   for (int k : {10, 11, 60, 61}) frames[k] = renderer.capture(run.trajectory, k / 30.0);
   render::SceneState away;
@@ -206,7 +206,7 @@ TEST(VisionTracker, ObliqueCameraPlaneFit) {
   sim::SimulationSpec spec = s.sim;
   spec.run.record = true;
   const sim::RunResult run = sim::run_spec(spec);
-  render::Renderer renderer(s);
+  render::Renderer renderer(flatland::model::compile(s));
   Sequence seq;
   seq.camera = renderer.camera();
   for (int k = 0; k <= 120; k += 4)

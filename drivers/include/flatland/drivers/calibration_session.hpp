@@ -6,7 +6,7 @@
 #include "flatland/calibration/session.hpp"
 #include "flatland/camera/board.hpp"
 #include "flatland/camera/camera_file.hpp"
-#include "flatland/scene/scene.hpp"
+#include "flatland/model/model.hpp"
 
 #include <opencv2/core.hpp>
 
@@ -41,14 +41,15 @@ struct CalibrationSession {
 /// ("intrinsics/view_00.png", "table/board_0.png", "joint/hand_0.png"), in order.
 using SessionImageSink = std::function<void(const std::string& path, const cv::Mat& image)>;
 
-/// Render one session of `scene` (which needs a camera) through its effects (noise, anti-
+/// Render one session of a compiled scene (which needs a camera) through its effects (noise, anti-
 /// aliasing): intrinsics views in which the board is detected, table views with the hand turned
 /// across the view out of the boards' way, joint views with no board, the disk out of view in
 /// all. The hand pivots at the table origin and its encoder reads the true hand angle. Throws
 /// std::invalid_argument for counts out of range ([3, 200] intrinsics views, [1, 50] table,
 /// [3, 100] joint), a bad board, or a camera that cannot see a board whole;
 /// std::runtime_error when no GL context can be made.
-CalibrationSession render_calibration_session(const Scene& scene, const SessionOptions& options,
+CalibrationSession render_calibration_session(const model::Model& model,
+                                              const SessionOptions& options,
                                               const SessionImageSink& sink);
 
 }  // namespace flatland::drivers

@@ -9,7 +9,7 @@
 #include "flatland/control/estimator.hpp"
 #include "flatland/drivers/interfaces.hpp"
 #include "flatland/drivers/synthetic.hpp"
-#include "flatland/scene/scene.hpp"
+#include "flatland/model/model.hpp"
 #include "flatland/vision/mapping.hpp"
 #include "flatland/vision/tracker.hpp"
 
@@ -30,7 +30,7 @@ struct PlanInfo {
   double period = 0, k = 0;
   bool solved = false;
 };
-PlanInfo make_plan(const Scene& nominal);
+PlanInfo make_plan(const model::Model& nominal);
 
 /// One row of the 1 kHz log.
 struct TickLog {
@@ -76,22 +76,19 @@ struct LoopResult {
   long estimator_steps = 0, estimator_repropagated = 0;
 };
 
-/// Everything the loop needs from the nominal scene; built once per experiment.
+/// What the loop assumes: the nominal compiled scene (its mapping, tracker, estimator,
+/// controller and safety configs) and its plan, simulated once; shared read-only by experiments.
+/// Needs a camera and a disk.
 struct LoopSetup {
-  explicit LoopSetup(const Scene& nominal);
-  Scene scene;
+  explicit LoopSetup(std::shared_ptr<const model::Model> nominal);
+  std::shared_ptr<const model::Model> model;
   PlanInfo plan;
-  vision::HandMapping mapping;
-  vision::TrackerConfig tracker;
-  control::EstimatorConfig estimator;
-  control::ControllerConfig controller;
-  control::SafetyConfig safety;
 };
 
 LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint& joint,
                     const LoopOptions& options);
 
-/// A whole synthetic experiment: the world obeys `truth`, the loop assumes `setup.scene`.
+/// A whole synthetic experiment: the world obeys `truth`, the loop assumes `setup.model`.
 struct SyntheticResult {
   LoopResult loop;
   /// Success: the disk rests in the back well with the hand at pi, judged in the hybrid world
@@ -122,7 +119,7 @@ struct SyntheticOptions {
       on_frame;
   std::function<void(double t, double t_end_estimate)> progress;
 };
-SyntheticResult run_synthetic(const LoopSetup& setup, const Scene& truth,
+SyntheticResult run_synthetic(const LoopSetup& setup, std::shared_ptr<const model::Model> truth,
                               const SyntheticOptions& options = {});
 
 }  // namespace flatland::drivers

@@ -6,7 +6,7 @@
 
 #include "flatland/drivers/interfaces.hpp"
 #include "flatland/render/renderer.hpp"
-#include "flatland/scene/scene.hpp"
+#include "flatland/model/model.hpp"
 #include "flatland/sim/hybrid.hpp"
 
 #include <array>
@@ -68,11 +68,11 @@ void require_friction(const Scene& scene);
 
 class SimWorld {
  public:
-  /// `truth` is the scene the world obeys (perhaps perturbed from what the controller assumes):
-  /// the hybrid contact model with its friction, restitution and losses, whatever the scene's
-  /// contact.model says. Needs a disk. The hand rests at its motion's angle at t = 0; time starts
-  /// at t_start.
-  SimWorld(const Scene& truth, double t_start);
+  /// `truth` is the compiled scene the world obeys (perhaps perturbed from what the controller
+  /// assumes): its plant under the hybrid contact model with its friction, restitution and
+  /// losses, whatever the scene's contact.model says. Needs a disk. The hand rests at its
+  /// motion's angle at t = 0; time starts at t_start.
+  SimWorld(std::shared_ptr<const model::Model> truth, double t_start);
 
   double t() const { return t_; }
   double servo_period() const { return dt_; }
@@ -122,7 +122,8 @@ class SimWorld {
   WorldSample sample_now(double alpha, double torque) const;
   std::shared_ptr<const sim::RollingProblem> held(double t, double alpha) const;
 
-  Scene scene_;
+  std::shared_ptr<const model::Model> model_;
+  const Scene& scene_;  // model_->spec
   std::shared_ptr<const sim::RollingProblem> problem_;
   sim::RunOptions step_options_;
   double dt_ = 1e-3;
@@ -181,7 +182,8 @@ class SimJoint final : public Joint {
 /// faults (stop, stall, occlusion) from the scene's `faults` section.
 class SyntheticCamera final : public Camera {
  public:
-  SyntheticCamera(const Scene& scene, const SimWorld& world, double t_start);
+  SyntheticCamera(std::shared_ptr<const model::Model> model, const SimWorld& world,
+                  double t_start);
   std::optional<CameraFrame> poll(double now) override;
   std::string describe() const override { return "synthetic"; }
   const std::vector<render::FrameTruth>& truths() const { return truths_; }

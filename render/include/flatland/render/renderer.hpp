@@ -6,7 +6,7 @@
 #include "flatland/camera/camera_model.hpp"
 #include "flatland/render/effects.hpp"
 #include "flatland/render/gl_context.hpp"
-#include "flatland/scene/scene.hpp"
+#include "flatland/model/model.hpp"
 #include "flatland/sim/simulate.hpp"
 
 #include <opencv2/core.hpp>
@@ -46,10 +46,11 @@ struct Frame {
 
 class Renderer {
  public:
-  /// Needs scene.camera. Creates the GL context (backend from scene.render.backend unless
-  /// `backend` is given). Throws std::invalid_argument on bad camera/effects values and
-  /// std::runtime_error when no GL context can be made.
-  explicit Renderer(const Scene& scene, std::optional<GlBackend> backend = std::nullopt);
+  /// Needs the model's camera. Creates the GL context (backend from the scene's render.backend
+  /// unless `backend` is given). Throws std::invalid_argument on values it cannot draw (an
+  /// object that is not a disk) and std::runtime_error when no GL context can be made.
+  explicit Renderer(std::shared_ptr<const model::Model> model,
+                    std::optional<GlBackend> backend = std::nullopt);
   ~Renderer();
   Renderer(const Renderer&) = delete;
   Renderer& operator=(const Renderer&) = delete;

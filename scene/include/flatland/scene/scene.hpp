@@ -37,6 +37,23 @@ struct CameraSpec {
   double latency_jitter = 0.0;  ///< s, half-width of a uniform spread of the latency
 };
 
+/// The largest camera image side, px (beyond any GL framebuffer flatland renders into; the same
+/// bound as camera::kMaxImageSide).
+constexpr int kMaxCameraSide = 16384;
+
+/// A rule a section breaks: the field below the section ("position", "look_at") and why.
+struct FieldProblem {
+  std::string field;
+  std::string reason;
+};
+
+/// The camera's rules, written once: the scene loader reports the first one broken as
+/// "origin: camera.FIELD: reason", model::compile_camera as "camera.FIELD: reason". Size in
+/// [1, kMaxCameraSide] px; fx, fy > 0; cx, cy, distortion, position, look_at, up finite; fps > 0;
+/// exposure in [0, 1/fps]; the camera above the table (z > 0), looking down at it, with `up` a
+/// non-zero vector not along the view. nullopt when none is broken.
+std::optional<FieldProblem> camera_problem(const CameraSpec& camera);
+
 /// Image effects (section `effects`); each is off unless the scene asks for it.
 struct EffectsSpec {
   int supersample = 1;              ///< anti-aliasing: render s x s samples per pixel

@@ -1,0 +1,64 @@
+// The compiled Model: a parsed Scene (the file's shape) turned once into the typed, validated
+// values every module runs on, immutable afterwards and shared as std::shared_ptr<const Model>,
+// as MuJoCo separates mjModel from mjData. A change of a world (a Monte Carlo draw, a study's cell,
+// a rendered calibration view) edits the Scene and compiles it again; nothing edits a Model.
+#pragma once
+
+#include "flatland/camera/board.hpp"
+#include "flatland/camera/camera_model.hpp"
+#include "flatland/control/controller.hpp"
+#include "flatland/control/estimator.hpp"
+#include "flatland/scene/scene.hpp"
+#include "flatland/sim/curve.hpp"
+#include "flatland/sim/rolling.hpp"
+#include "flatland/vision/mapping.hpp"
+#include "flatland/vision/tracker.hpp"
+
+#include <memory>
+#include <optional>
+#include <vector>
+
+namespace flatland::model {
+
+struct Model {
+  /// What the Model was compiled from. The sections that are typed values already (effects,
+  /// render, joint, faults, the simulation's run options) are read from here.
+  Scene spec;
+
+  /// The scene's rolling problem (sim::build_problem of spec.sim): the world.
+  std::shared_ptr<const sim::RollingProblem> plant;
+  /// The plant's hand: the right half of the paper's polynomial hand, mirrored (meshes, the
+  /// pixel -> s_h mapping).
+  std::shared_ptr<const sim::PolynomialHand> hand;
+  /// The same without losses (sim::paper_model): what the plan and the estimator assume.
+  std::shared_ptr<const sim::RollingProblem> paper_plant;
+
+  /// The scene's camera (section `camera`); absent: nothing is rendered or tracked.
+  std::optional<camera::CameraModel> camera;
+  /// The scene's calibration boards (section `targets`), in the file's order.
+  std::vector<camera::PlacedBoard> boards;
+
+  /// Tracked pixel -> table -> hand -> s_h, with the joint axis at the table origin (a synthetic
+  /// world's; a real one's comes from a camera file). Present with a camera and a disk.
+  std::optional<vision::HandMapping> mapping;
+  /// The tracker, knowing the camera and the plane of the disk's top face.
+  vision::TrackerConfig tracker;
+
+  /// The closed loop (sections `controller`, `estimator`, `joint`).
+  control::ControllerConfig controller;
+  control::SafetyConfig safety;
+  control::EstimatorConfig estimator;
+};
+
+/// Compile a parsed scene: builds the plant (sim::build_problem's checks, its messages naming the
+/// field), the camera (compile_camera), the boards (compile_target), the mapping and the loop's
+/// configs. std::invalid_argument on a value none of them can use.
+std::shared_ptr<const Model> compile(Scene scene);
+
+/// The pixel -> s_h mapping of a compiled scene's hand and disk seen by `camera` (the scene's, or
+/// a calibrated camera file's), the joint axis at `axis_table`. std::invalid_argument naming
+/// object.type unless the object is a disk.
+vision::HandMapping hand_mapping(const Model& model, const camera::CameraModel& camera,
+                                 cv::Point2d axis_table = {0, 0});
+
+}  // namespace flatland::model
