@@ -2,6 +2,7 @@
 // (k1, k2, p1, p2, k3) distortion, written out in the cost functor so that the result can be
 // compared with cv::calibrateCamera number for number.
 #include "flatland/calibration/intrinsics.hpp"
+#include "flatland/sim/format.hpp"
 
 #include <ceres/ceres.h>
 #include <ceres/rotation.h>
@@ -151,13 +152,6 @@ void solve(double* intr, std::vector<Pose>& poses, const std::vector<BoardView>&
 
 std::string size_text(cv::Size s) {
   return std::to_string(s.width) + "x" + std::to_string(s.height);
-}
-
-std::string fmt(double v, int precision = 3) {
-  std::ostringstream os;
-  os.precision(precision);
-  os << v;
-  return os.str();
 }
 
 }  // namespace
@@ -330,7 +324,7 @@ IntrinsicsResult calibrate_intrinsics(const std::vector<BoardView>& views,
   if (max_tilt < options.min_tilt_deg)
     throw std::invalid_argument(
         "focal length unobservable: all views are fronto-parallel (largest board tilt " +
-        fmt(max_tilt, 2) + " deg, need views tilted by " + fmt(options.min_tilt_deg, 2) +
+        sim::format_significant(max_tilt, 2) + " deg, need views tilted by " + sim::format_significant(options.min_tilt_deg, 2) +
         " deg or more)");
 
   double intr[kRational] = {f0, f0, Kinit(0, 2), Kinit(1, 2), 0, 0, 0, 0, 0, 0, 0, 0};
@@ -355,8 +349,8 @@ IntrinsicsResult calibrate_intrinsics(const std::vector<BoardView>& views,
   std::vector<int> inliers;
   for (int i : usable) {
     if (result.view_rms_px[i] > threshold)
-      result.rejected.push_back(label(i) + ": outlier, RMS " + fmt(result.view_rms_px[i]) +
-                                " px > " + fmt(threshold) + " px");
+      result.rejected.push_back(label(i) + ": outlier, RMS " + sim::format_significant(result.view_rms_px[i], 3) +
+                                " px > " + sim::format_significant(threshold, 3) + " px");
     else
       inliers.push_back(i);
   }

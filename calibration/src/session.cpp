@@ -1,5 +1,6 @@
 // Calibration sessions (see session.hpp): the CSV files of a session.
 #include "flatland/calibration/session.hpp"
+#include "flatland/sim/format.hpp"
 
 #include <algorithm>
 #include <charconv>
@@ -34,12 +35,6 @@ namespace {
 // A session's CSV names a few dozen images; anything far larger is not one.
 constexpr std::size_t kMaxCsvBytes = 1 << 20;
 constexpr std::size_t kMaxCsvRows = 10000;
-
-std::string format_value(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.10g", v);
-  return buf;
-}
 
 std::vector<std::string> split_fields(const std::string& line) {
   std::vector<std::string> out;
@@ -163,14 +158,14 @@ std::vector<JointImage> read_joint_csv(const std::string& path) {
 std::string table_csv(const std::vector<TablePlacement>& rows) {
   std::string s = "image,x,y,z,yaw\n";
   for (const TablePlacement& p : rows)
-    s += p.image + "," + format_value(p.x) + "," + format_value(p.y) + "," + format_value(p.z) +
-         "," + format_value(p.yaw) + "\n";
+    s += p.image + "," + sim::format_significant(p.x, 10) + "," + sim::format_significant(p.y, 10) + "," + sim::format_significant(p.z, 10) +
+         "," + sim::format_significant(p.yaw, 10) + "\n";
   return s;
 }
 
 std::string joint_csv(const std::vector<JointImage>& rows) {
   std::string s = "image,encoder\n";
-  for (const JointImage& j : rows) s += j.image + "," + format_value(j.encoder) + "\n";
+  for (const JointImage& j : rows) s += j.image + "," + sim::format_significant(j.encoder, 10) + "\n";
   return s;
 }
 

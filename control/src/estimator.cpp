@@ -1,4 +1,5 @@
 #include "flatland/control/estimator.hpp"
+#include "flatland/sim/format.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -17,22 +18,16 @@ constexpr double kMaxSubstep = 2e-3;
 // Tolerance on "capture time after the current time": loop clocks are sums of doubles.
 constexpr double kTimeSlack = 1e-9;
 
-std::string number(double v) {
-  std::ostringstream out;
-  out << v;
-  return out.str();
-}
-
 void require_positive(const char* field, double v) {
   if (!(v > 0) || !std::isfinite(v))
     throw std::invalid_argument(std::string("estimator.") + field + ": must be positive, got " +
-                                number(v));
+                                sim::format_significant(v));
 }
 
 void require_finite(const char* what, double v) {
   if (!std::isfinite(v))
     throw std::invalid_argument(std::string("estimator.") + what + ": must be finite, got " +
-                                number(v));
+                                sim::format_significant(v));
 }
 
 // The hand input advanced by tau within its step: the angle and rate evolve exactly under the

@@ -1,4 +1,5 @@
 #include "flatland/drivers/experiment.hpp"
+#include "flatland/sim/format.hpp"
 
 #include "flatland/drivers/recorded.hpp"
 #include "flatland/sim/search.hpp"
@@ -17,13 +18,6 @@ namespace {
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 // s: how long the world runs on after the loop for the disk to be trapped in a well or gone.
 constexpr double kSettleLimit = 10.0;
-
-std::string fmt(double v) {
-  std::ostringstream s;
-  s.precision(5);
-  s << v;
-  return s.str();
-}
 
 /// The hand angle at a past time from the joint readings of the last ticks (linear between
 /// ticks: the frames' capture times fall between them).
@@ -183,7 +177,7 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
           t, {control::StopCause::kDisk, "disk: " + options.world->failure_detail()});
     if (t > t_limit)
       controller.safe_stop(t, {control::StopCause::kTimeout,
-                               "timeout: the motion did not finish by t = " + fmt(t_limit) + " s"});
+                               "timeout: the motion did not finish by t = " + sim::format_significant(t_limit, 5) + " s"});
 
     control::Estimate est;
     if (estimating) est = estimator.estimate();

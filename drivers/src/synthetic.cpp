@@ -1,4 +1,5 @@
 #include "flatland/drivers/synthetic.hpp"
+#include "flatland/sim/format.hpp"
 
 #include "flatland/sim/spec.hpp"
 
@@ -16,13 +17,6 @@ Eigen::Matrix2d rotation(double a) {
   Eigen::Matrix2d r;
   r << std::cos(a), -std::sin(a), std::sin(a), std::cos(a);
   return r;
-}
-
-std::string fmt(double v) {
-  std::ostringstream s;
-  s.precision(6);
-  s << v;
-  return s.str();
 }
 
 /// Cubic Hermite interpolation of a value with its derivative over [0, h] at fraction u.
@@ -173,7 +167,7 @@ double SimWorld::step_disk(double t, double t_end, double alpha) {
     failure_detail_ = std::string(last_contact_mode_ == sim::ContactMode::kSliding
                                       ? "the disk slid off the hand"
                                       : "the disk lost contact") +
-                      " and was not caught (out of the hand's reach at t = " + fmt(disk_.t) +
+                      " and was not caught (out of the hand's reach at t = " + sim::format_significant(disk_.t, 6) +
                       " s)";
   }
   return disk_.t;
@@ -217,7 +211,7 @@ void SimWorld::servo_step() {
   for (int piece = 0; t < t_end; ++piece) {
     if (piece > 1000)
       throw std::runtime_error("world: the contact changes mode more than 1000 times within one "
-                               "servo period at t = " + fmt(t) + " s");
+                               "servo period at t = " + sim::format_significant(t, 6) + " s");
     bool stops = false;
     alpha = joint_acceleration(t, t_end, tau, stops);
     if (!failure_ && disk_.mode != sim::ContactMode::kFlight) {
@@ -366,16 +360,16 @@ GoalCheck SimWorld::goal_check() const {
   } else if (disk_.mode == sim::ContactMode::kFlight) {
     out.reason = "the disk is still in flight";
   } else if (!out.well_faces_up) {
-    out.reason = "the disk at s_h = " + fmt(out.s_h) +
+    out.reason = "the disk at s_h = " + sim::format_significant(out.s_h, 6) +
                  " is rolling off the hand (the hand faces down where it is heading)";
   } else if (!(out.well_bottom > 0.5 && out.well_bottom < 1.5)) {
-    out.reason = "disk at s_h = " + fmt(out.s_h) + " settles in the well whose bottom is at s_h = " +
-                 fmt(out.well_bottom) + ", not the goal well (bottom near s_h = +1)";
+    out.reason = "disk at s_h = " + sim::format_significant(out.s_h, 6) + " settles in the well whose bottom is at s_h = " +
+                 sim::format_significant(out.well_bottom, 6) + ", not the goal well (bottom near s_h = +1)";
   } else if (!(out.energy_margin > 0)) {
-    out.reason = "disk can still leave the goal well (energy " + fmt(-out.energy_margin) +
+    out.reason = "disk can still leave the goal well (energy " + sim::format_significant(-out.energy_margin, 6) +
                  " J above its lower rim)";
   } else if (!(std::abs(theta_ - theta_goal) < 0.05)) {
-    out.reason = "the hand is at " + fmt(theta_) + " rad, not at its goal " + fmt(theta_goal) +
+    out.reason = "the hand is at " + sim::format_significant(theta_, 6) + " rad, not at its goal " + sim::format_significant(theta_goal, 6) +
                  " rad";
   } else {
     out.in_goal = true;

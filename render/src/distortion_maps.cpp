@@ -4,6 +4,7 @@
 // image, project() and a calibration run by OpenCV on the rendered images all agree on where a
 // table point lands.
 #include "flatland/render/distortion_maps.hpp"
+#include "flatland/sim/format.hpp"
 
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core/utility.hpp>
@@ -31,13 +32,6 @@ constexpr int kIdealMargin = 2;
 constexpr int kMaxIdealGrowth = 4;
 // Largest tolerated error (supersampled px) of re-distorting a map position onto its pixel centre.
 constexpr double kMaxRoundTripPx = 1e-3;
-
-std::string num(double v) {
-  std::ostringstream os;
-  os.precision(9);
-  os << v;
-  return os.str();
-}
 
 [[noreturn]] void fail(const std::string& field, const std::string& reason) {
   throw std::invalid_argument(field + ": " + reason);
@@ -124,7 +118,7 @@ DistortionMaps compute_distortion_maps(const camera::CameraModel& camera, int su
   const double worst = *std::max_element(row_error.begin(), row_error.end());
   if (!(worst <= kMaxRoundTripPx))
     fail("camera.distortion",
-         "the distortion cannot be inverted over the image (round-trip error " + num(worst) +
+         "the distortion cannot be inverted over the image (round-trip error " + sim::format_significant(worst, 9) +
              " px); the coefficients are too strong for this field of view");
 
   // Footprint of the output pixels in the pinhole image with intrinsics K_s.
@@ -147,8 +141,8 @@ DistortionMaps compute_distortion_maps(const camera::CameraModel& camera, int su
   const double ideal_w = w + left + right, ideal_h = h + top + bottom;
   if (!(ideal_w <= static_cast<double>(w) * kMaxIdealGrowth) ||
       !(ideal_h <= static_cast<double>(h) * kMaxIdealGrowth))
-    fail("camera.distortion", "the undistorted image would be " + num(ideal_w) + " x " +
-                                  num(ideal_h) + " px for a " + std::to_string(w) + " x " +
+    fail("camera.distortion", "the undistorted image would be " + sim::format_significant(ideal_w, 9) + " x " +
+                                  sim::format_significant(ideal_h, 9) + " px for a " + std::to_string(w) + " x " +
                                   std::to_string(h) + " px image; the distortion is too strong");
   maps.ideal_width = static_cast<int>(ideal_w);
   maps.ideal_height = static_cast<int>(ideal_h);

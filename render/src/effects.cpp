@@ -5,6 +5,7 @@
 // a scene renders the same frames for the same seed, and switching one effect off does not change
 // the random numbers the others see.
 #include "flatland/render/effects.hpp"
+#include "flatland/sim/format.hpp"
 
 #include <opencv2/imgproc.hpp>
 
@@ -18,13 +19,6 @@
 namespace flatland::render {
 
 namespace {
-
-std::string num(double v) {
-  std::ostringstream os;
-  os.precision(9);
-  os << v;
-  return os.str();
-}
 
 [[noreturn]] void fail(const std::string& what, const std::string& reason) {
   throw std::invalid_argument(what + ": " + reason);
@@ -86,7 +80,7 @@ void downsample(const cv::Mat& image, int factor, cv::Mat& out) {
 
 void apply_vignetting(cv::Mat& image_f32, double strength, cv::Point2d principal_point) {
   if (!(strength >= 0 && strength <= 1))
-    fail("effects.vignetting", "must be in [0, 1], got " + num(strength));
+    fail("effects.vignetting", "must be in [0, 1], got " + sim::format_significant(strength, 9));
   if (!std::isfinite(principal_point.x) || !std::isfinite(principal_point.y))
     fail("apply_vignetting", "principal point must be finite");
   if (strength == 0) return;
@@ -170,9 +164,9 @@ const float* gaussian_quantiles() {
 
 void apply_noise(cv::Mat& image_f32, double read_sigma_dn, double shot_gain, EffectsRng& rng) {
   if (!(read_sigma_dn >= 0) || !std::isfinite(read_sigma_dn))
-    fail("effects.noise_read_dn", "must be >= 0 and finite, got " + num(read_sigma_dn));
+    fail("effects.noise_read_dn", "must be >= 0 and finite, got " + sim::format_significant(read_sigma_dn, 9));
   if (!(shot_gain >= 0) || !std::isfinite(shot_gain))
-    fail("effects.noise_shot_gain", "must be >= 0 and finite, got " + num(shot_gain));
+    fail("effects.noise_shot_gain", "must be >= 0 and finite, got " + sim::format_significant(shot_gain, 9));
   if (read_sigma_dn == 0 && shot_gain == 0) return;  // no draws: the stream stays as it was
   require_f32(image_f32, "apply_noise");
   // Sensor noise is a standard normal per pixel and channel, times sigma. A frame needs ~1e6 of
@@ -213,7 +207,7 @@ cv::Mat quantize(const cv::Mat& image_f32) {
 
 double jittered_time(double nominal, double sigma, EffectsRng& rng) {
   if (!(sigma >= 0) || !std::isfinite(sigma))
-    fail("effects.jitter_s", "must be >= 0 and finite, got " + num(sigma));
+    fail("effects.jitter_s", "must be >= 0 and finite, got " + sim::format_significant(sigma, 9));
   if (sigma == 0) return nominal;
   std::normal_distribution<double> normal(0.0, sigma);
   return nominal + normal(rng.engine());
@@ -221,7 +215,7 @@ double jittered_time(double nominal, double sigma, EffectsRng& rng) {
 
 bool dropped(double probability, EffectsRng& rng) {
   if (!(probability >= 0 && probability <= 1))
-    fail("effects.drop_probability", "must be in [0, 1], got " + num(probability));
+    fail("effects.drop_probability", "must be in [0, 1], got " + sim::format_significant(probability, 9));
   if (probability == 0) return false;
   std::bernoulli_distribution drop(probability);
   return drop(rng.engine());

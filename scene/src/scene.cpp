@@ -4,6 +4,7 @@
 // produce a plausible-looking but wrong simulation. Every error names the offending field and
 // echoes what the file said, on one line, so it can be read in a terminal or a log.
 #include "flatland/scene/scene.hpp"
+#include "flatland/sim/format.hpp"
 
 #include <yaml-cpp/eventhandler.h>
 #include <yaml-cpp/yaml.h>
@@ -440,18 +441,12 @@ void read_contact(const MapReader& root, sim::SimulationSpec& spec) {
   ev.time_tolerance = c->positive_or("event_tolerance", ev.time_tolerance);
 }
 
-std::string format_value(double v) {
-  char buf[64];
-  const auto res = std::to_chars(buf, buf + sizeof buf, v);
-  return std::string(buf, res.ptr);
-}
-
 /// A number in [lo, hi] (bounds included).
 double number_in(const MapReader& m, const char* key, double lo, double hi, double fallback) {
   if (!m.has(key)) return fallback;
   const double v = m.number(key);
   if (!(v >= lo && v <= hi))
-    m.fail_at(key, "must be in [" + format_value(lo) + ", " + format_value(hi) + "], got " +
+    m.fail_at(key, "must be in [" + sim::format_number(lo) + ", " + sim::format_number(hi) + "], got " +
                        m.node(key).Scalar());
   return v;
 }
@@ -494,7 +489,7 @@ void read_camera(const MapReader& root, Scene& scene) {
   cam.latency = non_negative(*c, "latency", cam.latency);
   cam.latency_jitter = non_negative(*c, "latency_jitter", cam.latency_jitter);
   if (!(cam.latency_jitter <= cam.latency))
-    c->fail_at("latency_jitter", "must not exceed camera.latency (" + format_value(cam.latency) +
+    c->fail_at("latency_jitter", "must not exceed camera.latency (" + sim::format_number(cam.latency) +
                                      " s): a frame cannot arrive before it is taken, got " +
                                      c->node("latency_jitter").Scalar());
 
@@ -521,7 +516,7 @@ void read_effects(const MapReader& root, Scene& scene) {
   // Sub-frames spread over a zero exposure would all be the same image.
   if (fx.blur_subframes > 1 && !(scene.camera && scene.camera->exposure > 0))
     e->fail_at("blur_subframes", "exposure blur needs camera.exposure > 0 (got " +
-                                     (scene.camera ? format_value(scene.camera->exposure) + " s"
+                                     (scene.camera ? sim::format_number(scene.camera->exposure) + " s"
                                                    : std::string("no camera section")) +
                                      ")");
   fx.noise_read_dn = non_negative(*e, "noise_read_dn", fx.noise_read_dn);
@@ -565,13 +560,13 @@ void read_joint(const MapReader& root, Scene& scene) {
   js.velocity_filter = non_negative(*j, "velocity_filter", js.velocity_filter);
   js.rate = number_in(*j, "rate", 10.0, 1e5, js.rate);
   if (!(js.coulomb < js.torque_limit))
-    j->fail_at("coulomb", "must be below joint.torque_limit (" + format_value(js.torque_limit) +
-                              " N m) or the joint cannot move, got " + format_value(js.coulomb));
+    j->fail_at("coulomb", "must be below joint.torque_limit (" + sim::format_number(js.torque_limit) +
+                              " N m) or the joint cannot move, got " + sim::format_number(js.coulomb));
   // The PD loop runs at the servo rate; a discrete PD loop with omega dt near 1 rings or diverges.
   const double omega_dt = std::sqrt(js.kp / js.inertia) / js.rate;
   if (!(omega_dt < 0.5))
     j->fail_at("kp", "too stiff for the servo rate: sqrt(kp/inertia)/rate = " +
-                         format_value(omega_dt) + " (must be < 0.5)");
+                         sim::format_number(omega_dt) + " (must be < 0.5)");
 }
 
 void read_controller(const MapReader& root, Scene& scene) {
@@ -589,8 +584,8 @@ void read_controller(const MapReader& root, Scene& scene) {
   cs.dip_until = number_in(*c, "dip_until", -1.0, 1.0, cs.dip_until);
   cs.finish_after = number_in(*c, "finish_after", -1.0, 1.0, cs.finish_after);
   if (!(cs.dip_until < cs.finish_after))
-    c->fail_at("finish_after", "must exceed controller.dip_until (" + format_value(cs.dip_until) +
-                                   "), got " + format_value(cs.finish_after));
+    c->fail_at("finish_after", "must exceed controller.dip_until (" + sim::format_number(cs.dip_until) +
+                                   "), got " + sim::format_number(cs.finish_after));
   cs.lost_timeout = c->positive_or("lost_timeout", cs.lost_timeout);
   cs.innovation_gate = c->positive_or("innovation_gate", cs.innovation_gate);
   cs.innovation_strikes =
@@ -664,8 +659,8 @@ void read_targets(const MapReader& root, Scene& scene) {
       t.marker = m.positive_or("marker", 0.75 * t.square);
       if (!(t.marker < t.square))
         m.fail_at("marker",
-                  "must be smaller than the square (" + format_value(t.square) + " m), got " +
-                      (m.has("marker") ? m.node("marker").Scalar() : format_value(t.marker)));
+                  "must be smaller than the square (" + sim::format_number(t.square) + " m), got " +
+                      (m.has("marker") ? m.node("marker").Scalar() : sim::format_number(t.marker)));
       if (m.has("dictionary")) {
         const std::string d = m.text("dictionary");
         const auto known =
@@ -732,18 +727,18 @@ std::optional<FieldProblem> camera_problem(const CameraSpec& cam) {
     return problem("height", size_rule + std::to_string(cam.height));
   // `!(x > 0)` rather than `x <= 0` so that NaN breaks the rule too.
   if (!(cam.fx > 0) || !std::isfinite(cam.fx))
-    return problem("fx", "must be positive and finite, got " + format_value(cam.fx));
+    return problem("fx", "must be positive and finite, got " + sim::format_number(cam.fx));
   if (!(cam.fy > 0) || !std::isfinite(cam.fy))
-    return problem("fy", "must be positive and finite, got " + format_value(cam.fy));
-  if (!std::isfinite(cam.cx)) return problem("cx", "must be finite, got " + format_value(cam.cx));
-  if (!std::isfinite(cam.cy)) return problem("cy", "must be finite, got " + format_value(cam.cy));
+    return problem("fy", "must be positive and finite, got " + sim::format_number(cam.fy));
+  if (!std::isfinite(cam.cx)) return problem("cx", "must be finite, got " + sim::format_number(cam.cx));
+  if (!std::isfinite(cam.cy)) return problem("cy", "must be finite, got " + sim::format_number(cam.cy));
   for (double d : cam.distortion)
     if (!std::isfinite(d))
-      return problem("distortion", "coefficients must be finite, got " + format_value(d));
+      return problem("distortion", "coefficients must be finite, got " + sim::format_number(d));
   if (!(cam.fps > 0) || !std::isfinite(cam.fps))
-    return problem("fps", "must be positive and finite, got " + format_value(cam.fps));
+    return problem("fps", "must be positive and finite, got " + sim::format_number(cam.fps));
   const auto vec3 = [](const std::array<double, 3>& v) {
-    return "(" + format_value(v[0]) + ", " + format_value(v[1]) + ", " + format_value(v[2]) + ")";
+    return "(" + sim::format_number(v[0]) + ", " + sim::format_number(v[1]) + ", " + sim::format_number(v[2]) + ")";
   };
   for (const auto& [field, v] : {std::pair{"position", &cam.position},
                                  std::pair{"look_at", &cam.look_at}, std::pair{"up", &cam.up}})
@@ -751,7 +746,7 @@ std::optional<FieldProblem> camera_problem(const CameraSpec& cam) {
       if (!std::isfinite(x)) return problem(field, "must be finite, got " + vec3(*v));
   if (!(cam.position[2] > 0))
     return problem("position", "the camera must be above the table (z > 0), got z = " +
-                                   format_value(cam.position[2]));
+                                   sim::format_number(cam.position[2]));
   const double view[3] = {cam.look_at[0] - cam.position[0], cam.look_at[1] - cam.position[1],
                           cam.look_at[2] - cam.position[2]};
   const double view_len = std::hypot(view[0], view[1], view[2]);
@@ -772,11 +767,11 @@ std::optional<FieldProblem> camera_problem(const CameraSpec& cam) {
   if (!(std::hypot(cross[0], cross[1], cross[2]) > 1e-6 * view_len * up_len))
     return problem("up", "must not be parallel to the viewing direction (look_at - position)");
   if (!(cam.exposure >= 0))
-    return problem("exposure", "must be >= 0 s, got " + format_value(cam.exposure));
+    return problem("exposure", "must be >= 0 s, got " + sim::format_number(cam.exposure));
   if (!(cam.exposure <= 1.0 / cam.fps))
     return problem("exposure", "must not exceed the frame interval 1/fps = " +
-                                   format_value(1.0 / cam.fps) + " s, got " +
-                                   format_value(cam.exposure));
+                                   sim::format_number(1.0 / cam.fps) + " s, got " +
+                                   sim::format_number(cam.exposure));
   return std::nullopt;
 }
 

@@ -1,6 +1,6 @@
 #include "flatland/sim/curve.hpp"
 
-#include "text.hpp"
+#include "flatland/sim/format.hpp"
 
 #include <algorithm>
 #include <array>
@@ -15,7 +15,6 @@ namespace flatland::sim {
 namespace {
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-using detail::fmt;
 
 // Newton's method on f(s) = (c(s) - p) . c'(s) = 0 from s, each step at most `max_step`, the
 // piece re-chosen at each iterate: the nearest point of a smooth curve from a good start.
@@ -156,7 +155,7 @@ CurveJet PolynomialHand::jet(double s, int piece) const {
 }
 
 std::string PolynomialHand::describe() const {
-  return "polynomial hand a=" + fmt(a_) + " b=" + fmt(b_) + " c=" + fmt(c_) + " d=" + fmt(d_) +
+  return "polynomial hand a=" + format_significant(a_) + " b=" + format_significant(b_) + " c=" + format_significant(c_) + " d=" + format_significant(d_) +
          " m";
 }
 
@@ -178,7 +177,7 @@ std::string LineCurve::describe() const { return "straight line"; }
 CircleCurve::CircleCurve(Vec2 center, double radius, Side side)
     : center_(center), radius_(radius), side_(side) {
   if (!(radius > 0) || !std::isfinite(radius))
-    throw std::invalid_argument("circle: radius must be positive and finite, got " + fmt(radius));
+    throw std::invalid_argument("circle: radius must be positive and finite, got " + format_significant(radius));
 }
 PieceInterval CircleCurve::piece_interval(int) const { return {-kInf, kInf}; }
 CurveJet CircleCurve::jet(double s, int) const {
@@ -193,7 +192,7 @@ double CircleCurve::nearest(const Vec2& p) const {
 }
 std::string CircleCurve::describe() const {
   return std::string(side_ == Side::kConvexBody ? "circle" : "circular well") + " of radius " +
-         fmt(radius_) + " m";
+         format_significant(radius_) + " m";
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -215,7 +214,7 @@ double EllipseCurve::nearest(const Vec2& p) const {
   return refine_nearest(*this, p, spacing * static_cast<double>(nearest_sample(pts, p)), spacing);
 }
 std::string EllipseCurve::describe() const {
-  return "ellipse " + fmt(ax_) + " x " + fmt(ay_) + " m";
+  return "ellipse " + format_significant(ax_) + " x " + format_significant(ay_) + " m";
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -226,16 +225,16 @@ bool segments_intersect(const Vec2& p1, const Vec2& p2, const Vec2& q1, const Ve
   return ((d1 > 0) != (d2 > 0)) && ((d3 > 0) != (d4 > 0));
 }
 std::string where(double s, const Vec2& p) {
-  return "at s_h=" + fmt(s) + " (x=" + fmt(p.x()) + " m, y=" + fmt(p.y()) + " m)";
+  return "at s_h=" + format_significant(s) + " (x=" + format_significant(p.x()) + " m, y=" + format_significant(p.y()) + " m)";
 }
 }  // namespace
 
 void validate_hand_for_disk(const PolynomialHand& hand, double disk_radius) {
   if (!(disk_radius > 0) || !std::isfinite(disk_radius))
     throw std::invalid_argument("object.radius: must be positive and finite, got " +
-                                fmt(disk_radius));
+                                format_significant(disk_radius));
   if (!(hand.a() > 0))
-    throw std::invalid_argument("hand.a: the tip x(0) = a must be positive, got " + fmt(hand.a()));
+    throw std::invalid_argument("hand.a: the tip x(0) = a must be positive, got " + format_significant(hand.a()));
   // The right half is sampled densely; the left half is its mirror, so the checks below cover
   // the whole outline.
   constexpr int kSamples = 2000;
@@ -253,8 +252,8 @@ void validate_hand_for_disk(const PolynomialHand& hand, double disk_radius) {
           where(s, g.point));
     if (g.curvature < 0 && !(disk_radius * -g.curvature < 1.0))
       throw std::invalid_argument("hand: concave part too tight for the disk (curvature radius " +
-                                  fmt(-1.0 / g.curvature) + " m <= disk radius " +
-                                  fmt(disk_radius) + " m) " + where(s, g.point));
+                                  format_significant(-1.0 / g.curvature) + " m <= disk radius " +
+                                  format_significant(disk_radius) + " m) " + where(s, g.point));
   }
   // Self-intersection of the right half on a coarser polyline. Every scene load, command and
   // shape-search candidate validates, so only the segment pairs whose x ranges overlap are
@@ -293,7 +292,7 @@ void validate_hand_for_disk(const PolynomialHand& hand, double disk_radius) {
     if (!(g.curvature < 0))
       throw std::invalid_argument(std::string("hand: no well at the ") + (s < 0 ? "palm" : "back") +
                                   " (the outline must be concave there, curvature " +
-                                  fmt(g.curvature) + " 1/m) " + where(s, g.point));
+                                  format_significant(g.curvature) + " 1/m) " + where(s, g.point));
   }
 }
 

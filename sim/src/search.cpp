@@ -1,4 +1,5 @@
 #include "flatland/sim/search.hpp"
+#include "flatland/sim/format.hpp"
 
 #include "flatland/sim/parallel.hpp"
 
@@ -51,13 +52,6 @@ double s_at_half_period(const std::shared_ptr<const RollingProblem>& base,
 void check_period(double period) {
   if (!(period > 0) || !std::isfinite(period))
     throw std::invalid_argument("period: must be positive and finite (2T in s)");
-}
-
-std::string num(double v) {
-  std::ostringstream os;
-  os.precision(8);
-  os << v;
-  return os.str();
 }
 
 struct Bracket {
@@ -133,8 +127,8 @@ void check_root_is_continuous(const std::function<double(double)>& f, const Root
   if (!probe(b, fb)) b = root.x, fb = root.fx;
   const double slope = b > a ? std::abs(fb - fa) / (b - a) : 0.0;
   if (std::abs(root.fx) <= 10 * slope * tolerance) return;
-  throw std::runtime_error("solve: s_h(T) changes sign at " + what + " = " + num(root.x) +
-                           " but jumps there (it stays at " + num(root.fx) +
+  throw std::runtime_error("solve: s_h(T) changes sign at " + what + " = " + format_significant(root.x, 8) +
+                           " but jumps there (it stays at " + format_significant(root.fx, 8) +
                            "), so this is no solution: the motion is too sensitive near it; try "
                            "another starting " +
                            what);
@@ -212,12 +206,12 @@ SolveReport solve_k_from(const SimulationSpec& spec,
   const auto br = find_bracket(f, k0, f(k0), 0.02, lo, hi);
   if (!br)
     throw std::runtime_error(
-        "solve: no k in (-2, 2] brings the disk to s_h(T) = 0 for 2T = " + num(period) + " s");
+        "solve: no k in (-2, 2] brings the disk to s_h(T) = 0 for 2T = " + format_significant(period, 8) + " s");
   const RootResult root = br->a == br->b ? RootResult{br->a, 0.0, 0, true}
                                          : brent_root(f, br->a, br->b, br->fa, br->fb,
                                                       set.tolerance, set.max_evaluations);
   if (!root.converged)
-    throw std::runtime_error("solve: root finder did not converge for 2T = " + num(period) + " s");
+    throw std::runtime_error("solve: root finder did not converge for 2T = " + format_significant(period, 8) + " s");
   check_root_is_continuous(f, root, set.tolerance, lo, hi, "k");
   SolveReport rep = evaluate_on(base, spec, period, root.x);
   rep.simulations += sims;
@@ -255,8 +249,8 @@ SolveReport solve_d(const SimulationSpec& spec, double period, double k,
                                s.hand.d + 10 * scale);
   if (!br)
     throw std::runtime_error(
-        "solve: no valid hand shape d brings the disk to s_h(T) = 0 for 2T = " + num(period) +
-        " s, k = " + num(k));
+        "solve: no valid hand shape d brings the disk to s_h(T) = 0 for 2T = " + format_significant(period, 8) +
+        " s, k = " + format_significant(k, 8));
   const RootResult root = br->a == br->b ? RootResult{br->a, 0.0, 0, true}
                                          : brent_root(f, br->a, br->b, br->fa, br->fb,
                                                       set.tolerance * scale, set.max_evaluations);
@@ -359,10 +353,10 @@ TimeOptimalReport time_optimal(const SimulationSpec& spec, double lo, double hi,
   const std::string what = friction ? "minimum of the normal force ratio and the friction margin"
                                     : "minimum normal force ratio";
   if (!(glo < 0 && ghi > 0))
-    throw std::runtime_error("time-optimal: [" + num(lo) + ", " + num(hi) +
+    throw std::runtime_error("time-optimal: [" + format_significant(lo, 8) + ", " + format_significant(hi, 8) +
                              "] s does not bracket the fastest admissible solution (" + what +
-                             " " + num(glo) + " at 2T = " + num(lo) + " s, " + num(ghi) + " at " +
-                             num(hi) + " s; it must go from < 0 to > 0)");
+                             " " + format_significant(glo, 8) + " at 2T = " + format_significant(lo, 8) + " s, " + format_significant(ghi, 8) + " at " +
+                             format_significant(hi, 8) + " s; it must go from < 0 to > 0)");
   const RootResult root = brent_root(g, lo, hi, glo, ghi, period_tolerance, set.max_evaluations);
   rep.solution = solve_k_from(s, base, root.x, k0, set);
   rep.period = root.x;

@@ -1,4 +1,4 @@
-// Trajectory CSV (sample_columns, samples_csv) and shortest round-trip numbers.
+// Trajectory CSV (sample_columns, samples_csv).
 #include "flatland/sim/trajectory_csv.hpp"
 
 #include <charconv>
@@ -6,14 +6,6 @@
 #include <stdexcept>
 
 namespace flatland::sim {
-
-std::string format_number(double v) {
-  if (std::isnan(v)) return "nan";
-  if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
-  char buf[64];
-  const auto res = std::to_chars(buf, buf + sizeof buf, v);
-  return std::string(buf, res.ptr);
-}
 
 const std::vector<std::string>& sample_columns() {
   static const std::vector<std::string> columns = {"t",

@@ -3,15 +3,13 @@
 // write, and what a library user writes the same way.
 #pragma once
 
+#include "flatland/sim/format.hpp"
 #include "flatland/sim/simulate.hpp"
 
 #include <string>
 #include <vector>
 
 namespace flatland::sim {
-
-/// Shortest text that reads back as exactly v (std::to_chars); "nan", "inf", "-inf" otherwise.
-std::string format_number(double v);
 
 /// Columns of a trajectory CSV, in order (one per Sample field).
 const std::vector<std::string>& sample_columns();
