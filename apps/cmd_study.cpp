@@ -4,9 +4,8 @@
 // `calibration`: the intrinsics' parameter error and time against views and corner noise.
 #include "study.hpp"
 
-#include "flatland/calibration/intrinsics.hpp"
-
-#include <opencv2/calib3d.hpp>
+#include "flatland/studies/calibration_study.hpp"
+#include "flatland/studies/sim_study.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -21,94 +20,6 @@
 namespace flatland::app {
 
 namespace {
-
-struct Setting {
-  sim::Method method;
-  sim::Formulation formulation;
-  double rtol = 0, step = 0;  // rtol for the adaptive methods, step (s) for RK4
-};
-
-struct Row {
-  Setting set;
-  long steps = 0, rhs_evals = 0;
-  double s_T = NAN, err_s_T = NAN, cpu_s_T = NAN;
-  double k = NAN, err_k = NAN, cpu_k = NAN;
-  int simulations = 0;
-  std::string failure;  // the integrator's or the search's error, if any
-};
-
-sim::SimulationSpec with_setting(sim::SimulationSpec spec, const Setting& s) {
-  auto& in = spec.run.integrator;
-  in.method = s.method;
-  if (s.method == sim::Method::kRungeKutta4) {
-    in.fixed_step = s.step;
-  } else {
-    in.rtol = s.rtol;
-    in.atol = s.rtol * 1e-2;  // docs/BENCHMARKS.md's convention: the state is O(1e-2..1)
-  }
-  spec.run.formulation = s.formulation;
-  return spec;
-}
-
-// s_h(T) for the scene's motion (one unrecorded run to T) and k* solving s_h(T) = 0, each with
-// the CPU time it costs at this setting.
-Row measure(const sim::SimulationSpec& base, const Setting& s, double min_cpu) {
-  Row r;
-  r.set = s;
-  const sim::SimulationSpec spec = with_setting(base, s);
-  const double period = spec.motion.period;
-  try {
-    sim::RunOptions o = sim::run_options(spec);
-    o.t_end = 0.5 * period;
-    o.record = false;
-    o.events.stop_on_contact_loss = false;  // as the searches: rolling enforced
-    const auto problem = sim::build_problem(spec);
-    sim::RunResult run;
-    r.cpu_s_T = cpu_per_call([&] { run = sim::simulate(problem, spec.initial, o); }, min_cpu);
-    r.s_T = run.final.s_h;
-    r.steps = run.stats.steps;
-    r.rhs_evals = run.stats.rhs_evals;
-    sim::SearchSettings search;
-    search.tolerance = 1e-14;  // below every integrator's error, so k* shows the integrator's
-    sim::SolveReport rep;
-    r.cpu_k = cpu_per_call([&] { rep = sim::solve_k(spec, period, search); }, min_cpu);
-    r.k = rep.k;
-    r.simulations = rep.simulations;
-  } catch (const std::runtime_error& e) {
-    r.failure = e.what();
-  }
-  return r;
-}
-
-std::string method_name(const Setting& s) { return sim::to_string(s.method); }
-
-std::string label(const Setting& s) {
-  std::ostringstream os;
-  os << method_name(s) << " " << sim::to_string(s.formulation) << " ";
-  if (s.method == sim::Method::kRungeKutta4)
-    os << "h=" << format_number(s.step) << " s";
-  else
-    os << "rtol=" << format_number(s.rtol);
-  return os.str();
-}
-
-std::string study_csv(const std::vector<Row>& rows) {
-  std::string out =
-      "method,formulation,rtol,atol,step,steps,rhs_evals,s_T,err_s_T,cpu_s_T,k,err_k,cpu_k,"
-      "simulations\n";
-  for (const Row& r : rows) {
-    const bool rk4 = r.set.method == sim::Method::kRungeKutta4;
-    out += method_name(r.set) + "," + sim::to_string(r.set.formulation) + "," +
-           (rk4 ? "nan" : format_number(r.set.rtol)) + "," +
-           (rk4 ? "nan" : format_number(r.set.rtol * 1e-2)) + "," +
-           (rk4 ? format_number(r.set.step) : "nan") + "," + std::to_string(r.steps) + "," +
-           std::to_string(r.rhs_evals) + "," + format_number(r.s_T) + "," +
-           format_number(r.err_s_T) + "," + format_number(r.cpu_s_T) + "," + format_number(r.k) +
-           "," + format_number(r.err_k) + "," + format_number(r.cpu_k) + "," +
-           std::to_string(r.simulations) + "\n";
-  }
-  return out;
-}
 
 // One log-log work-precision plot: error column `ecol` against CPU column `tcol`, a curve per
 // (method, formulation). Errors below 1e-16 are drawn at 1e-16 (the reference's own floor).
@@ -146,75 +57,38 @@ std::string plot_body(const std::string& title, const std::string& ylabel, int t
 
 }  // namespace
 
-double cpu_now() {
-  timespec ts{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
-}
-
 void run_sim_study(const StudyOptions& o) {
   CommonOptions common;
   common.scene = o.scene;
   Scene scene = load_scene_with_overrides(common);
-  sim::SimulationSpec& spec = scene.sim;
-  if (spec.motion.kind != sim::MotionSpec::Kind::kButterfly)
-    throw UsageError("study sim: the scene's motion must be the butterfly (motion.kind)");
-  sim::build_problem(spec);
+  const sim::SimulationSpec& spec = scene.sim;
   const fs::path dir = o.out;
   if (!dir.empty()) check_output_directory("--out", dir, o.force);
   const bool plots = !dir.empty() && !o.no_plot;
   if (plots) require_gnuplot();
 
-  // --quick: a few points of each curve, the tightest (the reference) always among them.
-  const std::vector<double> steps =
-      o.quick ? std::vector<double>{1e-2, 1e-3}
-              : std::vector<double>{1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4};
-  const std::vector<int> exponents = o.quick
-                                         ? std::vector<int>{3, 6, 9, 13}
-                                         : std::vector<int>{3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13};
-  std::vector<Setting> settings;
-  for (auto f : {sim::Formulation::kReduced, sim::Formulation::kGeneral}) {
-    for (double h : steps) settings.push_back({sim::Method::kRungeKutta4, f, 0, h});
-    for (auto m : {sim::Method::kDormandPrince54, sim::Method::kDormandPrince853})
-      for (int e : exponents) settings.push_back({m, f, std::pow(10.0, -e), 0});
-  }
-  std::cerr << "flatland: study sim: " << settings.size()
+  std::cerr << "flatland: study sim: " << studies::sim_study_settings(o.quick).size()
             << " settings, 2T = " << format_number(spec.motion.period)
             << " s, k = " << format_number(spec.motion.k) << "\n";
-  const double start = cpu_now();
-  std::vector<Row> rows;
+  studies::SimStudyResult study;
   {
     ProgressBar bar("study sim");
-    for (std::size_t i = 0; i < settings.size(); ++i) {
-      rows.push_back(measure(spec, settings[i], o.min_cpu));
-      bar.update(static_cast<long>(i + 1), static_cast<long>(settings.size()));
-    }
+    studies::SimStudyOptions so;
+    so.quick = o.quick;
+    so.min_cpu = o.min_cpu;
+    so.progress = bar.callback();
+    study = studies::run_sim_study(spec, so);
   }
-  // Reference: the tightest run of the other formulation (so a formulation's own systematic
-  // error cannot cancel in its reference); the tightest is DOP853 at the smallest rtol.
-  auto tightest = [&](sim::Formulation f) -> const Row& {
-    const Row* best = nullptr;
-    for (const Row& r : rows)
-      if (r.set.formulation == f && r.set.method == sim::Method::kDormandPrince853 &&
-          r.failure.empty() && (!best || r.set.rtol < best->set.rtol))
-        best = &r;
-    if (!best) throw std::runtime_error("study sim: no DOP853 reference run succeeded");
-    return *best;
-  };
-  const Row& ref_red = tightest(sim::Formulation::kReduced);
-  const Row& ref_gen = tightest(sim::Formulation::kGeneral);
-  for (Row& r : rows) {
-    const Row& ref = r.set.formulation == sim::Formulation::kReduced ? ref_gen : ref_red;
-    r.err_s_T = std::abs(r.s_T - ref.s_T);
-    r.err_k = std::abs(r.k - ref.k);
-  }
-  const double seconds = cpu_now() - start;
+  const std::vector<studies::SimStudyRow>& rows = study.rows;
+  const studies::SimStudyRow& ref_red = study.reference_reduced;
+  const studies::SimStudyRow& ref_gen = study.reference_general;
+  const double seconds = study.cpu_seconds;
 
   OutputSet outputs(o.force);
   std::vector<std::string> written;
   if (!dir.empty()) {
     outputs.begin_directory(dir);
-    outputs.stage(dir / "sim.csv", study_csv(rows));
+    outputs.stage(dir / "sim.csv", studies::sim_study_csv(study));
     if (plots) {
       run_plot(outputs, dir,
                {"sim_s_h.gp", "sim.csv", "sim_s_h.png",
@@ -239,23 +113,24 @@ void run_sim_study(const StudyOptions& o) {
     j["k"] = spec.motion.k;
     Json ref;
     ref["reduced"] = {{"method", "dop853"},
-                      {"rtol", ref_red.set.rtol},
+                      {"rtol", ref_red.setting.rtol},
                       {"s_T", number(ref_red.s_T)},
                       {"k", number(ref_red.k)}};
     ref["general"] = {{"method", "dop853"},
-                      {"rtol", ref_gen.set.rtol},
+                      {"rtol", ref_gen.setting.rtol},
                       {"s_T", number(ref_gen.s_T)},
                       {"k", number(ref_gen.k)}};
     ref["s_T_disagreement"] = number(std::abs(ref_red.s_T - ref_gen.s_T));
     ref["k_disagreement"] = number(std::abs(ref_red.k - ref_gen.k));
     j["reference"] = ref;
     Json arr = Json::array();
-    for (const Row& r : rows) {
+    for (const studies::SimStudyRow& r : rows) {
+      const studies::IntegratorSetting& set = r.setting;
       Json q;
-      q["method"] = method_name(r.set);
-      q["formulation"] = sim::to_string(r.set.formulation);
-      q["rtol"] = r.set.method == sim::Method::kRungeKutta4 ? Json(nullptr) : Json(r.set.rtol);
-      q["step"] = r.set.method == sim::Method::kRungeKutta4 ? Json(r.set.step) : Json(nullptr);
+      q["method"] = sim::to_string(set.method);
+      q["formulation"] = sim::to_string(set.formulation);
+      q["rtol"] = set.method == sim::Method::kRungeKutta4 ? Json(nullptr) : Json(set.rtol);
+      q["step"] = set.method == sim::Method::kRungeKutta4 ? Json(set.step) : Json(nullptr);
       q["steps"] = r.steps;
       q["rhs_evals"] = r.rhs_evals;
       q["err_s_T"] = number(r.err_s_T);
@@ -277,11 +152,11 @@ void run_sim_study(const StudyOptions& o) {
      << "  reference s_h(T): reduced " << format_number(ref_red.s_T) << ", general "
      << format_number(ref_gen.s_T) << "; k*: reduced " << format_number(ref_red.k) << ", general "
      << format_number(ref_gen.k) << "\n";
-  for (const Row& r : rows) {
+  for (const studies::SimStudyRow& r : rows) {
     char line[200];
     std::snprintf(line, sizeof line,
                   "  %-34s err s_h(T) %8.1e in %8.2e s   err k* %8.1e in %8.2e s%s\n",
-                  label(r.set).c_str(), r.err_s_T, r.cpu_s_T, r.err_k, r.cpu_k,
+                  studies::label(r.setting).c_str(), r.err_s_T, r.cpu_s_T, r.err_k, r.cpu_k,
                   r.failure.empty() ? "" : ("  FAILED: " + r.failure).c_str());
     os << line;
   }
@@ -290,56 +165,6 @@ void run_sim_study(const StudyOptions& o) {
 }
 
 // ---- study calibration ------------------------------------------------------------------------
-
-// The camera of tests/calibration/test_calibration_intrinsics.cpp: VGA, f = 800 px, an off-centre principal
-// point and barrel distortion, so that every parameter has something to recover.
-namespace {
-
-struct CalibTruth {
-  cv::Matx33d K{800, 0, 322.5, 0, 800, 237.5, 0, 0, 1};
-  cv::Vec<double, 5> dist{-0.2, 0.08, 0.001, -0.0005, 0.0};
-  cv::Size size{640, 480};
-};
-
-/// `n` views of a chessboard of 9 x 6 inner corners (25 mm squares) at random poses (0.35-0.8 m
-/// away, tilted 15-45 deg), every corner at least 10 px inside the image, projected through the
-/// truth with cv::projectPoints and perturbed by Gaussian noise of `sigma` px per coordinate.
-std::vector<calibration::BoardView> synthetic_views(const CalibTruth& truth, int n, double sigma,
-                                                    std::mt19937_64& rng) {
-  std::vector<cv::Point3f> board;
-  for (int r = 0; r < 6; ++r)
-    for (int c = 0; c < 9; ++c) board.emplace_back(0.025f * c, 0.025f * r, 0.f);
-  std::uniform_real_distribution<double> U(0, 1);
-  std::normal_distribution<double> N(0, 1);
-  std::vector<calibration::BoardView> views;
-  while (static_cast<int>(views.size()) < n) {
-    const double tilt = (15 + 30 * U(rng)) * std::numbers::pi / 180,
-                 phi = 2 * std::numbers::pi * U(rng);
-    const cv::Vec3d rvec(tilt * std::cos(phi), tilt * std::sin(phi), U(rng) - 0.5);
-    const double z = 0.35 + 0.45 * U(rng);
-    const cv::Vec3d tvec((U(rng) - 0.5) * 0.6 * z - 0.1, (U(rng) - 0.5) * 0.45 * z - 0.06, z);
-    std::vector<cv::Point2f> px;
-    cv::projectPoints(board, rvec, tvec, truth.K, truth.dist, px);
-    bool inside = true;
-    for (const auto& p : px)
-      inside = inside && p.x >= 10 && p.y >= 10 && p.x <= truth.size.width - 11 &&
-               p.y <= truth.size.height - 11;
-    if (!inside) continue;
-    for (auto& p : px) {
-      p.x += static_cast<float>(sigma * N(rng));
-      p.y += static_cast<float>(sigma * N(rng));
-    }
-    calibration::BoardView v;
-    v.name = "view" + std::to_string(views.size());
-    v.image_size = truth.size;
-    v.image_points = std::move(px);
-    v.object_points = board;
-    views.push_back(std::move(v));
-  }
-  return views;
-}
-
-}  // namespace
 
 // The study's rows as an aligned table for the terminal: {JSON key, column header}.
 std::string calibration_table(const Json& rows) {
@@ -376,76 +201,36 @@ void run_calibration_study(const StudyOptions& o) {
   if (!dir.empty()) check_output_directory("--out", dir, o.force);
   const bool plots = !dir.empty() && !o.no_plot;
   if (plots) require_gnuplot();
-  const CalibTruth truth;
-  const std::vector<int> view_counts = {5, 10, 20, 40};
-  const std::vector<double> noises = {0, 0.1, 0.3, 1};
-  const int trials = o.quick ? 2 : 8;
-  const char* names[] = {"fx", "fy", "cx", "cy", "k1", "k2"};
-  const double truth_p[] = {truth.K(0, 0), truth.K(1, 1), truth.K(0, 2),
-                            truth.K(1, 2), truth.dist[0], truth.dist[1]};
-  std::string csv = "views,noise_px,trials,failures";
-  for (const char* nm : names) csv += std::string(",rms_err_") + nm + ",max_err_" + nm;
-  csv += ",rms_px,time_s\n";
+  std::cerr << "flatland: study calibration: 16 cells x " << (o.quick ? 2 : 8)
+            << " trials (synthetic corners, cv::projectPoints + Gaussian noise)\n";
+  studies::CalibrationStudyResult study;
+  {
+    ProgressBar bar("study calibration");
+    studies::CalibrationStudyOptions so;
+    so.quick = o.quick;
+    so.progress = bar.callback();
+    study = studies::run_calibration_study(so);
+  }
+  const int trials = study.trials;
+  const std::array<double, 6> truth_p = study.truth.parameters();
   Json rows = Json::array();
-  std::cerr << "flatland: study calibration: " << view_counts.size() * noises.size() << " cells x "
-            << trials << " trials (synthetic corners, cv::projectPoints + Gaussian noise)\n";
-  ProgressBar bar("study calibration");
-  long done = 0;
-  const long total = static_cast<long>(view_counts.size() * noises.size());
-  for (int nv : view_counts)
-    for (double sigma : noises) {
-      std::mt19937_64 rng(1000 * nv + static_cast<int>(sigma * 100));
-      double sq[6] = {}, mx[6] = {}, rms = 0, time = 0;
-      int ok = 0, failed = 0;
-      for (int t = 0; t < trials; ++t) {
-        const auto views = synthetic_views(truth, nv, sigma, rng);
-        calibration::IntrinsicsOptions opt;
-        opt.compute_covariance = false;  // timed: the estimate, not its uncertainty
-        const auto t0 = std::chrono::steady_clock::now();
-        try {
-          const calibration::IntrinsicsResult r = calibration::calibrate_intrinsics(views, opt);
-          time += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-          const auto p = r.params();
-          for (int i = 0; i < 6; ++i) {
-            const double e = std::abs(p[static_cast<std::size_t>(i)] - truth_p[i]);
-            sq[i] += e * e;
-            mx[i] = std::max(mx[i], e);
-          }
-          rms += r.rms_px;
-          ++ok;
-        } catch (const std::exception&) {
-          ++failed;
-        }
-      }
-      std::string line = std::to_string(nv) + "," + format_number(sigma) + "," +
-                         std::to_string(trials) + "," + std::to_string(failed);
-      Json q;
-      q["views"] = nv;
-      q["noise_px"] = sigma;
-      q["failures"] = failed;
-      for (int i = 0; i < 6; ++i) {
-        const double r = ok ? std::sqrt(sq[i] / ok) : std::nan("");
-        // Appended piecewise: GCC 12 warns (-Wrestrict, a false positive) on "," + string here.
-        line += ',';
-        line += format_number(r);
-        line += ',';
-        line += format_number(ok ? mx[i] : std::nan(""));
-        q[std::string("rms_err_") + names[i]] = number(r);
-      }
-      const double rms_px = ok ? rms / ok : std::nan(""), t_s = ok ? time / ok : std::nan("");
-      line += "," + format_number(rms_px) + "," + format_number(t_s) + "\n";
-      q["rms_px"] = number(rms_px);
-      q["time_s"] = number(t_s);
-      csv += line;
-      rows.push_back(q);
-      bar.update(++done, total);
-    }
+  for (const studies::CalibrationStudyCell& c : study.cells) {
+    Json q;
+    q["views"] = c.views;
+    q["noise_px"] = c.noise_px;
+    q["failures"] = c.failures;
+    for (std::size_t i = 0; i < 6; ++i)
+      q[std::string("rms_err_") + studies::kCalibrationParameters[i]] = number(c.rms_error[i]);
+    q["rms_px"] = number(c.rms_px);
+    q["time_s"] = number(c.time_s);
+    rows.push_back(q);
+  }
 
   OutputSet outputs(o.force);
   std::vector<std::string> written;
   if (!dir.empty()) {
     outputs.begin_directory(dir);
-    outputs.stage(dir / "calibration.csv", csv);
+    outputs.stage(dir / "calibration.csv", studies::calibration_study_csv(study));
     if (plots) {
       // One panel per quantity: error against the number of views, one curve per noise level
       // (rows are views-major with 4 noise levels each: `every 4::i` picks noise level i, so

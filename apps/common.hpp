@@ -3,6 +3,7 @@
 #pragma once
 
 #include "commands.hpp"
+#include "flatland/files/output_set.hpp"
 #include "flatland/scene/scene.hpp"
 #include "flatland/sim/hybrid.hpp"
 #include "flatland/sim/search.hpp"
@@ -113,63 +114,7 @@ void add_force_option(CLI::App& cmd, bool& force);
 void check_output_file(const std::string& option, const fs::path& path, bool force);
 void check_output_directory(const std::string& option, const fs::path& path, bool force);
 
-/// Files a command writes, staged so that a failure or an interruption leaves nothing behind and
-/// an existing output is replaced in one rename:
-///  - a file output P/name is written as P/.flatland.tmp-<pid>/name and renamed over P/name by
-///    commit() (rename(2) replaces atomically; without --force RENAME_NOREPLACE also refuses a
-///    file that appeared while the command ran);
-///  - a directory output D (begin_directory) is built as the sibling D's-parent/.D.tmp-<pid>, and
-///    every file staged under D goes there under its final name; commit() renames it to D, or
-///    with --force swaps it with the existing D (renameat2 RENAME_EXCHANGE) and removes the old
-///    tree.
-/// Until commit() the destructor removes the staging directories and any directory this set
-/// created (if left empty), so an exception anywhere removes every output of the command. The
-/// staging directories are also registered process-wide, so that SIGINT/SIGTERM (see
-/// install_interrupt_handler) removes them before the process exits.
-class OutputSet {
- public:
-  explicit OutputSet(bool force = false) : force_(force) {}
-  OutputSet(const OutputSet&) = delete;
-  OutputSet& operator=(const OutputSet&) = delete;
-  ~OutputSet();
-
-  /// Start the directory output `dir` (created at commit; its parents now). Returns the staging
-  /// directory that stands for it until then. `nested`: the returned path does not exist yet and
-  /// lies inside a registered staging root, for a writer that creates the directory itself and
-  /// keeps its own temporaries beside it (the recorder).
-  fs::path begin_directory(const fs::path& dir, bool nested = false);
-  /// Create `dir` (and missing parents), remembering which directories were new. Inside a
-  /// directory output, creates the staged counterpart instead.
-  void ensure_directory(const fs::path& dir);
-  /// Stage `content` for `final_path` (its directory must exist). Returns the temporary path.
-  fs::path stage(const fs::path& final_path, const std::string& content);
-  /// Reserve a temporary path for a file another program or library writes (gnuplot's PNGs, the
-  /// camera file, the MP4 writer). The temporary keeps the file's name and extension.
-  fs::path reserve(const fs::path& final_path);
-  fs::path reserve_keep_extension(const fs::path& final_path) { return reserve(final_path); }
-  /// The temporary path of an already staged or reserved final path (empty if none).
-  fs::path temp_path(const fs::path& final_path) const;
-  /// Move every staged file and directory into place.
-  void commit();
-  /// The final paths, in staging order.
-  std::vector<std::string> paths() const;
-
- private:
-  fs::path map_path(const fs::path& final_path);
-  fs::path file_staging_dir(const fs::path& parent);
-
-  struct Dir {
-    fs::path staging;  // registered; removed on failure
-    fs::path content;  // what becomes final_path (staging itself unless nested)
-    fs::path final_path;
-    bool is_output;  // a directory output (else the staging directory of file outputs)
-  };
-  bool force_;
-  std::vector<std::pair<fs::path, fs::path>> files_;  // (temporary, final)
-  std::vector<Dir> dirs_;
-  std::vector<fs::path> created_dirs_;  // outermost first
-  bool committed_ = false;
-};
+using files::OutputSet;
 
 /// SIGINT and SIGTERM: the handler only writes the signal number to a pipe (async-signal-safe);
 /// a watcher thread reads it, kills a running gnuplot, removes every registered staging

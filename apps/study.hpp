@@ -1,5 +1,6 @@
-// flatland study: shared pieces of the speed-accuracy studies (issue #6). Each study lives in its
-// own file (study_*.cpp) and is dispatched from cmd_study.cpp.
+// flatland study: the command's side of the speed-accuracy studies (issue #6): the studies run in
+// flatland::studies (studies/), and each file here (study_*.cpp, cmd_study.cpp) writes one's
+// files, plots, JSON and text.
 #pragma once
 
 #include "common.hpp"
@@ -18,22 +19,6 @@ struct StudyOptions {
   bool no_plot = false;
   double min_cpu = 0.02;  // s: timing repeats until this much CPU time has been spent
 };
-
-/// Process CPU time (s).
-double cpu_now();
-
-// CPU seconds per call of f, repeated until min_cpu has passed (single runs at loose tolerances
-// take microseconds, below the clock's useful resolution).
-template <class F>
-double cpu_per_call(F&& f, double min_cpu) {
-  const double start = cpu_now();
-  long n = 0;
-  do {
-    f();
-    ++n;
-  } while (cpu_now() - start < min_cpu && n < 1000);
-  return (cpu_now() - start) / static_cast<double>(n);
-}
 
 void run_sim_study(const StudyOptions& o);
 void run_calibration_study(const StudyOptions& o);

@@ -16,13 +16,6 @@ std::string default_camera_scene();
 /// has no camera section or its camera is invalid.
 Scene load_camera_scene(const StudyOptions& o, const std::string& study);
 
-/// The 1-minute load average (NaN if unavailable): timings on a shared machine mean little
-/// without it.
-double load_average_1min();
-
-/// The p-quantile (0..1, nearest rank) of `v` (NaN when empty); sorts `v`.
-double quantile(std::vector<double>& v, double p);
-
 /// gnuplot: y tics at 1, 2, 5 of every decade from 1e-4 to 1e4 (a log axis spanning less than a
 /// decade would otherwise show one label or none).
 extern const std::string kLogTics;

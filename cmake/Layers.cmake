@@ -5,6 +5,7 @@
 
 # Each module and the flatland modules it may reach through its links (directly or not).
 set(FLATLAND_LAYERS
+  "files:"
   "sim:"
   "scene:sim"
   "camera:"
@@ -13,9 +14,10 @@ set(FLATLAND_LAYERS
   "vision:camera,sim"
   "calibration:vision,camera,sim"
   "control:sim"
-  "drivers:control,vision,render,calibration,model,scene,camera,sim")
+  "drivers:control,vision,render,calibration,model,scene,camera,sim,files"
+  "studies:drivers,control,vision,render,calibration,model,scene,camera,sim,files")
 # Modules whose headers must not include flatland/scene, flatland/model or flatland/render.
-set(FLATLAND_BELOW_MODEL sim camera vision calibration control)
+set(FLATLAND_BELOW_MODEL files sim camera vision calibration control)
 
 # The flatland modules that `target` links, transitively (flatland_x targets, by module name).
 function(flatland_module_closure target out)

@@ -1,4 +1,5 @@
 #include "flatland/drivers/recorded.hpp"
+#include "flatland/sim/format.hpp"
 
 #include "flatland/vision/image_file.hpp"
 
@@ -38,12 +39,6 @@ constexpr std::string_view kJointHeader = "tick,t,theta,theta_dot,theta_ddot_cmd
 constexpr long kMaxSkipWarnings = 10;
 
 /// Shortest text that reads back as the same double (std::to_chars round-trips exactly).
-std::string format_double(double v) {
-  char buf[64];
-  const auto res = std::to_chars(buf, buf + sizeof buf, v);
-  return std::string(buf, res.ptr);
-}
-
 std::string json_string(const std::string& s) {
   std::string out = "\"";
   for (const char c : s) {
@@ -195,18 +190,18 @@ FrameRecord read_frame_row(const CsvReader& csv, const FrameRecord* previous) {
   r.t_arrival = csv.real(2, "t_arrival", true);
   if (r.index < 0) csv.fail("negative index " + std::to_string(r.index));
   if (r.t_arrival < r.t_capture)
-    csv.fail("t_arrival " + format_double(r.t_arrival) + " < t_capture " +
-             format_double(r.t_capture));
+    csv.fail("t_arrival " + sim::format_number(r.t_arrival) + " < t_capture " +
+             sim::format_number(r.t_capture));
   if (previous) {
     if (r.index <= previous->index)
       csv.fail("non-monotonic index " + std::to_string(r.index) + " after " +
                std::to_string(previous->index));
     if (r.t_capture <= previous->t_capture)
-      csv.fail("non-monotonic t_capture " + format_double(r.t_capture) + " after " +
-               format_double(previous->t_capture));
+      csv.fail("non-monotonic t_capture " + sim::format_number(r.t_capture) + " after " +
+               sim::format_number(previous->t_capture));
     if (r.t_arrival < previous->t_arrival)
-      csv.fail("non-monotonic t_arrival " + format_double(r.t_arrival) + " after " +
-               format_double(previous->t_arrival));
+      csv.fail("non-monotonic t_arrival " + sim::format_number(r.t_arrival) + " after " +
+               sim::format_number(previous->t_arrival));
   }
   return r;
 }
@@ -301,11 +296,11 @@ struct Recorder::FrameWriter {
 Recorder::Recorder(fs::path dir, RecordingMetadata metadata)
     : dir_(std::move(dir)), meta_(std::move(metadata)) {
   if (dir_.empty()) throw std::invalid_argument("--record: empty directory name");
-  // "run/" names the directory run: its temporary sibling is "run.partial-*", not "run/.partial-*".
+  // "run/" names the directory run: it is staged as the sibling ".run.tmp-<pid>".
   if (!dir_.has_filename()) dir_ = dir_.parent_path();
   if (!std::isfinite(meta_.rate_hz) || !(meta_.rate_hz > 0))
     throw std::invalid_argument("--record " + dir_.string() + ": rate_hz must be positive, got " +
-                                format_double(meta_.rate_hz));
+                                sim::format_number(meta_.rate_hz));
   std::error_code ec;
   const auto st = fs::symlink_status(dir_, ec);
   if (fs::exists(st) && !(fs::is_directory(st) && fs::is_empty(dir_, ec) && !ec))
@@ -313,30 +308,10 @@ Recorder::Recorder(fs::path dir, RecordingMetadata metadata)
                                 ": already exists (a recording is never overwritten)");
 
   try {
-    // Missing parents are created here and remembered, so that an abandoned recording leaves
-    // the file system as it found it.
-    const fs::path parent = dir_.parent_path().empty() ? fs::path(".") : dir_.parent_path();
-    std::vector<fs::path> missing;
-    for (fs::path p = parent; !p.empty() && !fs::exists(p, ec); p = p.parent_path()) {
-      missing.push_back(p);
-      if (p == p.parent_path()) break;
-    }
-    for (auto it = missing.rbegin(); it != missing.rend(); ++it) {
-      if (!fs::create_directory(*it, ec) && ec)
-        throw std::runtime_error(it->string() + ": cannot create directory (" + ec.message() + ")");
-      created_dirs_.push_back(*it);
-    }
-
-    std::string tmpl = dir_.string() + ".partial-XXXXXX";
-    if (!::mkdtemp(tmpl.data()))
-      throw std::runtime_error(tmpl + ": cannot create the temporary recording directory (" +
-                               std::generic_category().message(errno) + ")");
-    tmp_ = tmpl;
-    // mkdtemp makes it private (0700); the recording is an ordinary directory once in place.
-    fs::permissions(tmp_,
-                    fs::perms::owner_all | fs::perms::group_read | fs::perms::group_exec |
-                        fs::perms::others_read | fs::perms::others_exec,
-                    ec);
+    // Staged beside DIR and moved into place by finish() (files::OutputSet: missing parents are
+    // created and removed again if the recording is abandoned).
+    outputs_.emplace();
+    tmp_ = outputs_->begin_directory(dir_);
     if (!fs::create_directory(tmp_ / "frames", ec))
       throw std::runtime_error((tmp_ / "frames").string() + ": cannot create directory (" +
                                ec.message() + ")");
@@ -361,12 +336,8 @@ void Recorder::abandon() noexcept {
   writer_.reset();  // discards queued frames and joins the thread
   frames_csv_.close();
   joint_csv_.close();
-  std::error_code ec;
-  if (!tmp_.empty()) fs::remove_all(tmp_, ec);
+  outputs_.reset();  // removes the staging directory and the parents it created
   tmp_.clear();
-  for (auto it = created_dirs_.rbegin(); it != created_dirs_.rend(); ++it)
-    fs::remove(*it, ec);  // only if still empty: remove() does not remove a non-empty directory
-  created_dirs_.clear();
 }
 
 void Recorder::require_open(const char* what) const {
@@ -402,8 +373,8 @@ void Recorder::add_frame(const CameraFrame& frame) {
   std::snprintf(name, sizeof name, "frames/%06ld.png", frame.index);
   // A deep copy: the camera may reuse its buffer for the next frame while the writer encodes.
   writer_->push({tmp_ / name, frame.image.clone()});
-  frames_csv_ << frame.index << ',' << format_double(frame.t_capture) << ','
-              << format_double(frame.t_arrival) << ',' << name << '\n';
+  frames_csv_ << frame.index << ',' << sim::format_number(frame.t_capture) << ','
+              << sim::format_number(frame.t_arrival) << ',' << name << '\n';
   check_stream(frames_csv_, "frames.csv");
   ++frames_;
   last_index_ = frame.index;
@@ -415,9 +386,9 @@ void Recorder::add_tick(const control::JointReading& reading, double theta_ddot_
   require_open("add_tick");
   if (!std::isfinite(reading.t) || (ticks_ > 0 && !(reading.t > last_tick_t_)))
     throw std::logic_error("Recorder: tick " + std::to_string(ticks_) + ": t " +
-                           format_double(reading.t) + " must be finite and increase");
-  joint_csv_ << ticks_ << ',' << format_double(reading.t) << ',' << format_double(reading.theta)
-             << ',' << format_double(reading.theta_dot) << ',' << format_double(theta_ddot_cmd)
+                           sim::format_number(reading.t) + " must be finite and increase");
+  joint_csv_ << ticks_ << ',' << sim::format_number(reading.t) << ',' << sim::format_number(reading.theta)
+             << ',' << sim::format_number(reading.theta_dot) << ',' << sim::format_number(theta_ddot_cmd)
              << '\n';
   check_stream(joint_csv_, "joint.csv");
   ++ticks_;
@@ -434,7 +405,7 @@ void Recorder::finish() {
     check_stream(joint_csv_, "joint.csv");
 
     std::ofstream json(tmp_ / "recording.json", std::ios::binary);
-    json << "{\n  \"version\": 1,\n  \"rate_hz\": " << format_double(meta_.rate_hz)
+    json << "{\n  \"version\": 1,\n  \"rate_hz\": " << sim::format_number(meta_.rate_hz)
          << ",\n  \"frames\": " << frames_ << ",\n  \"ticks\": " << ticks_
          << ",\n  \"camera\": " << json_string(meta_.camera)
          << ",\n  \"joint\": " << json_string(meta_.joint)
@@ -442,19 +413,15 @@ void Recorder::finish() {
     json.close();
     check_stream(json, "recording.json");
 
-    // rename(2) replaces an empty directory at DIR and fails if something was put there since
-    // the constructor looked.
-    std::error_code ec;
-    fs::rename(tmp_, dir_, ec);
-    if (ec)
-      throw std::runtime_error("--record " + dir_.string() + ": cannot move " + tmp_.string() +
-                               " into place (" + ec.message() + ")");
+    // Replaces an empty directory at DIR; refuses one that something was put in since the
+    // constructor looked.
+    outputs_->commit();
   } catch (...) {
     abandon();
     throw;
   }
   tmp_.clear();
-  created_dirs_.clear();
+  outputs_.reset();
   finished_ = true;
 }
 
@@ -597,8 +564,8 @@ LogJoint::LogJoint(const fs::path& path) : path_(path) {
         csv.fail("non-monotonic tick " + std::to_string(k.tick) + " after " +
                  std::to_string(log_.back().tick));
       if (k.reading.t <= log_.back().reading.t)
-        csv.fail("non-monotonic t " + format_double(k.reading.t) + " after " +
-                 format_double(log_.back().reading.t));
+        csv.fail("non-monotonic t " + sim::format_number(k.reading.t) + " after " +
+                 sim::format_number(log_.back().reading.t));
     }
     log_.push_back(k);
   }
@@ -609,25 +576,25 @@ std::string LogJoint::describe() const { return "log:" + path_.string(); }
 control::JointReading LogJoint::read(double t) {
   if (next_ >= log_.size())
     throw std::runtime_error(describe() + ": tick " + std::to_string(next_) +
-                             " (read at t=" + format_double(t) + ") is past the end of the log (" +
+                             " (read at t=" + sim::format_number(t) + ") is past the end of the log (" +
                              std::to_string(log_.size()) + " ticks)");
   const Tick& k = log_[next_];
   if (!(k.reading.t == t))
     throw std::runtime_error(describe() + ": tick " + std::to_string(k.tick) +
-                             ": the loop reads at t=" + format_double(t) +
-                             ", the log has t=" + format_double(k.reading.t));
+                             ": the loop reads at t=" + sim::format_number(t) +
+                             ", the log has t=" + sim::format_number(k.reading.t));
   ++next_;
   return k.reading;
 }
 
 void LogJoint::command(double t, double theta_ddot) {
   if (next_ == 0)
-    throw std::runtime_error(describe() + ": command at t=" + format_double(t) +
+    throw std::runtime_error(describe() + ": command at t=" + sim::format_number(t) +
                              " before any tick was read");
   const Tick& k = log_[next_ - 1];
   if (!(k.reading.t == t))
     throw std::runtime_error(describe() + ": tick " + std::to_string(k.tick) + ": command at t=" +
-                             format_double(t) + ", the tick is at t=" + format_double(k.reading.t));
+                             sim::format_number(t) + ", the tick is at t=" + sim::format_number(k.reading.t));
   ++commands_;
   double d = 0;
   if (!same_double(theta_ddot, k.theta_ddot_cmd)) {

@@ -3,9 +3,11 @@
 // docs/DEVELOPING.md, "Layers", says what each module holds and what it depends on.
 #pragma once
 
+#include "flatland/files/output_set.hpp"
 
 #include "flatland/sim/contact.hpp"
 #include "flatland/sim/curve.hpp"
+#include "flatland/sim/format.hpp"
 #include "flatland/sim/hybrid.hpp"
 #include "flatland/sim/motion.hpp"
 #include "flatland/sim/object.hpp"
@@ -54,3 +56,10 @@
 #include "flatland/drivers/montecarlo.hpp"
 #include "flatland/drivers/recorded.hpp"
 #include "flatland/drivers/synthetic.hpp"
+
+#include "flatland/studies/calibration_study.hpp"
+#include "flatland/studies/closed_loop_study.hpp"
+#include "flatland/studies/render_study.hpp"
+#include "flatland/studies/sim_study.hpp"
+#include "flatland/studies/timing.hpp"
+#include "flatland/studies/tracker_study.hpp"

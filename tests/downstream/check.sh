@@ -32,6 +32,9 @@ library, cli, located = (json.loads(a) for a in sys.argv[1:4])
 prefix, root = sys.argv[4], sys.argv[5]
 if library["k"] != cli["k"]:
     sys.exit(f"downstream: the library's k {library['k']!r} differs from the CLI's {cli['k']!r}")
+if abs(library["study_k"] - cli["k"]) > 1e-8 or library["study_rows"] != 20:
+    sys.exit(f"downstream: the quick sim study gave k* {library['study_k']!r} in "
+             f"{library['study_rows']} rows (the CLI's k {cli['k']!r}, 20 settings)")
 if abs(cli["k"] + 1.1393) > 1e-3:
     sys.exit(f"downstream: k = {cli['k']!r}, the paper's is -1.1393")
 if library["default_scene"].startswith(root + "/"):

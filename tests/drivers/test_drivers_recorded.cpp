@@ -229,10 +229,10 @@ TEST_F(RecordedDrivers, RecorderDestroyedWithoutFinishLeavesNothing) {
     Recorder r(rec, {});
     for (int k = 0; k < 5; ++k) r.add_frame(frame(k));
     for (int i = 0; i < 10; ++i) r.add_tick(reading(i), command(i));
-    // While recording, only the temporary sibling exists.
+    // While recording, only the staging sibling exists (files::OutputSet's).
     const auto during = entries(rec.parent_path());
     ASSERT_EQ(during.size(), 1u);
-    EXPECT_EQ(during[0].rfind("run.partial-", 0), 0u) << during[0];
+    EXPECT_EQ(during[0].rfind(".run.tmp-", 0), 0u) << during[0];
     EXPECT_TRUE(fs::exists(rec.parent_path() / during[0] / "joint.csv"));
   }
   EXPECT_TRUE(entries(dir_).empty()) << "the parents it created are removed too";

@@ -4,6 +4,7 @@
 #pragma once
 
 #include "flatland/drivers/interfaces.hpp"
+#include "flatland/files/output_set.hpp"
 
 #include <opencv2/videoio.hpp>
 
@@ -25,11 +26,12 @@ struct RecordingMetadata {
   std::string scene;      ///< the scene file the run used
 };
 
-/// Writes a recording directory. Everything goes into a temporary sibling directory
-/// ("DIR.partial-XXXXXX") that finish() renames to DIR, so DIR either holds a complete recording
-/// or does not exist: destroying the Recorder without finish() (an exception in the loop) removes
-/// the temporary directory. A killed process can leave a "DIR.partial-*" directory behind, never
-/// a half-written DIR.
+/// Writes a recording directory. Everything goes into a staging sibling directory
+/// (".DIR.tmp-<pid>", files::OutputSet) that finish() renames to DIR, so DIR either holds a
+/// complete recording or does not exist: destroying the Recorder without finish() (an exception in
+/// the loop) removes the staging directory, and so does an interrupt handler that calls
+/// files::abandon_outputs. A killed process can leave a ".DIR.tmp-*" directory behind, never a
+/// half-written DIR.
 class Recorder {
  public:
   /// std::invalid_argument if `dir` exists and is not an empty directory (nothing is written
@@ -67,8 +69,8 @@ class Recorder {
   void abandon() noexcept;
 
   std::filesystem::path dir_;
-  std::filesystem::path tmp_;                        // DIR.partial-XXXXXX, empty once finished
-  std::vector<std::filesystem::path> created_dirs_;  // missing parents we created, outermost first
+  std::optional<files::OutputSet> outputs_;  // the staging of DIR; empty once finished
+  std::filesystem::path tmp_;                 // where DIR is built, empty once finished
   RecordingMetadata meta_;
   std::unique_ptr<FrameWriter> writer_;
   std::ofstream frames_csv_, joint_csv_;

@@ -1,0 +1,95 @@
+// Success of the vision-feedback loop against camera rate and latency. Every cell of the grid
+// (rate x latency) runs the same N perturbed worlds (drivers::perturb with the default Monte
+// Carlo perturbations and a fixed seed, so the cells differ only in the camera) through the
+// feedback controller; the open loop runs once, at the scene's rate and latency, as the baseline.
+// Per cell: successes with their Wilson 95 % interval, why the others failed, the smallest normal
+// force, the estimator's error while it steers the hand, and what the cell cost
+// (docs/ACCURACY.md).
+#pragma once
+
+#include "flatland/drivers/montecarlo.hpp"
+#include "flatland/model/model.hpp"
+#include "flatland/sim/search.hpp"
+
+#include <cmath>
+#include <cstdint>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace flatland::studies {
+
+/// The worlds' seed, as `flatland montecarlo`'s default: the same worlds.
+inline constexpr std::uint64_t kClosedLoopSeed = 1;
+
+/// One cell: the camera the loop and its worlds share, and the controller.
+struct ClosedLoopCell {
+  double fps = 30, latency = 0, jitter = 0;  ///< Hz, s, s
+  std::string controller = "feedback";       ///< feedback | open-loop
+};
+
+/// The grid of a scene: rates 15, 30, 60, 120 Hz and latencies 0-200 ms (quick: 15 Hz and an
+/// absurd 300 ms, beyond the safety monitor's lost_timeout, so that one cell must fail), the
+/// scene's own rate and latency added to each; the open-loop baseline last.
+struct ClosedLoopGrid {
+  std::vector<double> rates, latencies;
+  double nominal_fps = 0, nominal_latency = 0;
+  std::vector<ClosedLoopCell> cells;
+  int runs_per_cell = 0;  ///< 30 (quick: 2)
+};
+
+/// What one experiment left that the study aggregates.
+struct ClosedLoopRun {
+  bool success = false;
+  drivers::Outcome outcome = drivers::Outcome::kNotFinished;
+  std::optional<control::StopCause> stop_cause;  ///< why it stopped safely (outcome kSafeStop)
+  double fn_min = NAN, duration = NAN, est_rms = NAN, nees = NAN;
+  long frames = 0, frames_lost = 0;
+};
+/// A short class for how a run failed: the outcome ("dropped", ...) and, for a safe stop, what
+/// triggered it ("safe_stop (camera)").
+std::string failure_class(const ClosedLoopRun& run);
+
+struct ClosedLoopCellResult {
+  ClosedLoopCell cell;
+  std::vector<ClosedLoopRun> runs;  ///< by world
+  int successes = 0;
+  drivers::Interval ci;                 ///< Wilson 95 %
+  std::map<std::string, int> failures;  ///< failure_class -> count
+  /// Over the successes: the smallest normal force ratio's mean and minimum, the mean duration;
+  /// over every run that servoed: the estimate's RMS error and mean NEES in the servo stage.
+  double fn_min_mean = NAN, fn_min_min = NAN, duration_mean = NAN, est_rms = NAN, nees = NAN;
+  double frames_lost_fraction = NAN;
+  double wall = 0, cpu = 0;  ///< s, the whole cell (all its runs, on all threads)
+};
+
+struct ClosedLoopStudyOptions {
+  bool quick = false;
+  unsigned threads = 0;    ///< 0: std::thread::hardware_concurrency()
+  sim::Progress progress;  ///< (experiments done, experiments)
+};
+
+struct ClosedLoopStudyResult {
+  ClosedLoopGrid grid;
+  drivers::Perturbations perturbations;  ///< the worlds' (the defaults; each cell sets the latency)
+  std::vector<ClosedLoopCellResult> cells;  ///< in grid order
+  unsigned threads = 0;
+  double seconds = 0, cpu_seconds = 0;  ///< wall and process CPU time of the whole study
+};
+
+/// The grid of a compiled scene, checked: std::invalid_argument (naming the scene and field) for
+/// a scene without a camera or a butterfly, or one that some cell's loop cannot run.
+ClosedLoopGrid closed_loop_grid(const model::Model& nominal, bool quick);
+
+/// The study: each cell's scene is the nominal one with the cell's camera and controller,
+/// compiled; each world is its perturbed scene, compiled. An exception in any run stops the
+/// others and is rethrown (a failed experiment is a result, not an exception).
+ClosedLoopStudyResult run_closed_loop_study(const model::Model& nominal,
+                                            const ClosedLoopStudyOptions& options = {});
+
+/// closed_loop.csv: one row per cell (rate, latency, jitter, controller, runs, successes, rate
+/// with its interval, failures in five columns, the force, duration, estimate and cost columns).
+std::string closed_loop_study_csv(const ClosedLoopStudyResult& result);
+
+}  // namespace flatland::studies

@@ -1,0 +1,275 @@
+// The closed-loop study (closed_loop_study.hpp).
+#include "flatland/studies/closed_loop_study.hpp"
+
+#include "flatland/drivers/experiment.hpp"
+#include "flatland/sim/parallel.hpp"
+#include "flatland/sim/trajectory_csv.hpp"
+#include "flatland/studies/timing.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <functional>
+#include <stdexcept>
+#include <thread>
+
+namespace flatland::studies {
+
+namespace {
+
+using sim::format_number;
+using RunSummary = ClosedLoopRun;
+using Cell = ClosedLoopCell;
+using CellResult = ClosedLoopCellResult;
+constexpr std::uint64_t kSeed = kClosedLoopSeed;
+// Worlds per cell. The full grid is 24 feedback cells and the baseline, 750 experiments of
+// 0.25 (15 Hz) to 2 s (120 Hz) CPU each: about 8 minutes on two cores (docs/ACCURACY.md). The
+// Wilson interval of 30/30 is 88.6-100 %; more worlds would not fit the budget.
+constexpr int kRunsFull = 30;
+constexpr int kRunsQuick = 2;
+// --quick's second latency: beyond the safety monitor's default lost_timeout (0.25 s), so no
+// frame arrives before the monitor gives up and every run must end in a safe stop. It makes the
+// quick grid a test that can fail (a cell that must fail next to one that should not).
+constexpr double kAbsurdLatency = 0.3;
+
+/// The CSV's failure columns: classes folded into five.
+int failure_column(const std::string& cls) {
+  if (cls == "dropped") return 0;
+  if (cls == "slid_off") return 1;
+  if (cls == "wrong_well" || cls == "not_settled") return 2;
+  if (cls.rfind("safe_stop", 0) == 0) return 3;
+  return 4;
+}
+const char* const kFailureColumns[] = {"fail_dropped", "fail_slid_off", "fail_wrong_well",
+                                       "fail_safe_stop", "fail_other"};
+
+/// The scene the loop assumes in a cell: the nominal scene with the cell's camera. The truth
+/// worlds are perturbed from it, so the loop and the world agree on the camera's rate and
+/// latency. The estimator's latency compensation rewinds to each frame's capture time stamp (the
+/// synthetic camera's stamps are exact), so it compensates the latency a frame really had; the
+/// scene's camera.latency only sizes the estimator's history (drivers::LoopSetup), which must
+/// reach back that far.
+Scene cell_scene(const Scene& nominal, const Cell& c) {
+  Scene s = nominal;
+  s.controller.mode = c.controller;
+  s.camera->fps = c.fps;
+  // scene validation: exposure <= 1/fps. A faster camera cannot expose longer than its frame.
+  s.camera->exposure = std::min(s.camera->exposure, 1.0 / c.fps);
+  s.camera->latency = c.latency;
+  s.camera->latency_jitter = c.jitter;
+  return s;
+}
+
+/// The estimate while it steers the hand (the servo stage, before any failure stops the world):
+/// the RMS of its error in s_h over every tick, and its mean NEES at the ticks that folded in a
+/// measurement (about 2 for a consistent filter). NaN if the run never servoed. Both are taken
+/// over the same window in every run, so a run that failed does not add the estimate's drift
+/// against a world that has stopped.
+struct ServoStats {
+  double err_rms = NAN, nees = NAN;
+};
+ServoStats servo_stats(const drivers::LoopResult& loop) {
+  double sum = 0, nees = 0;
+  long n = 0, m = 0;
+  for (const drivers::TickLog& row : loop.log) {
+    if (row.stage != control::Stage::kServo || !row.estimating || !std::isfinite(row.s_true))
+      continue;
+    const double e = row.s_est - row.s_true;
+    sum += e * e;
+    ++n;
+    if (row.measured && std::isfinite(row.nees)) {
+      nees += row.nees;
+      ++m;
+    }
+  }
+  ServoStats s;
+  if (n) s.err_rms = std::sqrt(sum / static_cast<double>(n));
+  if (m) s.nees = nees / static_cast<double>(m);
+  return s;
+}
+
+double mean_finite(const std::vector<RunSummary>& runs, double RunSummary::*field,
+                   bool successes_only = false) {
+  double sum = 0;
+  long n = 0;
+  for (const RunSummary& r : runs)
+    if (std::isfinite(r.*field) && (!successes_only || r.success)) {
+      sum += r.*field;
+      ++n;
+    }
+  return n ? sum / static_cast<double>(n) : NAN;
+}
+
+/// Sorted, with `extra` added unless it is already there (to 1e-9).
+std::vector<double> with_value(std::vector<double> v, double extra) {
+  if (std::none_of(v.begin(), v.end(), [&](double x) { return std::abs(x - extra) < 1e-9; }))
+    v.push_back(extra);
+  std::sort(v.begin(), v.end());
+  return v;
+}
+
+/// Run the cell's `n` worlds on `threads` threads (each experiment owns its renderer and GL
+/// context). Run i's world is perturb(assumed, p, kSeed, i) in every cell. An exception in any
+/// run stops the others and is rethrown (a failed experiment is a result, not an exception).
+CellResult run_cell(const Scene& nominal, const Cell& cell, int n, unsigned threads,
+                    const std::function<void()>& tick) {
+  CellResult out;
+  out.cell = cell;
+  const Scene assumed = cell_scene(nominal, cell);
+  drivers::Perturbations p;
+  p.latency = cell.latency;
+  p.latency_jitter = cell.jitter;
+  const drivers::LoopSetup setup(model::compile(assumed));
+  out.runs.resize(static_cast<std::size_t>(n));
+
+  const auto wall0 = std::chrono::steady_clock::now();
+  const double cpu0 = cpu_now();
+  sim::parallel_for(
+      n, std::max(1u, threads),
+      [&](long index) {
+        const int run = static_cast<int>(index);
+        const drivers::SyntheticResult r =
+            drivers::run_synthetic(setup, model::compile(drivers::perturb(assumed, p, kSeed, run)));
+        RunSummary s;
+        s.success = r.success;
+        s.outcome = r.outcome;
+        if (r.loop.stop_reason) s.stop_cause = r.loop.stop_reason->cause;
+        s.fn_min = r.fn_min_ratio;
+        s.duration = r.success ? r.loop.duration_s : NAN;
+        const ServoStats servo = servo_stats(r.loop);
+        s.est_rms = servo.err_rms;
+        s.nees = servo.nees;
+        s.frames = r.loop.frames;
+        s.frames_lost = r.loop.frames_lost;
+        out.runs[static_cast<std::size_t>(run)] = std::move(s);
+      },
+      [&](long) { tick(); });
+  out.cpu = cpu_now() - cpu0;
+  out.wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
+
+  long frames = 0, lost = 0;
+  for (const RunSummary& r : out.runs) {
+    if (r.success)
+      ++out.successes;
+    else
+      ++out.failures[failure_class(r)];
+    frames += r.frames;
+    lost += r.frames_lost;
+    if (r.success && std::isfinite(r.fn_min))
+      out.fn_min_min = std::isnan(out.fn_min_min) ? r.fn_min : std::min(out.fn_min_min, r.fn_min);
+  }
+  out.ci = drivers::wilson_interval(out.successes, n);
+  out.fn_min_mean = mean_finite(out.runs, &RunSummary::fn_min, true);
+  out.duration_mean = mean_finite(out.runs, &RunSummary::duration, true);
+  out.est_rms = mean_finite(out.runs, &RunSummary::est_rms);
+  out.nees = mean_finite(out.runs, &RunSummary::nees);
+  out.frames_lost_fraction = frames ? static_cast<double>(lost) / static_cast<double>(frames) : NAN;
+  return out;
+}
+
+std::string csv_header() {
+  std::string h =
+      "rate[Hz],latency[s],latency_jitter[s],controller,runs,successes,success_rate,ci95_lo,"
+      "ci95_hi";
+  for (const char* c : kFailureColumns) h += std::string(",") + c;
+  return h +
+         ",fn_min_ratio_mean,fn_min_ratio_min,duration_mean[s],est_err_rms,nees_mean,"
+         "frames_lost_fraction,wall[s],cpu[s]\n";
+}
+
+std::string csv_row(const CellResult& c, int n) {
+  int fails[5] = {};
+  for (const auto& [cls, count] : c.failures) fails[failure_column(cls)] += count;
+  std::string s = format_number(c.cell.fps);
+  for (double v : {c.cell.latency, c.cell.jitter}) {
+    s += ',';
+    s += format_number(v);
+  }
+  s += "," + c.cell.controller + "," + std::to_string(n) + "," + std::to_string(c.successes);
+  for (double v : {static_cast<double>(c.successes) / n, c.ci.lo, c.ci.hi}) {
+    s += ',';
+    s += format_number(v);
+  }
+  for (int f : fails) {
+    s += ',';  // piecewise: GCC 12's -Wrestrict false positive on "," + std::string&&
+    s += std::to_string(f);
+  }
+  for (double v : {c.fn_min_mean, c.fn_min_min, c.duration_mean, c.est_rms, c.nees,
+                   c.frames_lost_fraction, c.wall, c.cpu}) {
+    s += ',';
+    s += format_number(v);
+  }
+  return s + "\n";
+}
+
+}  // namespace
+
+std::string failure_class(const ClosedLoopRun& r) {
+  if (r.outcome != drivers::Outcome::kSafeStop) return drivers::to_string(r.outcome);
+  if (!r.stop_cause) return "safe_stop (other)";
+  return std::string("safe_stop (") + control::to_string(*r.stop_cause) + ")";
+}
+
+ClosedLoopGrid closed_loop_grid(const model::Model& nominal, bool quick) {
+  const Scene& scene = nominal.spec;
+  if (!scene.camera)
+    throw std::invalid_argument(scene.origin +
+                                ": camera: the scene has no camera section (needed by the closed loop)");
+  if (scene.sim.motion.kind != sim::MotionSpec::Kind::kButterfly)
+    throw std::invalid_argument(
+        scene.origin + ": motion: study closed-loop needs the butterfly (motion.type: butterfly)");
+  const drivers::Perturbations defaults;
+  drivers::perturb(scene, defaults, kSeed, 0);  // std::invalid_argument for what it refuses
+
+  // The scene's own rate and latency are always in the grid (the nominal cell).
+  ClosedLoopGrid grid;
+  grid.nominal_fps = scene.camera->fps;
+  grid.nominal_latency = scene.camera->latency;
+  const double fps0 = grid.nominal_fps, latency0 = grid.nominal_latency;
+  grid.rates =
+      with_value(quick ? std::vector<double>{15} : std::vector<double>{15, 30, 60, 120}, fps0);
+  grid.latencies = with_value(quick ? std::vector<double>{kAbsurdLatency}
+                                    : std::vector<double>{0, 0.033, 0.067, 0.1, 0.15, 0.2},
+                              latency0);
+  // Each cell keeps the Monte Carlo study's latency spread where it can (it must not exceed the
+  // latency: a frame cannot arrive before it is taken).
+  const auto jitter = [&](double latency) { return std::min(defaults.latency_jitter, latency); };
+  for (double r : grid.rates)
+    for (double l : grid.latencies) grid.cells.push_back({r, l, jitter(l), "feedback"});
+  // The open loop does not use the camera to steer, so one baseline (at the scene's camera) says
+  // what feedback adds.
+  grid.cells.push_back({fps0, latency0, jitter(latency0), "open-loop"});
+  // Every cell's loop set-up is built now, so that a scene the loop cannot run is bad input
+  // rather than a failure half-way through.
+  for (const Cell& c : grid.cells) drivers::LoopSetup check(model::compile(cell_scene(scene, c)));
+  grid.runs_per_cell = quick ? kRunsQuick : kRunsFull;
+  return grid;
+}
+
+ClosedLoopStudyResult run_closed_loop_study(const model::Model& nominal,
+                                            const ClosedLoopStudyOptions& options) {
+  ClosedLoopStudyResult out;
+  out.grid = closed_loop_grid(nominal, options.quick);
+  out.threads = options.threads ? options.threads : std::max(1u, std::thread::hardware_concurrency());
+  const int n = out.grid.runs_per_cell;
+  const long total = static_cast<long>(out.grid.cells.size()) * n;
+  const auto wall0 = std::chrono::steady_clock::now();
+  const double cpu0 = cpu_now();
+  long done = 0;
+  for (const Cell& c : out.grid.cells)
+    out.cells.push_back(run_cell(nominal.spec, c, n, out.threads, [&] {
+      ++done;
+      if (options.progress) options.progress(done, total);
+    }));
+  out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
+  out.cpu_seconds = cpu_now() - cpu0;
+  return out;
+}
+
+std::string closed_loop_study_csv(const ClosedLoopStudyResult& result) {
+  std::string csv = csv_header();
+  for (const CellResult& c : result.cells) csv += csv_row(c, result.grid.runs_per_cell);
+  return csv;
+}
+
+}  // namespace flatland::studies
