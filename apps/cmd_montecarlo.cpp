@@ -127,8 +127,9 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
   drivers::MonteCarloResult r;
   {
     ProgressBar bar("montecarlo");
-    r = drivers::run_montecarlo(*model::compile(scene), o.p, o.n, static_cast<std::uint64_t>(o.seed), o.controllers,
-                                threads, bar.callback());
+    r = drivers::run_montecarlo(*model::compile(scene), o.p, o.n,
+                                static_cast<std::uint64_t>(o.seed), o.controllers, threads,
+                                bar.callback());
   }
   const double per_second = r.seconds > 0 ? static_cast<double>(experiments) / r.seconds : 0;
 

@@ -4,8 +4,8 @@
 #include "common.hpp"
 
 #include "flatland/camera/camera_file.hpp"
-#include "flatland/vision/image_file.hpp"
 #include "flatland/model/model.hpp"
+#include "flatland/vision/image_file.hpp"
 #include "flatland/vision/mapping.hpp"
 #include "flatland/vision/tracker.hpp"
 #include "flatland/vision/video_reader.hpp"

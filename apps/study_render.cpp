@@ -61,8 +61,9 @@ namespace {
 
 /// One curve per resolution (selected by width, CSV column 2) of column `col` against the
 /// supersampling factor; `dashed_col` adds a dashed curve of the same colour (0: none).
-std::string per_resolution_curves(const std::vector<studies::RenderStudyCell>& cells, int col, int dashed_col,
-                                  const std::string& what, const std::string& dashed_what) {
+std::string per_resolution_curves(const std::vector<studies::RenderStudyCell>& cells, int col,
+                                  int dashed_col, const std::string& what,
+                                  const std::string& dashed_what) {
   std::vector<std::pair<int, int>> sizes;
   for (const studies::RenderStudyCell& c : cells)
     if (std::find(sizes.begin(), sizes.end(), std::make_pair(c.width, c.height)) == sizes.end())
@@ -95,10 +96,10 @@ void run_render_study(const StudyOptions& o) {
   if (plots) require_gnuplot();
 
   const studies::RenderStudyGrid grid = studies::render_study_grid(o.quick);
-  std::cerr << "flatland: study render: " << grid.factors.size() * grid.scales.size()
-            << " cells (" << grid.factors.size() << " supersampling factors x "
-            << grid.scales.size() << " resolutions) x " << grid.positions
-            << " disk positions x 2 turns, " << scene.origin << "\n";
+  std::cerr << "flatland: study render: " << grid.factors.size() * grid.scales.size() << " cells ("
+            << grid.factors.size() << " supersampling factors x " << grid.scales.size()
+            << " resolutions) x " << grid.positions << " disk positions x 2 turns, " << scene.origin
+            << "\n";
   studies::RenderStudyResult study;
   {
     ProgressBar bar("study render");

@@ -41,9 +41,9 @@ void run_tracker_study(const StudyOptions& o) {
   const std::shared_ptr<const model::Model> compiled = model::compile(scene);
   const studies::TrackerStudyGrid grid = studies::tracker_study_grid(o.quick);
   std::cerr << "flatland: study tracker: " << grid.methods.size() << " methods x "
-            << grid.fractions.size() << " exposures x " << grid.noises.size()
-            << " noise levels (" << scene.origin << ", " << scene.camera->width << " x "
-            << scene.camera->height << ", supersample " << scene.effects.supersample << ")\n";
+            << grid.fractions.size() << " exposures x " << grid.noises.size() << " noise levels ("
+            << scene.origin << ", " << scene.camera->width << " x " << scene.camera->height
+            << ", supersample " << scene.effects.supersample << ")\n";
   studies::TrackerStudyResult study;
   {
     ProgressBar bar("study tracker");

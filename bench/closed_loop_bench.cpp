@@ -86,7 +86,8 @@ void BM_SyntheticExperiment(benchmark::State& state) {
   long frames = 0;
   for (auto _ : state) {
     const auto t0 = std::chrono::steady_clock::now();
-    const drivers::SyntheticResult r = drivers::run_synthetic(su, flatland::model::compile(scene()));
+    const drivers::SyntheticResult r =
+        drivers::run_synthetic(su, flatland::model::compile(scene()));
     wall += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     simulated += r.loop.log.back().t - r.loop.log.front().t;
     frames += r.loop.frames;

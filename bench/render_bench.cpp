@@ -135,7 +135,8 @@ void Render(benchmark::State& state, render::GlBackend backend, int width, int h
 
 // H.264 ('avc1') encoding through OpenCV's FFmpeg writer, of rendered 640x480 frames.
 void Mp4Encode(benchmark::State& state) {
-  render::Renderer r(flatland::model::compile(camera_scene(640, 480, 1)), render::GlBackend::kOsmesa);
+  render::Renderer r(flatland::model::compile(camera_scene(640, 480, 1)),
+                     render::GlBackend::kOsmesa);
   const cv::Mat frame = r.render_8u(mid_roll());
   const std::string path =
       (std::filesystem::temp_directory_path() / "flatland_bench_encode.mp4").string();

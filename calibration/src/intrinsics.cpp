@@ -324,8 +324,8 @@ IntrinsicsResult calibrate_intrinsics(const std::vector<BoardView>& views,
   if (max_tilt < options.min_tilt_deg)
     throw std::invalid_argument(
         "focal length unobservable: all views are fronto-parallel (largest board tilt " +
-        sim::format_significant(max_tilt, 2) + " deg, need views tilted by " + sim::format_significant(options.min_tilt_deg, 2) +
-        " deg or more)");
+        sim::format_significant(max_tilt, 2) + " deg, need views tilted by " +
+        sim::format_significant(options.min_tilt_deg, 2) + " deg or more)");
 
   double intr[kRational] = {f0, f0, Kinit(0, 2), Kinit(1, 2), 0, 0, 0, 0, 0, 0, 0, 0};
   const bool rational = options.rational_model;
@@ -349,8 +349,9 @@ IntrinsicsResult calibrate_intrinsics(const std::vector<BoardView>& views,
   std::vector<int> inliers;
   for (int i : usable) {
     if (result.view_rms_px[i] > threshold)
-      result.rejected.push_back(label(i) + ": outlier, RMS " + sim::format_significant(result.view_rms_px[i], 3) +
-                                " px > " + sim::format_significant(threshold, 3) + " px");
+      result.rejected.push_back(label(i) + ": outlier, RMS " +
+                                sim::format_significant(result.view_rms_px[i], 3) + " px > " +
+                                sim::format_significant(threshold, 3) + " px");
     else
       inliers.push_back(i);
   }

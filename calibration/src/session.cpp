@@ -158,14 +158,15 @@ std::vector<JointImage> read_joint_csv(const std::string& path) {
 std::string table_csv(const std::vector<TablePlacement>& rows) {
   std::string s = "image,x,y,z,yaw\n";
   for (const TablePlacement& p : rows)
-    s += p.image + "," + sim::format_significant(p.x, 10) + "," + sim::format_significant(p.y, 10) + "," + sim::format_significant(p.z, 10) +
-         "," + sim::format_significant(p.yaw, 10) + "\n";
+    s += p.image + "," + sim::format_significant(p.x, 10) + "," + sim::format_significant(p.y, 10) +
+         "," + sim::format_significant(p.z, 10) + "," + sim::format_significant(p.yaw, 10) + "\n";
   return s;
 }
 
 std::string joint_csv(const std::vector<JointImage>& rows) {
   std::string s = "image,encoder\n";
-  for (const JointImage& j : rows) s += j.image + "," + sim::format_significant(j.encoder, 10) + "\n";
+  for (const JointImage& j : rows)
+    s += j.image + "," + sim::format_significant(j.encoder, 10) + "\n";
   return s;
 }
 

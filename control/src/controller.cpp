@@ -49,13 +49,15 @@ Plan::Plan(std::shared_ptr<const sim::HandMotion> motion, double duration,
   std::size_t i0 = 0;
   while (i0 < plan_s_.size() && plan_s_[i0] < s_from) ++i0;
   if (i0 == 0 || i0 == plan_s_.size())
-    throw std::invalid_argument("plan: the planned s_h never rises through " + sim::format_significant(s_from, 4) +
-                                " (it starts at " + sim::format_significant(plan_s_.front(), 4) + ")");
+    throw std::invalid_argument("plan: the planned s_h never rises through " +
+                                sim::format_significant(s_from, 4) + " (it starts at " +
+                                sim::format_significant(plan_s_.front(), 4) + ")");
   std::size_t i1 = i0;
   while (i1 < plan_s_.size() && plan_s_[i1] < s_to) ++i1;
   if (i1 == plan_s_.size())
-    throw std::invalid_argument("plan: the planned s_h never reaches " + sim::format_significant(s_to, 4) +
-                                " (it ends at " + sim::format_significant(plan_s_.back(), 4) + ")");
+    throw std::invalid_argument("plan: the planned s_h never reaches " +
+                                sim::format_significant(s_to, 4) + " (it ends at " +
+                                sim::format_significant(plan_s_.back(), 4) + ")");
   const auto crossing = [&](std::size_t i, double s) {
     const double w = (s - plan_s_[i - 1]) / (plan_s_[i] - plan_s_[i - 1]);
     return plan_t_[i - 1] + w * (plan_t_[i] - plan_t_[i - 1]);
@@ -65,8 +67,10 @@ Plan::Plan(std::shared_ptr<const sim::HandMotion> motion, double duration,
   for (std::size_t i = i0; i < i1; ++i) {
     if (!(plan_s_[i] > s_.back()))
       throw std::invalid_argument("plan: the planned s_h is not monotonic between " +
-                                  sim::format_significant(s_from, 4) + " and " + sim::format_significant(s_to, 4) + " (at t = " +
-                                  sim::format_significant(plan_t_[i], 4) + " s); stage 2 cannot index the plan by s_h");
+                                  sim::format_significant(s_from, 4) + " and " +
+                                  sim::format_significant(s_to, 4) +
+                                  " (at t = " + sim::format_significant(plan_t_[i], 4) +
+                                  " s); stage 2 cannot index the plan by s_h");
     s_.push_back(plan_s_[i]);
     t_.push_back(plan_t_[i]);
   }
@@ -228,16 +232,18 @@ SafetyMonitor::SafetyMonitor(SafetyConfig config, double t_start)
 
 std::optional<StopReason> SafetyMonitor::check_joint(const JointReading& joint) {
   if (!std::isfinite(joint.theta) || !std::isfinite(joint.theta_dot))
-    return StopReason{StopCause::kJoint, "joint: non-finite reading at t = " + sim::format_significant(joint.t, 4) + " s"};
+    return StopReason{StopCause::kJoint, "joint: non-finite reading at t = " +
+                                             sim::format_significant(joint.t, 4) + " s"};
   if (last_joint_) {
     const double predicted =
         last_joint_->theta + last_joint_->theta_dot * (joint.t - last_joint_->t);
     const double jump = joint.theta - predicted;
     if (std::abs(jump) > config_.max_joint_jump)
       return StopReason{StopCause::kJoint,
-                        "joint: encoder glitch at t = " + sim::format_significant(joint.t, 4) + " s (reading " +
-                            sim::format_significant(joint.theta, 4) + " rad, " + sim::format_significant(jump, 4) +
-                            " rad from the prediction; limit " + sim::format_significant(config_.max_joint_jump, 4) + ")"};
+                        "joint: encoder glitch at t = " + sim::format_significant(joint.t, 4) +
+                            " s (reading " + sim::format_significant(joint.theta, 4) + " rad, " +
+                            sim::format_significant(jump, 4) + " rad from the prediction; limit " +
+                            sim::format_significant(config_.max_joint_jump, 4) + ")"};
   }
   last_joint_ = joint;
   return std::nullopt;
@@ -253,10 +259,11 @@ void SafetyMonitor::frame(double t, bool fresh, bool tracked) {
 std::optional<StopReason> SafetyMonitor::innovation(double nis) {
   if (nis > config_.innovation_gate) {
     if (++strikes_ >= config_.innovation_strikes)
-      return StopReason{StopCause::kEstimator, "estimator: " + std::to_string(strikes_) +
-                                                   " implausible innovations in a row (NIS " +
-                                                   sim::format_significant(nis, 4) + " > " +
-                                                   sim::format_significant(config_.innovation_gate, 4) + ")"};
+      return StopReason{StopCause::kEstimator,
+                        "estimator: " + std::to_string(strikes_) +
+                            " implausible innovations in a row (NIS " +
+                            sim::format_significant(nis, 4) + " > " +
+                            sim::format_significant(config_.innovation_gate, 4) + ")"};
   } else {
     strikes_ = 0;
   }
@@ -267,14 +274,17 @@ std::optional<StopReason> SafetyMonitor::check_time(double t) const {
   const double since = t - t_last_measurement_;
   if (since <= config_.lost_timeout) return std::nullopt;
   if (!any_frame_ || t - t_last_frame_ > config_.lost_timeout)
-    return StopReason{StopCause::kCamera, "camera: no frames for " + sim::format_significant(t - t_last_frame_, 3) +
-                                              " s (at t = " + sim::format_significant(t, 4) + " s)"};
+    return StopReason{StopCause::kCamera,
+                      "camera: no frames for " + sim::format_significant(t - t_last_frame_, 3) +
+                          " s (at t = " + sim::format_significant(t, 4) + " s)"};
   if (t - t_last_fresh_ > config_.lost_timeout)
     return StopReason{StopCause::kCamera, "camera: stalled, no new image for " +
-                                              sim::format_significant(t - t_last_fresh_, 3) + " s (at t = " + sim::format_significant(t, 4) +
+                                              sim::format_significant(t - t_last_fresh_, 3) +
+                                              " s (at t = " + sim::format_significant(t, 4) +
                                               " s)"};
   return StopReason{StopCause::kTracking,
-                    "tracking: disk lost for " + sim::format_significant(since, 3) + " s (at t = " + sim::format_significant(t, 4) + " s)"};
+                    "tracking: disk lost for " + sim::format_significant(since, 3) +
+                        " s (at t = " + sim::format_significant(t, 4) + " s)"};
 }
 
 }  // namespace flatland::control

@@ -176,8 +176,9 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
       controller.safe_stop(
           t, {control::StopCause::kDisk, "disk: " + options.world->failure_detail()});
     if (t > t_limit)
-      controller.safe_stop(t, {control::StopCause::kTimeout,
-                               "timeout: the motion did not finish by t = " + sim::format_significant(t_limit, 5) + " s"});
+      controller.safe_stop(
+          t, {control::StopCause::kTimeout, "timeout: the motion did not finish by t = " +
+                                                sim::format_significant(t_limit, 5) + " s"});
 
     control::Estimate est;
     if (estimating) est = estimator.estimate();

@@ -387,9 +387,9 @@ void Recorder::add_tick(const control::JointReading& reading, double theta_ddot_
   if (!std::isfinite(reading.t) || (ticks_ > 0 && !(reading.t > last_tick_t_)))
     throw std::logic_error("Recorder: tick " + std::to_string(ticks_) + ": t " +
                            sim::format_number(reading.t) + " must be finite and increase");
-  joint_csv_ << ticks_ << ',' << sim::format_number(reading.t) << ',' << sim::format_number(reading.theta)
-             << ',' << sim::format_number(reading.theta_dot) << ',' << sim::format_number(theta_ddot_cmd)
-             << '\n';
+  joint_csv_ << ticks_ << ',' << sim::format_number(reading.t) << ','
+             << sim::format_number(reading.theta) << ',' << sim::format_number(reading.theta_dot)
+             << ',' << sim::format_number(theta_ddot_cmd) << '\n';
   check_stream(joint_csv_, "joint.csv");
   ++ticks_;
   last_tick_t_ = reading.t;
@@ -575,9 +575,9 @@ std::string LogJoint::describe() const { return "log:" + path_.string(); }
 
 control::JointReading LogJoint::read(double t) {
   if (next_ >= log_.size())
-    throw std::runtime_error(describe() + ": tick " + std::to_string(next_) +
-                             " (read at t=" + sim::format_number(t) + ") is past the end of the log (" +
-                             std::to_string(log_.size()) + " ticks)");
+    throw std::runtime_error(
+        describe() + ": tick " + std::to_string(next_) + " (read at t=" + sim::format_number(t) +
+        ") is past the end of the log (" + std::to_string(log_.size()) + " ticks)");
   const Tick& k = log_[next_];
   if (!(k.reading.t == t))
     throw std::runtime_error(describe() + ": tick " + std::to_string(k.tick) +
@@ -593,8 +593,9 @@ void LogJoint::command(double t, double theta_ddot) {
                              " before any tick was read");
   const Tick& k = log_[next_ - 1];
   if (!(k.reading.t == t))
-    throw std::runtime_error(describe() + ": tick " + std::to_string(k.tick) + ": command at t=" +
-                             sim::format_number(t) + ", the tick is at t=" + sim::format_number(k.reading.t));
+    throw std::runtime_error(describe() + ": tick " + std::to_string(k.tick) +
+                             ": command at t=" + sim::format_number(t) +
+                             ", the tick is at t=" + sim::format_number(k.reading.t));
   ++commands_;
   double d = 0;
   if (!same_double(theta_ddot, k.theta_ddot_cmd)) {

@@ -164,11 +164,11 @@ double SimWorld::step_disk(double t, double t_end, double alpha) {
   if (r.reason == sim::StopReason::kDropped) {
     failure_ = last_contact_mode_ == sim::ContactMode::kSliding ? Outcome::kSlidOff
                                                                  : Outcome::kDropped;
-    failure_detail_ = std::string(last_contact_mode_ == sim::ContactMode::kSliding
-                                      ? "the disk slid off the hand"
-                                      : "the disk lost contact") +
-                      " and was not caught (out of the hand's reach at t = " + sim::format_significant(disk_.t, 6) +
-                      " s)";
+    failure_detail_ =
+        std::string(last_contact_mode_ == sim::ContactMode::kSliding ? "the disk slid off the hand"
+                                                                     : "the disk lost contact") +
+        " and was not caught (out of the hand's reach at t = " +
+        sim::format_significant(disk_.t, 6) + " s)";
   }
   return disk_.t;
 }
@@ -210,8 +210,10 @@ void SimWorld::servo_step() {
   // and so does the hand's acceleration; an impact changes the hand's rate at once.
   for (int piece = 0; t < t_end; ++piece) {
     if (piece > 1000)
-      throw std::runtime_error("world: the contact changes mode more than 1000 times within one "
-                               "servo period at t = " + sim::format_significant(t, 6) + " s");
+      throw std::runtime_error(
+          "world: the contact changes mode more than 1000 times within one "
+          "servo period at t = " +
+          sim::format_significant(t, 6) + " s");
     bool stops = false;
     alpha = joint_acceleration(t, t_end, tau, stops);
     if (!failure_ && disk_.mode != sim::ContactMode::kFlight) {
@@ -363,14 +365,16 @@ GoalCheck SimWorld::goal_check() const {
     out.reason = "the disk at s_h = " + sim::format_significant(out.s_h, 6) +
                  " is rolling off the hand (the hand faces down where it is heading)";
   } else if (!(out.well_bottom > 0.5 && out.well_bottom < 1.5)) {
-    out.reason = "disk at s_h = " + sim::format_significant(out.s_h, 6) + " settles in the well whose bottom is at s_h = " +
-                 sim::format_significant(out.well_bottom, 6) + ", not the goal well (bottom near s_h = +1)";
+    out.reason = "disk at s_h = " + sim::format_significant(out.s_h, 6) +
+                 " settles in the well whose bottom is at s_h = " +
+                 sim::format_significant(out.well_bottom, 6) +
+                 ", not the goal well (bottom near s_h = +1)";
   } else if (!(out.energy_margin > 0)) {
-    out.reason = "disk can still leave the goal well (energy " + sim::format_significant(-out.energy_margin, 6) +
-                 " J above its lower rim)";
+    out.reason = "disk can still leave the goal well (energy " +
+                 sim::format_significant(-out.energy_margin, 6) + " J above its lower rim)";
   } else if (!(std::abs(theta_ - theta_goal) < 0.05)) {
-    out.reason = "the hand is at " + sim::format_significant(theta_, 6) + " rad, not at its goal " + sim::format_significant(theta_goal, 6) +
-                 " rad";
+    out.reason = "the hand is at " + sim::format_significant(theta_, 6) + " rad, not at its goal " +
+                 sim::format_significant(theta_goal, 6) + " rad";
   } else {
     out.in_goal = true;
   }

@@ -218,7 +218,7 @@ void OutputSet::commit() {
     const int err = rename_with(tmp, final_path, no_replace);
     if (err == EEXIST)
       throw std::invalid_argument(final_path.string() +
-                       " appeared while flatland ran; pass --force to replace it");
+                                  " appeared while flatland ran; pass --force to replace it");
     if (err)
       throw std::runtime_error("cannot rename " + tmp.string() + " to " + final_path.string() +
                                ": " + std::strerror(err));
@@ -246,7 +246,7 @@ void OutputSet::commit() {
     }
     if (err == EEXIST || err == ENOTEMPTY)
       throw std::invalid_argument(d.final_path.string() +
-                       " appeared while flatland ran; pass --force to replace it");
+                                  " appeared while flatland ran; pass --force to replace it");
     if (err)
       throw std::runtime_error("cannot move " + d.content.string() + " to " +
                                d.final_path.string() + ": " + std::strerror(err));

@@ -77,9 +77,8 @@ void compile_loop(Model& m) {
   // back past the worst latency and a frame or two.
   if (scene.camera)
     m.estimator.history =
-        std::max(m.estimator.history,
-                 3.0 * (scene.camera->latency + scene.camera->latency_jitter) +
-                     2.0 / scene.camera->fps);
+        std::max(m.estimator.history, 3.0 * (scene.camera->latency + scene.camera->latency_jitter) +
+                                          2.0 / scene.camera->fps);
 
   const ControllerSpec& c = scene.controller;
   m.controller.feedback = c.mode == "feedback";

@@ -118,7 +118,8 @@ DistortionMaps compute_distortion_maps(const camera::CameraModel& camera, int su
   const double worst = *std::max_element(row_error.begin(), row_error.end());
   if (!(worst <= kMaxRoundTripPx))
     fail("camera.distortion",
-         "the distortion cannot be inverted over the image (round-trip error " + sim::format_significant(worst, 9) +
+         "the distortion cannot be inverted over the image (round-trip error " +
+             sim::format_significant(worst, 9) +
              " px); the coefficients are too strong for this field of view");
 
   // Footprint of the output pixels in the pinhole image with intrinsics K_s.
@@ -141,9 +142,10 @@ DistortionMaps compute_distortion_maps(const camera::CameraModel& camera, int su
   const double ideal_w = w + left + right, ideal_h = h + top + bottom;
   if (!(ideal_w <= static_cast<double>(w) * kMaxIdealGrowth) ||
       !(ideal_h <= static_cast<double>(h) * kMaxIdealGrowth))
-    fail("camera.distortion", "the undistorted image would be " + sim::format_significant(ideal_w, 9) + " x " +
-                                  sim::format_significant(ideal_h, 9) + " px for a " + std::to_string(w) + " x " +
-                                  std::to_string(h) + " px image; the distortion is too strong");
+    fail("camera.distortion",
+         "the undistorted image would be " + sim::format_significant(ideal_w, 9) + " x " +
+             sim::format_significant(ideal_h, 9) + " px for a " + std::to_string(w) + " x " +
+             std::to_string(h) + " px image; the distortion is too strong");
   maps.ideal_width = static_cast<int>(ideal_w);
   maps.ideal_height = static_cast<int>(ideal_h);
   const double icx = cx + left, icy = cy + top;

@@ -164,9 +164,11 @@ const float* gaussian_quantiles() {
 
 void apply_noise(cv::Mat& image_f32, double read_sigma_dn, double shot_gain, EffectsRng& rng) {
   if (!(read_sigma_dn >= 0) || !std::isfinite(read_sigma_dn))
-    fail("effects.noise_read_dn", "must be >= 0 and finite, got " + sim::format_significant(read_sigma_dn, 9));
+    fail("effects.noise_read_dn",
+         "must be >= 0 and finite, got " + sim::format_significant(read_sigma_dn, 9));
   if (!(shot_gain >= 0) || !std::isfinite(shot_gain))
-    fail("effects.noise_shot_gain", "must be >= 0 and finite, got " + sim::format_significant(shot_gain, 9));
+    fail("effects.noise_shot_gain",
+         "must be >= 0 and finite, got " + sim::format_significant(shot_gain, 9));
   if (read_sigma_dn == 0 && shot_gain == 0) return;  // no draws: the stream stays as it was
   require_f32(image_f32, "apply_noise");
   // Sensor noise is a standard normal per pixel and channel, times sigma. A frame needs ~1e6 of
@@ -215,7 +217,8 @@ double jittered_time(double nominal, double sigma, EffectsRng& rng) {
 
 bool dropped(double probability, EffectsRng& rng) {
   if (!(probability >= 0 && probability <= 1))
-    fail("effects.drop_probability", "must be in [0, 1], got " + sim::format_significant(probability, 9));
+    fail("effects.drop_probability",
+         "must be in [0, 1], got " + sim::format_significant(probability, 9));
   if (probability == 0) return false;
   std::bernoulli_distribution drop(probability);
   return drop(rng.engine());

@@ -446,8 +446,8 @@ double number_in(const MapReader& m, const char* key, double lo, double hi, doub
   if (!m.has(key)) return fallback;
   const double v = m.number(key);
   if (!(v >= lo && v <= hi))
-    m.fail_at(key, "must be in [" + sim::format_number(lo) + ", " + sim::format_number(hi) + "], got " +
-                       m.node(key).Scalar());
+    m.fail_at(key, "must be in [" + sim::format_number(lo) + ", " + sim::format_number(hi) +
+                       "], got " + m.node(key).Scalar());
   return v;
 }
 
@@ -489,7 +489,8 @@ void read_camera(const MapReader& root, Scene& scene) {
   cam.latency = non_negative(*c, "latency", cam.latency);
   cam.latency_jitter = non_negative(*c, "latency_jitter", cam.latency_jitter);
   if (!(cam.latency_jitter <= cam.latency))
-    c->fail_at("latency_jitter", "must not exceed camera.latency (" + sim::format_number(cam.latency) +
+    c->fail_at("latency_jitter", "must not exceed camera.latency (" +
+                                     sim::format_number(cam.latency) +
                                      " s): a frame cannot arrive before it is taken, got " +
                                      c->node("latency_jitter").Scalar());
 
@@ -515,10 +516,11 @@ void read_effects(const MapReader& root, Scene& scene) {
   fx.blur_subframes = static_cast<int>(e->integer_or("blur_subframes", 1, 64, fx.blur_subframes));
   // Sub-frames spread over a zero exposure would all be the same image.
   if (fx.blur_subframes > 1 && !(scene.camera && scene.camera->exposure > 0))
-    e->fail_at("blur_subframes", "exposure blur needs camera.exposure > 0 (got " +
-                                     (scene.camera ? sim::format_number(scene.camera->exposure) + " s"
-                                                   : std::string("no camera section")) +
-                                     ")");
+    e->fail_at("blur_subframes",
+               "exposure blur needs camera.exposure > 0 (got " +
+                   (scene.camera ? sim::format_number(scene.camera->exposure) + " s"
+                                 : std::string("no camera section")) +
+                   ")");
   fx.noise_read_dn = non_negative(*e, "noise_read_dn", fx.noise_read_dn);
   fx.noise_shot_gain = non_negative(*e, "noise_shot_gain", fx.noise_shot_gain);
   fx.quantize = e->boolean_or("quantize", fx.quantize);
@@ -560,8 +562,9 @@ void read_joint(const MapReader& root, Scene& scene) {
   js.velocity_filter = non_negative(*j, "velocity_filter", js.velocity_filter);
   js.rate = number_in(*j, "rate", 10.0, 1e5, js.rate);
   if (!(js.coulomb < js.torque_limit))
-    j->fail_at("coulomb", "must be below joint.torque_limit (" + sim::format_number(js.torque_limit) +
-                              " N m) or the joint cannot move, got " + sim::format_number(js.coulomb));
+    j->fail_at("coulomb",
+               "must be below joint.torque_limit (" + sim::format_number(js.torque_limit) +
+                   " N m) or the joint cannot move, got " + sim::format_number(js.coulomb));
   // The PD loop runs at the servo rate; a discrete PD loop with omega dt near 1 rings or diverges.
   const double omega_dt = std::sqrt(js.kp / js.inertia) / js.rate;
   if (!(omega_dt < 0.5))
@@ -584,8 +587,9 @@ void read_controller(const MapReader& root, Scene& scene) {
   cs.dip_until = number_in(*c, "dip_until", -1.0, 1.0, cs.dip_until);
   cs.finish_after = number_in(*c, "finish_after", -1.0, 1.0, cs.finish_after);
   if (!(cs.dip_until < cs.finish_after))
-    c->fail_at("finish_after", "must exceed controller.dip_until (" + sim::format_number(cs.dip_until) +
-                                   "), got " + sim::format_number(cs.finish_after));
+    c->fail_at("finish_after", "must exceed controller.dip_until (" +
+                                   sim::format_number(cs.dip_until) + "), got " +
+                                   sim::format_number(cs.finish_after));
   cs.lost_timeout = c->positive_or("lost_timeout", cs.lost_timeout);
   cs.innovation_gate = c->positive_or("innovation_gate", cs.innovation_gate);
   cs.innovation_strikes =
@@ -730,15 +734,18 @@ std::optional<FieldProblem> camera_problem(const CameraSpec& cam) {
     return problem("fx", "must be positive and finite, got " + sim::format_number(cam.fx));
   if (!(cam.fy > 0) || !std::isfinite(cam.fy))
     return problem("fy", "must be positive and finite, got " + sim::format_number(cam.fy));
-  if (!std::isfinite(cam.cx)) return problem("cx", "must be finite, got " + sim::format_number(cam.cx));
-  if (!std::isfinite(cam.cy)) return problem("cy", "must be finite, got " + sim::format_number(cam.cy));
+  if (!std::isfinite(cam.cx))
+    return problem("cx", "must be finite, got " + sim::format_number(cam.cx));
+  if (!std::isfinite(cam.cy))
+    return problem("cy", "must be finite, got " + sim::format_number(cam.cy));
   for (double d : cam.distortion)
     if (!std::isfinite(d))
       return problem("distortion", "coefficients must be finite, got " + sim::format_number(d));
   if (!(cam.fps > 0) || !std::isfinite(cam.fps))
     return problem("fps", "must be positive and finite, got " + sim::format_number(cam.fps));
   const auto vec3 = [](const std::array<double, 3>& v) {
-    return "(" + sim::format_number(v[0]) + ", " + sim::format_number(v[1]) + ", " + sim::format_number(v[2]) + ")";
+    return "(" + sim::format_number(v[0]) + ", " + sim::format_number(v[1]) + ", " +
+           sim::format_number(v[2]) + ")";
   };
   for (const auto& [field, v] : {std::pair{"position", &cam.position},
                                  std::pair{"look_at", &cam.look_at}, std::pair{"up", &cam.up}})

@@ -14,9 +14,10 @@ namespace flatland::sim {
 namespace {
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-
 void require(bool ok, const std::string& field, const std::string& what, double v) {
-  if (!ok) throw std::invalid_argument("contact." + field + ": " + what + ", got " + format_significant(v));
+  if (!ok)
+    throw std::invalid_argument("contact." + field + ": " + what + ", got " +
+                                format_significant(v));
 }
 
 double sign(double v) { return v > 0 ? 1.0 : v < 0 ? -1.0 : 0.0; }
@@ -50,7 +51,8 @@ void ContactLaw::validate() const {
     require(std::isfinite(*mu_kinetic) && *mu_kinetic >= 0, "mu_kinetic", "must be finite and >= 0",
             *mu_kinetic);
     require(*mu_kinetic <= *mu, "mu_kinetic",
-            "must not exceed the static coefficient contact.mu = " + format_significant(*mu), *mu_kinetic);
+            "must not exceed the static coefficient contact.mu = " + format_significant(*mu),
+            *mu_kinetic);
   }
   require(restitution >= 0 && restitution <= 1, "restitution", "must be in [0, 1]", restitution);
   require(std::isfinite(capture_velocity) && capture_velocity >= 0, "capture_velocity",

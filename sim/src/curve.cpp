@@ -15,7 +15,6 @@ namespace flatland::sim {
 namespace {
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-
 // Newton's method on f(s) = (c(s) - p) . c'(s) = 0 from s, each step at most `max_step`, the
 // piece re-chosen at each iterate: the nearest point of a smooth curve from a good start.
 double refine_nearest(const Curve& curve, const Vec2& p, double s, double max_step) {
@@ -155,8 +154,8 @@ CurveJet PolynomialHand::jet(double s, int piece) const {
 }
 
 std::string PolynomialHand::describe() const {
-  return "polynomial hand a=" + format_significant(a_) + " b=" + format_significant(b_) + " c=" + format_significant(c_) + " d=" + format_significant(d_) +
-         " m";
+  return "polynomial hand a=" + format_significant(a_) + " b=" + format_significant(b_) +
+         " c=" + format_significant(c_) + " d=" + format_significant(d_) + " m";
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -177,7 +176,8 @@ std::string LineCurve::describe() const { return "straight line"; }
 CircleCurve::CircleCurve(Vec2 center, double radius, Side side)
     : center_(center), radius_(radius), side_(side) {
   if (!(radius > 0) || !std::isfinite(radius))
-    throw std::invalid_argument("circle: radius must be positive and finite, got " + format_significant(radius));
+    throw std::invalid_argument("circle: radius must be positive and finite, got " +
+                                format_significant(radius));
 }
 PieceInterval CircleCurve::piece_interval(int) const { return {-kInf, kInf}; }
 CurveJet CircleCurve::jet(double s, int) const {
@@ -225,7 +225,8 @@ bool segments_intersect(const Vec2& p1, const Vec2& p2, const Vec2& q1, const Ve
   return ((d1 > 0) != (d2 > 0)) && ((d3 > 0) != (d4 > 0));
 }
 std::string where(double s, const Vec2& p) {
-  return "at s_h=" + format_significant(s) + " (x=" + format_significant(p.x()) + " m, y=" + format_significant(p.y()) + " m)";
+  return "at s_h=" + format_significant(s) + " (x=" + format_significant(p.x()) +
+         " m, y=" + format_significant(p.y()) + " m)";
 }
 }  // namespace
 
@@ -234,7 +235,8 @@ void validate_hand_for_disk(const PolynomialHand& hand, double disk_radius) {
     throw std::invalid_argument("object.radius: must be positive and finite, got " +
                                 format_significant(disk_radius));
   if (!(hand.a() > 0))
-    throw std::invalid_argument("hand.a: the tip x(0) = a must be positive, got " + format_significant(hand.a()));
+    throw std::invalid_argument("hand.a: the tip x(0) = a must be positive, got " +
+                                format_significant(hand.a()));
   // The right half is sampled densely; the left half is its mirror, so the checks below cover
   // the whole outline.
   constexpr int kSamples = 2000;

@@ -127,8 +127,9 @@ void check_root_is_continuous(const std::function<double(double)>& f, const Root
   if (!probe(b, fb)) b = root.x, fb = root.fx;
   const double slope = b > a ? std::abs(fb - fa) / (b - a) : 0.0;
   if (std::abs(root.fx) <= 10 * slope * tolerance) return;
-  throw std::runtime_error("solve: s_h(T) changes sign at " + what + " = " + format_significant(root.x, 8) +
-                           " but jumps there (it stays at " + format_significant(root.fx, 8) +
+  throw std::runtime_error("solve: s_h(T) changes sign at " + what + " = " +
+                           format_significant(root.x, 8) + " but jumps there (it stays at " +
+                           format_significant(root.fx, 8) +
                            "), so this is no solution: the motion is too sensitive near it; try "
                            "another starting " +
                            what);
@@ -205,13 +206,14 @@ SolveReport solve_k_from(const SimulationSpec& spec,
   k0 = std::clamp(k0, lo, hi);
   const auto br = find_bracket(f, k0, f(k0), 0.02, lo, hi);
   if (!br)
-    throw std::runtime_error(
-        "solve: no k in (-2, 2] brings the disk to s_h(T) = 0 for 2T = " + format_significant(period, 8) + " s");
+    throw std::runtime_error("solve: no k in (-2, 2] brings the disk to s_h(T) = 0 for 2T = " +
+                             format_significant(period, 8) + " s");
   const RootResult root = br->a == br->b ? RootResult{br->a, 0.0, 0, true}
                                          : brent_root(f, br->a, br->b, br->fa, br->fb,
                                                       set.tolerance, set.max_evaluations);
   if (!root.converged)
-    throw std::runtime_error("solve: root finder did not converge for 2T = " + format_significant(period, 8) + " s");
+    throw std::runtime_error(
+        "solve: root finder did not converge for 2T = " + format_significant(period, 8) + " s");
   check_root_is_continuous(f, root, set.tolerance, lo, hi, "k");
   SolveReport rep = evaluate_on(base, spec, period, root.x);
   rep.simulations += sims;
@@ -249,8 +251,8 @@ SolveReport solve_d(const SimulationSpec& spec, double period, double k,
                                s.hand.d + 10 * scale);
   if (!br)
     throw std::runtime_error(
-        "solve: no valid hand shape d brings the disk to s_h(T) = 0 for 2T = " + format_significant(period, 8) +
-        " s, k = " + format_significant(k, 8));
+        "solve: no valid hand shape d brings the disk to s_h(T) = 0 for 2T = " +
+        format_significant(period, 8) + " s, k = " + format_significant(k, 8));
   const RootResult root = br->a == br->b ? RootResult{br->a, 0.0, 0, true}
                                          : brent_root(f, br->a, br->b, br->fa, br->fb,
                                                       set.tolerance * scale, set.max_evaluations);
@@ -353,9 +355,11 @@ TimeOptimalReport time_optimal(const SimulationSpec& spec, double lo, double hi,
   const std::string what = friction ? "minimum of the normal force ratio and the friction margin"
                                     : "minimum normal force ratio";
   if (!(glo < 0 && ghi > 0))
-    throw std::runtime_error("time-optimal: [" + format_significant(lo, 8) + ", " + format_significant(hi, 8) +
-                             "] s does not bracket the fastest admissible solution (" + what +
-                             " " + format_significant(glo, 8) + " at 2T = " + format_significant(lo, 8) + " s, " + format_significant(ghi, 8) + " at " +
+    throw std::runtime_error("time-optimal: [" + format_significant(lo, 8) + ", " +
+                             format_significant(hi, 8) +
+                             "] s does not bracket the fastest admissible solution (" + what + " " +
+                             format_significant(glo, 8) + " at 2T = " + format_significant(lo, 8) +
+                             " s, " + format_significant(ghi, 8) + " at " +
                              format_significant(hi, 8) + " s; it must go from < 0 to > 0)");
   const RootResult root = brent_root(g, lo, hi, glo, ghi, period_tolerance, set.max_evaluations);
   rep.solution = solve_k_from(s, base, root.x, k0, set);

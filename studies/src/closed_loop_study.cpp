@@ -213,8 +213,8 @@ std::string failure_class(const ClosedLoopRun& r) {
 ClosedLoopGrid closed_loop_grid(const model::Model& nominal, bool quick) {
   const Scene& scene = nominal.spec;
   if (!scene.camera)
-    throw std::invalid_argument(scene.origin +
-                                ": camera: the scene has no camera section (needed by the closed loop)");
+    throw std::invalid_argument(
+        scene.origin + ": camera: the scene has no camera section (needed by the closed loop)");
   if (scene.sim.motion.kind != sim::MotionSpec::Kind::kButterfly)
     throw std::invalid_argument(
         scene.origin + ": motion: study closed-loop needs the butterfly (motion.type: butterfly)");
@@ -250,7 +250,8 @@ ClosedLoopStudyResult run_closed_loop_study(const model::Model& nominal,
                                             const ClosedLoopStudyOptions& options) {
   ClosedLoopStudyResult out;
   out.grid = closed_loop_grid(nominal, options.quick);
-  out.threads = options.threads ? options.threads : std::max(1u, std::thread::hardware_concurrency());
+  out.threads =
+      options.threads ? options.threads : std::max(1u, std::thread::hardware_concurrency());
   const int n = out.grid.runs_per_cell;
   const long total = static_cast<long>(out.grid.cells.size()) * n;
   const auto wall0 = std::chrono::steady_clock::now();

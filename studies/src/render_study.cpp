@@ -52,8 +52,8 @@ double disk_radius_px(const camera::CameraModel& cam, cv::Point2d c, double radi
   return r;
 }
 
-/// The window the centroid is taken over (tests/render/test_render.cpp's): 1.4 apparent radii around
-/// the truth, so that it holds the whole disk and a border of table.
+/// The window the centroid is taken over (tests/render/test_render.cpp's): 1.4 apparent radii
+/// around the truth, so that it holds the whole disk and a border of table.
 cv::Rect centroid_window(cv::Point2d around, double radius_px) {
   const int r = static_cast<int>(radius_px * 1.4);
   return {static_cast<int>(around.x) - r, static_cast<int>(around.y) - r, 2 * r + 1, 2 * r + 1};
@@ -111,8 +111,9 @@ Scene cell_scene(const Scene& scene, double scale, int factor) {
 /// back-projected onto the disk's top-face plane; it is kept when, at every scale, the centroid
 /// window (grown by 3 px) lies in the image and is uniform in an image without the disk (nothing
 /// but table: the hand, the table's edge or a target in the window would bias the centroid).
-std::vector<RenderStudyPosition> free_positions(const Scene& scene, const std::vector<double>& scales, int n,
-                                     std::uint64_t seed) {
+std::vector<RenderStudyPosition> free_positions(const Scene& scene,
+                                                const std::vector<double>& scales, int n,
+                                                std::uint64_t seed) {
   const double radius = scene.sim.object.radius, z = scene.render.disk_thickness;
   std::vector<camera::CameraModel> cams;
   std::vector<cv::Mat> backgrounds;
@@ -148,15 +149,16 @@ std::vector<RenderStudyPosition> free_positions(const Scene& scene, const std::v
   }
   if (static_cast<int>(out.size()) < n)
     throw std::invalid_argument(scene.origin +
-                     ": study render: the camera sees too little free table (found " +
-                     std::to_string(out.size()) + " of " + std::to_string(n) +
-                     " disk positions clear of the hand and inside every image)");
+                                ": study render: the camera sees too little free table (found " +
+                                std::to_string(out.size()) + " of " + std::to_string(n) +
+                                " disk positions clear of the hand and inside every image)");
   return out;
 }
 
 RenderStudyCell measure_cell(const Scene& scene, double scale, int factor,
-                        const std::vector<RenderStudyPosition>& positions, double timing_seconds,
-                        std::string& gl, const std::function<void()>& tick) {
+                             const std::vector<RenderStudyPosition>& positions,
+                             double timing_seconds, std::string& gl,
+                             const std::function<void()>& tick) {
   render::Renderer r(model::compile(cell_scene(scene, scale, factor)));
   gl = r.gl_description();
   const camera::CameraModel& cam = r.camera();
@@ -252,8 +254,8 @@ RenderStudyGrid render_study_grid(bool quick) {
 RenderStudyResult run_render_study(const model::Model& model, const RenderStudyOptions& options) {
   const Scene& scene = model.spec;
   if (!model.camera)
-    throw std::invalid_argument(scene.origin +
-                                ": camera: the scene has no camera section (needed by study render)");
+    throw std::invalid_argument(
+        scene.origin + ": camera: the scene has no camera section (needed by study render)");
   RenderStudyResult out;
   out.grid = render_study_grid(options.quick);
   const RenderStudyGrid& g = out.grid;

@@ -81,9 +81,9 @@ std::string label(const IntegratorSetting& s) {
 }
 
 std::vector<IntegratorSetting> sim_study_settings(bool quick) {
-  const std::vector<double> steps = quick
-                                        ? std::vector<double>{1e-2, 1e-3}
-                                        : std::vector<double>{1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4};
+  const std::vector<double> steps =
+      quick ? std::vector<double>{1e-2, 1e-3}
+            : std::vector<double>{1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4};
   const std::vector<int> exponents =
       quick ? std::vector<int>{3, 6, 9, 13} : std::vector<int>{3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13};
   std::vector<IntegratorSetting> settings;
@@ -97,7 +97,8 @@ std::vector<IntegratorSetting> sim_study_settings(bool quick) {
 
 SimStudyResult run_sim_study(const sim::SimulationSpec& spec, const SimStudyOptions& options) {
   if (spec.motion.kind != sim::MotionSpec::Kind::kButterfly)
-    throw std::invalid_argument("study sim: the scene's motion must be the butterfly (motion.kind)");
+    throw std::invalid_argument(
+        "study sim: the scene's motion must be the butterfly (motion.kind)");
   sim::build_problem(spec);
   const std::vector<IntegratorSetting> settings = sim_study_settings(options.quick);
   const double start = cpu_now();

@@ -81,7 +81,8 @@ TrackerStudyGrid tracker_study_grid(bool quick) {
   return g;
 }
 
-TrackerStudyResult run_tracker_study(const model::Model& model, const TrackerStudyOptions& options) {
+TrackerStudyResult run_tracker_study(const model::Model& model,
+                                     const TrackerStudyOptions& options) {
   const Scene& scene = model.spec;
   if (!model.camera)
     throw std::invalid_argument(
@@ -111,7 +112,8 @@ TrackerStudyResult run_tracker_study(const model::Model& model, const TrackerStu
   }
   if (times.size() < 3)
     throw std::invalid_argument(scene.origin + ": study tracker: the run (" +
-                     format_number(tr.t_end() - tr.t_begin()) + " s) gives fewer than 3 frames");
+                                format_number(tr.t_end() - tr.t_begin()) +
+                                " s) gives fewer than 3 frames");
 
   const camera::CameraModel& cam0 = *model.camera;
   std::vector<TrackerStudyBlur>& blurs = out.blurs;
@@ -236,10 +238,11 @@ std::string tracker_study_csv(const TrackerStudyResult& r) {
     const TrackerStudyBlur& b = r.blurs[c.blur];
     std::string line =
         m.name + (m.table_plane ? ",table-plane," : ",pixel,") + std::to_string(c.blur);
-    for (double v : {b.exposure, static_cast<double>(b.subframes), b.px_mean, b.px_max,
-                     r.grid.noises[c.noise], static_cast<double>(c.frames), static_cast<double>(c.lost),
-                     static_cast<double>(c.reacquired), static_cast<double>(c.gross), c.rms_px,
-                     c.max_px, c.rms_mm, c.max_mm, c.ms_median, c.ms_p95, c.ms_max}) {
+    for (double v :
+         {b.exposure, static_cast<double>(b.subframes), b.px_mean, b.px_max, r.grid.noises[c.noise],
+          static_cast<double>(c.frames), static_cast<double>(c.lost),
+          static_cast<double>(c.reacquired), static_cast<double>(c.gross), c.rms_px, c.max_px,
+          c.rms_mm, c.max_mm, c.ms_median, c.ms_p95, c.ms_max}) {
       line += ',';
       line += format_number(v);
     }

@@ -106,7 +106,8 @@ TEST(ClosedLoop, PaperRunSucceedsWithFeedback) {
   for (const Scene* world : {static_cast<const Scene*>(&lossless), &scene}) {
     const bool losses = world == &scene;
     SCOPED_TRACE(losses ? "the air table's losses" : "lossless");
-    const drivers::SyntheticResult r = drivers::run_synthetic(setup, flatland::model::compile(*world));
+    const drivers::SyntheticResult r =
+        drivers::run_synthetic(setup, flatland::model::compile(*world));
     ASSERT_TRUE(r.success) << r.failure;
     EXPECT_EQ(r.outcome, drivers::Outcome::kSuccess);
     EXPECT_FALSE(r.loop.safe_stop);
@@ -146,7 +147,8 @@ TEST(ClosedLoop, OutcomeSaysWhereTheDiskEnded) {
   slippery.sim.contact.mu = 0.05;
   slippery.sim.contact.mu_kinetic = 0.04;
   slippery.sim.contact.rolling_resistance = 1e-5;  // below mu_k r
-  const drivers::SyntheticResult r = drivers::run_synthetic(setup, flatland::model::compile(slippery));
+  const drivers::SyntheticResult r =
+      drivers::run_synthetic(setup, flatland::model::compile(slippery));
   EXPECT_FALSE(r.success);
   EXPECT_TRUE(r.outcome == drivers::Outcome::kSlidOff || r.outcome == drivers::Outcome::kDropped)
       << drivers::to_string(r.outcome) << ": " << r.failure;
@@ -156,7 +158,8 @@ TEST(ClosedLoop, OutcomeSaysWhereTheDiskEnded) {
   ASSERT_FALSE(r.contact_events.empty());
   EXPECT_EQ(r.contact_events.back().kind, sim::EventKind::kDropped);
   // The nominal world succeeds open loop, and the disk is trapped in the back well.
-  const drivers::SyntheticResult ok = drivers::run_synthetic(setup, flatland::model::compile(scene));
+  const drivers::SyntheticResult ok =
+      drivers::run_synthetic(setup, flatland::model::compile(scene));
   EXPECT_EQ(ok.outcome, drivers::Outcome::kSuccess) << ok.failure;
   EXPECT_TRUE(ok.goal.trapped);
   EXPECT_TRUE(ok.goal.well_faces_up);
@@ -248,7 +251,8 @@ TEST(ClosedLoop, EstimatorIsConsistentInTheLoop) {
       truth.sim.object.radius *= 1.0 + 0.02 * u(rng);
       truth.sim.initial.s_h += 0.02 * u(rng);
       truth.camera->latency_jitter = 0.005;
-      const drivers::SyntheticResult r = drivers::run_synthetic(setup, flatland::model::compile(truth));
+      const drivers::SyntheticResult r =
+          drivers::run_synthetic(setup, flatland::model::compile(truth));
       // Only up to the end of the motion: afterwards the disk rests, the estimate is exact and
       // samples pile up where there is nothing to test.
       const double t_end =

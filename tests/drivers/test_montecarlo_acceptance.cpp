@@ -20,8 +20,8 @@ TEST(MonteCarloAcceptance, FeedbackSucceedsInNinetyPercentAndBeatsOpenLoop) {
   int n = 200;
   if (const char* env = std::getenv("FLATLAND_MC_RUNS")) n = std::max(1, std::atoi(env));
   const drivers::Perturbations defaults;  // the issue's: +-0.02 s_h, +-0.25 deg, +-2 % r, ...
-  const drivers::MonteCarloResult r =
-      drivers::run_montecarlo(*flatland::model::compile(nominal), defaults, n, 1, {"open-loop", "feedback"});
+  const drivers::MonteCarloResult r = drivers::run_montecarlo(
+      *flatland::model::compile(nominal), defaults, n, 1, {"open-loop", "feedback"});
   std::fprintf(stderr,
                "[ monte carlo ] %d runs: feedback %d (95 %% CI [%.3f, %.3f]), open loop %d "
                "([%.3f, %.3f]); %.1f s\n",

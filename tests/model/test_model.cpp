@@ -150,7 +150,8 @@ TEST(Model, TheLoaderAndTheCompileStepReportTheSameCameraRule) {
   ASSERT_FALSE(paper.empty());
   ASSERT_EQ(paper.find("\ncamera:"), std::string::npos);
   const std::string camera_section =
-      paper + "\ncamera:\n  width: 640\n  height: 480\n  fx: 700\n  fy: 700\n"
+      paper +
+      "\ncamera:\n  width: 640\n  height: 480\n  fx: 700\n  fy: 700\n"
       "  position: [0, 0, 1]\n  fps: 30\n";
   struct Case {
     std::string yaml;  // one more key of the camera section
@@ -158,10 +159,26 @@ TEST(Model, TheLoaderAndTheCompileStepReportTheSameCameraRule) {
     std::string field;
   };
   const Case cases[] = {
-      {"  look_at: [0, 0, 1]\n", [](CameraSpec& c) { c.look_at = {0, 0, 1}; }, "look_at"},
-      {"  look_at: [1, 0, 1]\n", [](CameraSpec& c) { c.look_at = {1, 0, 1}; }, "look_at"},
-      {"  up: [0, 0, 1]\n", [](CameraSpec& c) { c.up = {0, 0, 1}; }, "up"},
-      {"  up: [0, 0, 0]\n", [](CameraSpec& c) { c.up = {0, 0, 0}; }, "up"},
+      {"  look_at: [0, 0, 1]\n",
+       [](CameraSpec& c) {
+         c.look_at = {0, 0, 1};
+       },
+       "look_at"},
+      {"  look_at: [1, 0, 1]\n",
+       [](CameraSpec& c) {
+         c.look_at = {1, 0, 1};
+       },
+       "look_at"},
+      {"  up: [0, 0, 1]\n",
+       [](CameraSpec& c) {
+         c.up = {0, 0, 1};
+       },
+       "up"},
+      {"  up: [0, 0, 0]\n",
+       [](CameraSpec& c) {
+         c.up = {0, 0, 0};
+       },
+       "up"},
       {"  exposure: 0.05\n", [](CameraSpec& c) { c.exposure = 0.05; }, "exposure"},
   };
   for (const Case& c : cases) {

@@ -55,7 +55,8 @@ TEST(Studies, SimStudyErrorsFallWithTheTolerance) {
       for (const auto& row : r.rows)
         if (row.setting.method == method && row.setting.formulation == f) curve.push_back(&row);
       ASSERT_EQ(curve.size(), 4u);
-      EXPECT_LT(curve.back()->err_k, 1e-3 * curve.front()->err_k) << studies::label(curve.back()->setting);
+      EXPECT_LT(curve.back()->err_k, 1e-3 * curve.front()->err_k)
+          << studies::label(curve.back()->setting);
       const auto& other =
           f == sim::Formulation::kReduced ? r.reference_general : r.reference_reduced;
       EXPECT_DOUBLE_EQ(curve.front()->err_s_T, std::abs(curve.front()->s_T - other.s_T));

@@ -92,10 +92,11 @@ using MonteCarloProgress = std::function<void(long done, long total)>;
 /// `n` runs of each of `controllers` ("open-loop", "feedback"; each at most once) on `threads`
 /// std::threads (0: std::thread::hardware_concurrency()). Run i's world obeys
 /// perturb(nominal.spec, p, seed, i), compiled; the loop assumes `nominal` with
-/// controller.mode set to the controller. Experiments are handed out by index, and each result is stored at its index, so
-/// the records do not depend on the thread count. An exception in any experiment stops the others
-/// and is rethrown (a run that fails — contact lost, safe stop — is a result, not an exception).
-/// std::invalid_argument for n < 1, an unknown or repeated controller, invalid perturbations.
+/// controller.mode set to the controller. Experiments are handed out by index, and each result is
+/// stored at its index, so the records do not depend on the thread count. An exception in any
+/// experiment stops the others and is rethrown (a run that fails — contact lost, safe stop — is a
+/// result, not an exception). std::invalid_argument for n < 1, an unknown or repeated controller,
+/// invalid perturbations.
 MonteCarloResult run_montecarlo(const model::Model& nominal_model, const Perturbations& p, int n,
                                 std::uint64_t seed, const std::vector<std::string>& controllers,
                                 unsigned threads = 0, const MonteCarloProgress& progress = {});

@@ -70,7 +70,7 @@ class Recorder {
 
   std::filesystem::path dir_;
   std::optional<files::OutputSet> outputs_;  // the staging of DIR; empty once finished
-  std::filesystem::path tmp_;                 // where DIR is built, empty once finished
+  std::filesystem::path tmp_;                // where DIR is built, empty once finished
   RecordingMetadata meta_;
   std::unique_ptr<FrameWriter> writer_;
   std::ofstream frames_csv_, joint_csv_;

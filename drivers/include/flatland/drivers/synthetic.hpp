@@ -5,8 +5,8 @@
 #pragma once
 
 #include "flatland/drivers/interfaces.hpp"
-#include "flatland/render/renderer.hpp"
 #include "flatland/model/model.hpp"
+#include "flatland/render/renderer.hpp"
 #include "flatland/sim/hybrid.hpp"
 
 #include <array>
@@ -182,8 +182,7 @@ class SimJoint final : public Joint {
 /// faults (stop, stall, occlusion) from the scene's `faults` section.
 class SyntheticCamera final : public Camera {
  public:
-  SyntheticCamera(std::shared_ptr<const model::Model> model, const SimWorld& world,
-                  double t_start);
+  SyntheticCamera(std::shared_ptr<const model::Model> model, const SimWorld& world, double t_start);
   std::optional<CameraFrame> poll(double now) override;
   std::string describe() const override { return "synthetic"; }
   const std::vector<render::FrameTruth>& truths() const { return truths_; }

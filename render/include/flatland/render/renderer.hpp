@@ -4,9 +4,9 @@
 #pragma once
 
 #include "flatland/camera/camera_model.hpp"
+#include "flatland/model/model.hpp"
 #include "flatland/render/effects.hpp"
 #include "flatland/render/gl_context.hpp"
-#include "flatland/model/model.hpp"
 #include "flatland/sim/simulate.hpp"
 
 #include <opencv2/core.hpp>

@@ -41,14 +41,15 @@ struct CalibrationStudyCell {
 };
 
 struct CalibrationStudyOptions {
-  bool quick = false;  ///< 2 trials per cell instead of 8
+  bool quick = false;      ///< 2 trials per cell instead of 8
   sim::Progress progress;  ///< (cells done, cells)
 };
 
 struct CalibrationStudyResult {
   CalibrationStudyCamera truth;
   int trials = 0;
-  std::vector<CalibrationStudyCell> cells;  ///< views-major: 5, 10, 20, 40 views x noise 0, 0.1, 0.3, 1 px
+  std::vector<CalibrationStudyCell>
+      cells;  ///< views-major: 5, 10, 20, 40 views x noise 0, 0.1, 0.3, 1 px
 };
 
 /// The study; each cell's corners come from a std::mt19937_64 seeded by the cell alone.

@@ -29,7 +29,7 @@ struct RenderStudyCell {
   double scale = 1;  ///< of the scene's image size
   int width = 0, height = 0;
   double fx = 0, radius_px = 0;
-  int positions = 0, frames = 0;  ///< frames: timed renders
+  int positions = 0, frames = 0;                                    ///< frames: timed renders
   double err_rms = NAN, err_max = NAN, bias_x = NAN, bias_y = NAN;  ///< px
   double ms_median = NAN, ms_p95 = NAN, fps_median = NAN, fps_mean = NAN;  ///< wall
 };
@@ -55,8 +55,8 @@ struct RenderStudyResult {
   std::vector<cv::Size> resolutions;  ///< per scale
   std::vector<RenderStudyPosition> positions;
   std::vector<RenderStudyCell> cells;  ///< scale-major, then factor
-  std::uint64_t seed = 0;     ///< the scene's effects.seed: the positions' draws
-  std::string gl;             ///< the GL context's description
+  std::uint64_t seed = 0;              ///< the scene's effects.seed: the positions' draws
+  std::string gl;                      ///< the GL context's description
   /// The camera is oblique or distorted: the image of the face is not a scaled copy of it, so
   /// the errors include the projection's own bias, not only the renderer's.
   bool projection_biased = false;
@@ -65,7 +65,8 @@ struct RenderStudyResult {
 
 /// The study on a compiled scene with a camera (std::invalid_argument otherwise, or when the
 /// camera sees too little free table for the positions); std::runtime_error without GL.
-RenderStudyResult run_render_study(const model::Model& model, const RenderStudyOptions& options = {});
+RenderStudyResult run_render_study(const model::Model& model,
+                                   const RenderStudyOptions& options = {});
 
 /// render.csv: one row per cell.
 std::string render_study_csv(const RenderStudyResult& result);

@@ -22,7 +22,7 @@ std::string label(const IntegratorSetting& s);
 
 struct SimStudyRow {
   IntegratorSetting setting;
-  long steps = 0, rhs_evals = 0;  ///< of the run to T
+  long steps = 0, rhs_evals = 0;                   ///< of the run to T
   double s_T = NAN, err_s_T = NAN, cpu_s_T = NAN;  ///< s_h(T), its error, CPU s per run
   double k = NAN, err_k = NAN, cpu_k = NAN;        ///< k*, its error, CPU s per solve
   int simulations = 0;                             ///< runs of one solve
@@ -30,8 +30,8 @@ struct SimStudyRow {
 };
 
 struct SimStudyOptions {
-  bool quick = false;    ///< a few points of each curve (the tightest always among them)
-  double min_cpu = 0.02;  ///< s: each timing repeats until this much CPU time has passed
+  bool quick = false;      ///< a few points of each curve (the tightest always among them)
+  double min_cpu = 0.02;   ///< s: each timing repeats until this much CPU time has passed
   sim::Progress progress;  ///< (settings done, settings)
 };
 
