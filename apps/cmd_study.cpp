@@ -201,7 +201,9 @@ void run_calibration_study(const StudyOptions& o) {
   if (!dir.empty()) check_output_directory("--out", dir, o.force);
   const bool plots = !dir.empty() && !o.no_plot;
   if (plots) require_gnuplot();
-  std::cerr << "flatland: study calibration: 16 cells x " << (o.quick ? 2 : 8)
+  const studies::CalibrationStudyGrid grid = studies::calibration_study_grid(o.quick);
+  std::cerr << "flatland: study calibration: " << grid.views.size() * grid.noises.size()
+            << " cells x " << grid.trials
             << " trials (synthetic corners, cv::projectPoints + Gaussian noise)\n";
   studies::CalibrationStudyResult study;
   {
@@ -211,7 +213,7 @@ void run_calibration_study(const StudyOptions& o) {
     so.progress = bar.callback();
     study = studies::run_calibration_study(so);
   }
-  const int trials = study.trials;
+  const int trials = study.grid.trials;
   const std::array<double, 6> truth_p = study.truth.parameters();
   Json rows = Json::array();
   for (const studies::CalibrationStudyCell& c : study.cells) {

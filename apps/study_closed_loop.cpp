@@ -122,7 +122,6 @@ void run_closed_loop_study(const StudyOptions& o) {
   const int n = grid.runs_per_cell;
   const std::uint64_t seed = studies::kClosedLoopSeed;
   studies::ClosedLoopStudyOptions so;
-  so.quick = o.quick;
   so.threads = std::max(1u, std::thread::hardware_concurrency());
   std::cerr << "flatland: study closed-loop: " << grid.cells.size() << " cells ("
             << grid.rates.size() << " rates x " << grid.latencies.size()
@@ -132,7 +131,7 @@ void run_closed_loop_study(const StudyOptions& o) {
   {
     ProgressBar bar("study closed-loop");
     so.progress = bar.callback();
-    study = studies::run_closed_loop_study(*nominal, so);
+    study = studies::run_closed_loop_study(*nominal, grid, so);
   }
   const std::vector<double>& rates = grid.rates;
   const std::vector<double>& latencies = grid.latencies;

@@ -98,15 +98,17 @@ CalibrationStudyCell measure(const CalibrationStudyCamera& truth, int nv, double
 
 }  // namespace
 
+CalibrationStudyGrid calibration_study_grid(bool quick) {
+  return {{5, 10, 20, 40}, {0, 0.1, 0.3, 1}, quick ? 2 : 8};
+}
+
 CalibrationStudyResult run_calibration_study(const CalibrationStudyOptions& options) {
   CalibrationStudyResult out;
-  out.trials = options.quick ? 2 : 8;
-  const std::vector<int> view_counts = {5, 10, 20, 40};
-  const std::vector<double> noises = {0, 0.1, 0.3, 1};
-  const long total = static_cast<long>(view_counts.size() * noises.size());
-  for (int nv : view_counts)
-    for (double sigma : noises) {
-      out.cells.push_back(measure(out.truth, nv, sigma, out.trials));
+  out.grid = calibration_study_grid(options.quick);
+  const long total = static_cast<long>(out.grid.views.size() * out.grid.noises.size());
+  for (int nv : out.grid.views)
+    for (double sigma : out.grid.noises) {
+      out.cells.push_back(measure(out.truth, nv, sigma, out.grid.trials));
       if (options.progress) options.progress(static_cast<long>(out.cells.size()), total);
     }
   return out;

@@ -246,10 +246,10 @@ ClosedLoopGrid closed_loop_grid(const model::Model& nominal, bool quick) {
   return grid;
 }
 
-ClosedLoopStudyResult run_closed_loop_study(const model::Model& nominal,
+ClosedLoopStudyResult run_closed_loop_study(const model::Model& nominal, const ClosedLoopGrid& grid,
                                             const ClosedLoopStudyOptions& options) {
   ClosedLoopStudyResult out;
-  out.grid = closed_loop_grid(nominal, options.quick);
+  out.grid = grid;
   out.threads =
       options.threads ? options.threads : std::max(1u, std::thread::hardware_concurrency());
   const int n = out.grid.runs_per_cell;

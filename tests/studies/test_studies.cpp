@@ -80,7 +80,7 @@ TEST(Studies, CalibrationStudyRecoversTheCameraWithoutNoise) {
   o.quick = true;
   const studies::CalibrationStudyResult r = studies::run_calibration_study(o);
   ASSERT_EQ(r.cells.size(), 16u);
-  EXPECT_EQ(r.trials, 2);
+  EXPECT_EQ(r.grid.trials, 2);
   for (const auto& c : r.cells) {
     EXPECT_EQ(c.failures, 0) << c.views << " views, " << c.noise_px << " px";
     EXPECT_EQ(c.trials, 2);
@@ -108,9 +108,8 @@ TEST(Studies, ClosedLoopQuickGridHasACellThatMustFail) {
   EXPECT_EQ(grid.cells.back().controller, "open-loop");
 
   studies::ClosedLoopStudyOptions o;
-  o.quick = true;
   o.threads = 2;
-  const studies::ClosedLoopStudyResult r = studies::run_closed_loop_study(*nominal, o);
+  const studies::ClosedLoopStudyResult r = studies::run_closed_loop_study(*nominal, grid, o);
   ASSERT_EQ(r.cells.size(), grid.cells.size());
   for (const auto& c : r.cells) {
     ASSERT_EQ(c.runs.size(), 2u);

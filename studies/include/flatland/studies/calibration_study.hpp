@@ -40,6 +40,15 @@ struct CalibrationStudyCell {
   double time_s = 0;  ///< mean wall time of one calibration (without its covariance)
 };
 
+/// What the study measures: 5, 10, 20 and 40 views at corner noise 0, 0.1, 0.3 and 1 px, each
+/// cell over 8 trials (quick: 2).
+struct CalibrationStudyGrid {
+  std::vector<int> views;
+  std::vector<double> noises;  ///< px
+  int trials = 0;
+};
+CalibrationStudyGrid calibration_study_grid(bool quick);
+
 struct CalibrationStudyOptions {
   bool quick = false;      ///< 2 trials per cell instead of 8
   sim::Progress progress;  ///< (cells done, cells)
@@ -47,9 +56,8 @@ struct CalibrationStudyOptions {
 
 struct CalibrationStudyResult {
   CalibrationStudyCamera truth;
-  int trials = 0;
-  std::vector<CalibrationStudyCell>
-      cells;  ///< views-major: 5, 10, 20, 40 views x noise 0, 0.1, 0.3, 1 px
+  CalibrationStudyGrid grid;
+  std::vector<CalibrationStudyCell> cells;  ///< views-major, in the grid's order
 };
 
 /// The study; each cell's corners come from a std::mt19937_64 seeded by the cell alone.

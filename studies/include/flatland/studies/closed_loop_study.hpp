@@ -65,7 +65,6 @@ struct ClosedLoopCellResult {
 };
 
 struct ClosedLoopStudyOptions {
-  bool quick = false;
   unsigned threads = 0;    ///< 0: std::thread::hardware_concurrency()
   sim::Progress progress;  ///< (experiments done, experiments)
 };
@@ -82,10 +81,11 @@ struct ClosedLoopStudyResult {
 /// a scene without a camera or a butterfly, or one that some cell's loop cannot run.
 ClosedLoopGrid closed_loop_grid(const model::Model& nominal, bool quick);
 
-/// The study: each cell's scene is the nominal one with the cell's camera and controller,
-/// compiled; each world is its perturbed scene, compiled. An exception in any run stops the
-/// others and is rethrown (a failed experiment is a result, not an exception).
-ClosedLoopStudyResult run_closed_loop_study(const model::Model& nominal,
+/// The study over `grid` (closed_loop_grid of the same scene): each cell's scene is the nominal
+/// one with the cell's camera and controller, compiled; each world is its perturbed scene,
+/// compiled. An exception in any run stops the others and is rethrown (a failed experiment is a
+/// result, not an exception).
+ClosedLoopStudyResult run_closed_loop_study(const model::Model& nominal, const ClosedLoopGrid& grid,
                                             const ClosedLoopStudyOptions& options = {});
 
 /// closed_loop.csv: one row per cell (rate, latency, jitter, controller, runs, successes, rate
