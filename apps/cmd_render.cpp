@@ -4,6 +4,7 @@
 
 #include "flatland/camera/camera_file.hpp"
 
+#include "flatland/model/model.hpp"
 #include "flatland/render/renderer.hpp"
 #include "flatland/render/video_writer.hpp"
 #include "flatland/sim/curve.hpp"
@@ -256,7 +257,7 @@ void run_render(const RenderOptions& o) {
 
   // The renderer validates the camera and effects (bad input) and makes the GL context (a
   // runtime failure), both before any file exists.
-  render::Renderer renderer(compiled, backend);
+  render::Renderer renderer(model::render_setup(*compiled), backend);
   const camera::CameraModel& model = renderer.camera();
   const std::string gl = renderer.gl_description();
 

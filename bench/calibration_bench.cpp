@@ -1,10 +1,11 @@
 // Calibration wall time for 20 rendered chessboard views: flatland's Ceres calibration (both
 // passes, with and without the covariance) against cv::calibrateCamera on the same corners.
 // Results: docs/CALIBRATION.md.
-#include "flatland/model/compile.hpp"
+#include "flatland/calibration/intrinsics.hpp"
 #include "flatland/camera/board.hpp"
 #include "flatland/camera/camera_model.hpp"
-#include "flatland/calibration/intrinsics.hpp"
+#include "flatland/model/compile.hpp"
+#include "flatland/model/model.hpp"
 #include "flatland/render/effects.hpp"
 #include "flatland/render/renderer.hpp"
 
@@ -70,7 +71,7 @@ const std::vector<BoardView>& views() {
       s.camera = cam;
       s.effects.supersample = 4;
       s.targets = {t};
-      render::Renderer r(flatland::model::compile(s));
+      render::Renderer r(flatland::model::render_setup(*flatland::model::compile(s)));
       render::SceneState state;
       state.disk_center = {5.0, 5.0};
       cv::Mat linear = r.render_linear(state);
@@ -124,7 +125,7 @@ void BM_DetectChessboard(benchmark::State& state) {
   s.camera = cam;
   s.effects.supersample = 2;
   s.targets = {t};
-  render::Renderer r(flatland::model::compile(s));
+  render::Renderer r(flatland::model::render_setup(*flatland::model::compile(s)));
   render::SceneState st;
   st.disk_center = {5.0, 5.0};
   const cv::Mat image = r.render_8u(st);

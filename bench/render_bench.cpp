@@ -8,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
+#include "flatland/model/model.hpp"
 #include "flatland/render/renderer.hpp"
 
 #include <filesystem>
@@ -123,7 +124,9 @@ void TrivialScene(benchmark::State& state, render::GlBackend backend, int width,
 
 void Render(benchmark::State& state, render::GlBackend backend, int width, int height,
             int supersample) {
-  render::Renderer r(flatland::model::compile(camera_scene(width, height, supersample)), backend);
+  render::Renderer r(flatland::model::render_setup(
+                         *flatland::model::compile(camera_scene(width, height, supersample))),
+                     backend);
   const render::SceneState st = mid_roll();
   for (auto _ : state) {
     cv::Mat image = r.render_8u(st);
@@ -135,8 +138,9 @@ void Render(benchmark::State& state, render::GlBackend backend, int width, int h
 
 // H.264 ('avc1') encoding through OpenCV's FFmpeg writer, of rendered 640x480 frames.
 void Mp4Encode(benchmark::State& state) {
-  render::Renderer r(flatland::model::compile(camera_scene(640, 480, 1)),
-                     render::GlBackend::kOsmesa);
+  render::Renderer r(
+      flatland::model::render_setup(*flatland::model::compile(camera_scene(640, 480, 1))),
+      render::GlBackend::kOsmesa);
   const cv::Mat frame = r.render_8u(mid_roll());
   const std::string path =
       (std::filesystem::temp_directory_path() / "flatland_bench_encode.mp4").string();

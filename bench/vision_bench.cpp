@@ -5,6 +5,7 @@
 #include "flatland/model/compile.hpp"
 #include <benchmark/benchmark.h>
 
+#include "flatland/model/model.hpp"
 #include "flatland/render/renderer.hpp"
 #include "flatland/vision/mapping.hpp"
 #include "flatland/vision/tracker.hpp"
@@ -36,7 +37,7 @@ const cv::Mat& frame() {
     s.effects.blur_subframes = 8;
     s.effects.noise_read_dn = 2;
     const sim::RunResult run = sim::run_spec(s.sim);
-    render::Renderer renderer(flatland::model::compile(s));
+    render::Renderer renderer(flatland::model::render_setup(*flatland::model::compile(s)));
     return renderer.capture(run.trajectory, 2.0).image;
   }();
   return image;

@@ -9,8 +9,8 @@ set(FLATLAND_LAYERS
   "sim:"
   "scene:sim"
   "camera:"
-  "model:scene,sim,camera,vision,control"
-  "render:model,scene,sim,camera,vision,control"
+  "render:scene,sim,camera"
+  "model:render,scene,sim,camera,vision,control"
   "vision:camera,sim"
   "calibration:vision,camera,sim"
   "control:sim"
@@ -18,6 +18,8 @@ set(FLATLAND_LAYERS
   "studies:drivers,control,vision,render,calibration,model,scene,camera,sim,files")
 # Modules whose headers must not include flatland/scene, flatland/model or flatland/render.
 set(FLATLAND_BELOW_MODEL files sim camera vision calibration control)
+# Modules that read the scene's sections but sit below the compiled Model: no flatland/model.
+set(FLATLAND_BELOW_MODEL_WITH_SCENE render)
 
 # The flatland modules that `target` links, transitively (flatland_x targets, by module name).
 function(flatland_module_closure target out)
@@ -65,10 +67,14 @@ function(flatland_check_layers)
       endif()
     endforeach()
   endforeach()
-  foreach(module ${FLATLAND_BELOW_MODEL})
+  foreach(module ${FLATLAND_BELOW_MODEL} ${FLATLAND_BELOW_MODEL_WITH_SCENE})
+    set(forbidden "scene|model|render")
+    if(module IN_LIST FLATLAND_BELOW_MODEL_WITH_SCENE)
+      set(forbidden "model")
+    endif()
     file(GLOB_RECURSE headers ${PROJECT_SOURCE_DIR}/${module}/include/*.hpp)
     foreach(header ${headers})
-      file(STRINGS ${header} bad REGEX "#include [<\"]flatland/(scene|model|render)/")
+      file(STRINGS ${header} bad REGEX "#include [<\"]flatland/(${forbidden})/")
       if(bad)
         file(RELATIVE_PATH name ${PROJECT_SOURCE_DIR} ${header})
         list(GET bad 0 first)

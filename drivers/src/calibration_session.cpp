@@ -58,7 +58,7 @@ struct SessionRenderer {
     Scene s = scene;
     s.targets.clear();
     for (const camera::PlacedBoard& b : boards) s.targets.push_back(target_spec(b));
-    render::Renderer r(model::compile(std::move(s)));
+    render::Renderer r(model::render_setup(*model::compile(std::move(s))));
     render::SceneState st;
     st.hand_angle = hand_angle;
     st.disk_center = {50.0, 50.0};

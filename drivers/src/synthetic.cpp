@@ -404,7 +404,7 @@ SyntheticCamera::SyntheticCamera(std::shared_ptr<const model::Model> model, cons
                                        ": camera: a synthetic camera needs a camera section in "
                                        "the scene")),
       faults_(model->spec.faults),
-      renderer_(model),
+      renderer_(model::render_setup(*model)),
       t_start_(t_start),
       capture_jitter_(model->spec.effects.jitter_s),
       latency_rng_(model->spec.effects.seed ^ 0x9e3779b97f4a7c15ULL) {}

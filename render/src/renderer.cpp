@@ -502,9 +502,8 @@ struct Renderer::Impl {
     bool behind = false;  // drawn with a polygon offset: coplanar geometry drawn later wins
   };
 
-  std::shared_ptr<const model::Model> model;
-  const Scene& scene;  // model->spec
-  camera::CameraModel camera;
+  RenderSetup setup;
+  camera::CameraModel& camera = setup.camera;
   DistortionMaps maps;
   int supersample = 1;
   double disk_radius = 0;
@@ -527,15 +526,14 @@ struct Renderer::Impl {
   // image before quantisation: reused.
   cv::Mat ideal_bgr, ideal_f32, distorted_f32, subframe, linear_scratch;
 
-  Impl(std::shared_ptr<const model::Model> m, GlBackend backend)
-      : model(std::move(m)), scene(model->spec), camera(*model->camera), rng(scene.effects.seed) {
-    const Scene& s = scene;
+  Impl(const RenderSetup& given, GlBackend backend) : setup(given), rng(given.effects.seed) {
+    const RenderSetup& s = setup;
     supersample = s.effects.supersample;
     if (supersample < 1 || supersample > 8)
       throw std::invalid_argument("effects.supersample: must be between 1 and 8");
-    if (s.sim.object.kind != sim::ObjectSpec::Kind::kDisk)
+    if (s.object.kind != sim::ObjectSpec::Kind::kDisk)
       throw std::invalid_argument("object.type: the renderer draws disks only");
-    disk_radius = s.sim.object.radius;
+    disk_radius = s.object.radius;
     maps = make_distortion_maps(camera, supersample);
     fbo_width = maps.ideal_width;
     fbo_height = maps.ideal_height;
@@ -544,10 +542,10 @@ struct Renderer::Impl {
     build_program();
     build_framebuffer();
     table = upload(table_mesh(s.render.table_extent));
-    hand = upload(hand_mesh(*model->hand, s.render.hand_thickness));
+    hand = upload(hand_mesh(*s.hand, s.render.hand_thickness));
     disk = upload(disk_side_mesh(disk_radius, s.render.disk_thickness));
     disk_top = upload(disk_top_quad(disk_radius, s.render.disk_thickness));
-    for (const camera::PlacedBoard& b : model->boards) targets.push_back(make_target(b));
+    for (const camera::PlacedBoard& b : s.boards) targets.push_back(make_target(b));
     for (const Drawable& t : targets) textured_targets = textured_targets || t.texture != 0;
     readback.create(fbo_height, fbo_width, CV_8UC4);
     const float shade = static_cast<float>(kAmbient + (1.0 - kAmbient) * std::max(kLight[2], 0.0));
@@ -861,7 +859,7 @@ struct Renderer::Impl {
     tr.t = st.t;
     tr.theta = st.hand_angle;
     tr.s_h = st.s_h;
-    const double z = scene.render.disk_thickness;
+    const double z = setup.render.disk_thickness;
     tr.disk_center_table = {st.disk_center.x, st.disk_center.y, z};
     tr.marker_table = {st.disk_center.x + kMarkerOffset * disk_radius * std::cos(st.disk_angle),
                        st.disk_center.y + kMarkerOffset * disk_radius * std::sin(st.disk_angle), z};
@@ -872,12 +870,10 @@ struct Renderer::Impl {
   }
 };
 
-Renderer::Renderer(std::shared_ptr<const model::Model> model, std::optional<GlBackend> backend) {
-  if (!model) throw std::invalid_argument("render: no model");
-  if (!model->camera)
-    throw std::invalid_argument("camera: the scene has no camera section (needed to render)");
-  const GlBackend chosen = backend ? *backend : parse_backend(model->spec.render.backend);
-  impl_ = std::make_unique<Impl>(std::move(model), chosen);
+Renderer::Renderer(const RenderSetup& setup, std::optional<GlBackend> backend) {
+  if (!setup.hand) throw std::invalid_argument("render: no hand to draw");
+  const GlBackend chosen = backend ? *backend : parse_backend(setup.render.backend);
+  impl_ = std::make_unique<Impl>(setup, chosen);
 }
 
 Renderer::~Renderer() = default;
@@ -898,7 +894,7 @@ Frame Renderer::capture(const sim::Trajectory& trajectory, double t) {
 }
 
 Frame Renderer::capture(const StateAt& state_at, double t) {
-  const EffectsSpec& fx = impl_->scene.effects;
+  const EffectsSpec& fx = impl_->setup.effects;
   EffectsRng& rng = impl_->rng;
   Frame frame;
   const double t_capture = jittered_time(t, fx.jitter_s, rng);

@@ -118,7 +118,7 @@ std::vector<RenderStudyPosition> free_positions(const Scene& scene,
   std::vector<camera::CameraModel> cams;
   std::vector<cv::Mat> backgrounds;
   for (double s : scales) {
-    render::Renderer r(model::compile(cell_scene(scene, s, 1)));
+    render::Renderer r(model::render_setup(*model::compile(cell_scene(scene, s, 1))));
     cams.push_back(r.camera());
     cv::Mat gray;
     cv::cvtColor(r.render_8u(disk_at({1e3, 1e3}, 0)), gray, cv::COLOR_BGR2GRAY);
@@ -159,7 +159,7 @@ RenderStudyCell measure_cell(const Scene& scene, double scale, int factor,
                              const std::vector<RenderStudyPosition>& positions,
                              double timing_seconds, std::string& gl,
                              const std::function<void()>& tick) {
-  render::Renderer r(model::compile(cell_scene(scene, scale, factor)));
+  render::Renderer r(model::render_setup(*model::compile(cell_scene(scene, scale, factor))));
   gl = r.gl_description();
   const camera::CameraModel& cam = r.camera();
   const double radius = scene.sim.object.radius, z = scene.render.disk_thickness;

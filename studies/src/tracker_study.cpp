@@ -155,7 +155,7 @@ TrackerStudyResult run_tracker_study(const model::Model& model,
       s.effects.quantize = false;
       s.effects.jitter_s = 0;
       s.effects.drop_probability = 0;
-      render::Renderer renderer(model::compile(std::move(s)));
+      render::Renderer renderer(model::render_setup(*model::compile(std::move(s))));
       gl = renderer.gl_description();
       // One noise stream per level, all seeded alike: a frame's noise is the same normal
       // variates times sigma at every level (common random numbers), at every exposure too.

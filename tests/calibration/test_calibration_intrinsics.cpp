@@ -1,10 +1,11 @@
 // Intrinsics calibration against known truth: 20 rendered chessboard views (σ = 1 DN noise) of a
 // distorted camera, the same corners through cv::calibrateCamera, outlier views, the bad-input
 // errors, ChArUco, and `flatland calibrate` end to end.
-#include "flatland/model/compile.hpp"
+#include "cli_support.hpp"
 #include "flatland/camera/board.hpp"
 #include "flatland/camera/camera_model.hpp"
-#include "cli_support.hpp"
+#include "flatland/model/compile.hpp"
+#include "render_support.hpp"
 
 #include "flatland/camera/camera_file.hpp"
 #include "flatland/calibration/intrinsics.hpp"
@@ -99,7 +100,7 @@ RenderedViews render_views(const TargetSpec& board_template, const camera::Board
     s.effects.supersample = kSupersample;
     s.effects.noise_read_dn = 1.0;
     s.targets = {t};
-    render::Renderer r(flatland::model::compile(s));
+    render::Renderer r(flatland_test::render_setup(s));
     render::SceneState state;
     state.disk_center = {5.0, 5.0};  // the disk out of view
     cv::Mat linear = r.render_linear(state);
@@ -248,7 +249,7 @@ TEST(CalibrationIntrinsics, ChessboardNotationIsOpenCvsPatternSize) {
   s.camera = truth_camera();
   s.effects.supersample = 2;
   s.targets = parsed.targets;
-  render::Renderer r(flatland::model::compile(s));
+  render::Renderer r(flatland_test::render_setup(s));
   render::SceneState state;
   state.disk_center = {5.0, 5.0};  // the disk out of view
   const cv::Mat image = r.render_8u(state);
@@ -662,7 +663,7 @@ TEST_F(CalibrateCli, FrontoParallelImagesExitTwo) {
     s.camera = truth_camera();
     s.effects.supersample = 2;
     s.targets = {t};
-    render::Renderer rr(flatland::model::compile(s));
+    render::Renderer rr(flatland_test::render_setup(s));
     render::SceneState st;
     st.disk_center = {5.0, 5.0};
     cv::imwrite((dir_ / "imgs" / ("flat" + std::to_string(i) + ".png")).string(), rr.render_8u(st));

@@ -1,11 +1,12 @@
 // Hand pose from the outline and the joint / table-pose calibration against the renderer's exact
 // truth: the hand pivots at the table origin, hand_angle = encoder + offset, and
 // camera::CameraModel::from_spec gives the true table pose. Frames get 1 DN of read noise.
-#include "flatland/model/compile.hpp"
-#include "flatland/camera/camera_model.hpp"
 #include "flatland/calibration/joint.hpp"
+#include "flatland/camera/camera_model.hpp"
+#include "flatland/model/compile.hpp"
 #include "flatland/render/renderer.hpp"
 #include "flatland/vision/hand_pose.hpp"
+#include "render_support.hpp"
 
 #include <gtest/gtest.h>
 
@@ -59,7 +60,7 @@ bool one_line(const std::string& s) { return !s.empty() && s.find('\n') == std::
 
 TEST(HandPose, SingleFrameCentreAndAngle) {
   const Scene s = joint_scene();
-  Renderer r(flatland::model::compile(s));
+  Renderer r(flatland_test::render_setup(s));
   EffectsRng rng(3);
   for (double angle : {0.0, 0.4, 1.3, 2.2, 3.0}) {
     const cv::Mat img = hand_frame(r, s, angle, rng);
@@ -75,7 +76,7 @@ TEST(HandPose, ObliqueDistortedCamera) {
   // Camera foot point over the hand's tip region, looking sideways, barrel distortion: the side
   // walls of the plate are in view and the hand is far from the principal point.
   const Scene s = joint_scene({0.15, 0.1, 0.9}, {0.05, 0.02, 0}, {-0.1, 0.02, 0, 0, 0});
-  Renderer r(flatland::model::compile(s));
+  Renderer r(flatland_test::render_setup(s));
   EffectsRng rng(4);
   for (double angle : {0.1, 1.0, 2.4}) {
     const cv::Mat img = hand_frame(r, s, angle, rng);
@@ -111,7 +112,7 @@ TEST(JointCalibration, AxisAndOffsetAcceptance) {
   // Two cameras: the brief's, and one whose view puts the pivot well off the image centre.
   const std::vector<Scene> scenes = {joint_scene(), joint_scene({0.12, 0.08, 1.0}, {0.1, 0.06, 0})};
   for (const Scene& s : scenes) {
-    Renderer r(flatland::model::compile(s));
+    Renderer r(flatland_test::render_setup(s));
     EffectsRng rng(11);
     const double offset = 0.7 * kDeg;
     std::vector<cv::Mat> images;
@@ -135,7 +136,7 @@ TEST(JointCalibration, AxisAndOffsetAcceptance) {
 
 TEST(JointCalibration, RejectsMisreadEncoder) {
   const Scene s = joint_scene();
-  Renderer r(flatland::model::compile(s));
+  Renderer r(flatland_test::render_setup(s));
   EffectsRng rng(5);
   const double offset = -1.2 * kDeg;
   std::vector<cv::Mat> images;
@@ -171,7 +172,7 @@ TargetSpec board_at(double x, double y, double rot_z) {
 cv::Mat board_image(const TargetSpec& board, EffectsRng& rng) {
   Scene s = joint_scene();
   s.targets.push_back(board);
-  Renderer r(flatland::model::compile(s));
+  Renderer r(flatland_test::render_setup(s));
   return hand_frame(r, s, std::numbers::pi / 2, rng);
 }
 
@@ -220,7 +221,7 @@ TEST(JointCalibration, TablePoseFromBoards) {
 
   // And the joint calibrated through the estimated pose instead of the true one.
   const Scene s = joint_scene();
-  Renderer r(flatland::model::compile(s));
+  Renderer r(flatland_test::render_setup(s));
   camera::CameraModel estimated = r.camera();
   estimated.R = pose.R;
   estimated.t = pose.t;

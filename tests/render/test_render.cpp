@@ -1,11 +1,12 @@
 // Rendered images against exact truth: the disk's centroid and a chessboard's corners against
 // cv::projectPoints (also through a strongly distorted lens), determinism, backend agreement and
 // the GL error path.
-#include "flatland/model/compile.hpp"
 #include "flatland/camera/board.hpp"
 #include "flatland/camera/camera_model.hpp"
+#include "flatland/model/compile.hpp"
 #include "flatland/render/renderer.hpp"
 #include "flatland/sim/spec.hpp"
+#include "render_support.hpp"
 
 #include <gtest/gtest.h>
 #include <opencv2/aruco/charuco.hpp>
@@ -97,7 +98,7 @@ SceneState disk_at(double x, double y, double angle) {
 
 TEST(Render, DiskCentroidMatchesProjectedCentre) {
   const Scene scene = overhead_scene(4);
-  Renderer r(flatland::model::compile(scene));
+  Renderer r(flatland_test::render_setup(scene));
   const double radius_px = 900 * scene.sim.object.radius / (1.0 - scene.render.disk_thickness);
   for (cv::Point2d c :
        {cv::Point2d(0.12, 0.21), cv::Point2d(-0.1, 0.19), cv::Point2d(0.25, 0.22)}) {
@@ -134,7 +135,7 @@ TEST(Render, ChessboardCornersMatchProjectionEvenThroughStrongDistortion) {
     board.position = {-0.12, -0.06, 0.03};  // above the hand
     board.rotation = {0.25, -0.15, 0.1};
     scene.targets = {board};
-    Renderer r(flatland::model::compile(scene));
+    Renderer r(flatland_test::render_setup(scene));
     const cv::Mat image = r.render_8u(disk_at(5.0, 5.0, 0.0));  // the disk out of view
     const double rms = corner_rms(image, board, r.camera());
     ASSERT_GE(rms, 0.0) << "chessboard not found with k1 = " << k1;
@@ -153,7 +154,7 @@ TEST(Render, SameSceneAndSeedGiveIdenticalFrames) {
   scene.effects.jitter_s = 0.001;
   scene.effects.seed = 42;
   const sim::RunResult run = sim::run_spec(scene.sim);
-  Renderer a(flatland::model::compile(scene)), b(flatland::model::compile(scene));
+  Renderer a(flatland_test::render_setup(scene)), b(flatland_test::render_setup(scene));
   for (double t : {0.2, 0.5, 0.8}) {
     const Frame fa = a.capture(run.trajectory, t), fb = b.capture(run.trajectory, t);
     ASSERT_EQ(fa.image.size(), fb.image.size());
@@ -163,7 +164,7 @@ TEST(Render, SameSceneAndSeedGiveIdenticalFrames) {
   // Another seed gives other noise at the same instant.
   Scene other = scene;
   other.effects.seed = 43;
-  Renderer fresh(flatland::model::compile(scene)), reseeded(flatland::model::compile(other));
+  Renderer fresh(flatland_test::render_setup(scene)), reseeded(flatland_test::render_setup(other));
   const Frame f42 = fresh.capture(run.trajectory, 0.5), f43 = reseeded.capture(run.trajectory, 0.5);
   EXPECT_GT(cv::norm(f42.image, f43.image, cv::NORM_INF), 0.0);
 }
@@ -178,7 +179,7 @@ TEST(Render, BlurredCaptureIsTheMeanOfItsSubFrames) {
   scene.effects.blur_subframes = 4;
   scene.effects.quantize = false;  // the float image, before rounding
   const sim::RunResult run = sim::run_spec(scene.sim);
-  Renderer blurred(flatland::model::compile(scene)), single(flatland::model::compile(scene));
+  Renderer blurred(flatland_test::render_setup(scene)), single(flatland_test::render_setup(scene));
   for (double t : {0.3, 0.6}) {
     const Frame f = blurred.capture(run.trajectory, t);
     std::vector<cv::Mat> subs;
@@ -198,11 +199,11 @@ TEST(Render, OsmesaAndEglAgreeWithinOneLevel) {
   const Scene scene = overhead_scene(2);
   std::unique_ptr<Renderer> egl;
   try {
-    egl = std::make_unique<Renderer>(flatland::model::compile(scene), GlBackend::kEgl);
+    egl = std::make_unique<Renderer>(flatland_test::render_setup(scene), GlBackend::kEgl);
   } catch (const std::runtime_error& e) {
     GTEST_SKIP() << "EGL is not available here: " << e.what();
   }
-  Renderer osmesa(flatland::model::compile(scene), GlBackend::kOsmesa);
+  Renderer osmesa(flatland_test::render_setup(scene), GlBackend::kOsmesa);
   const SceneState st = disk_at(0.1, 0.2, 0.7);
   const cv::Mat a = osmesa.render_8u(st), b = egl->render_8u(st);
   EXPECT_LE(cv::norm(a, b, cv::NORM_INF), 1.0);
@@ -212,7 +213,7 @@ TEST(Render, MissingBackendNamesItAndItsPackage) {
   const Scene scene = overhead_scene(1);
   setenv("FLATLAND_OSMESA_LIBRARY", "/nonexistent/libOSMesa.so.8", 1);
   try {
-    Renderer r(flatland::model::compile(scene), GlBackend::kOsmesa);
+    Renderer r(flatland_test::render_setup(scene), GlBackend::kOsmesa);
     ADD_FAILURE() << "expected an error";
   } catch (const std::runtime_error& e) {
     const std::string msg = e.what();
@@ -225,7 +226,7 @@ TEST(Render, MissingBackendNamesItAndItsPackage) {
 
 TEST(Render, SceneWithoutCameraIsRejected) {
   Scene scene;
-  EXPECT_THROW(Renderer r(flatland::model::compile(scene)), std::invalid_argument);
+  EXPECT_THROW(Renderer r(flatland_test::render_setup(scene)), std::invalid_argument);
 }
 
 TEST(Render, CharucoBoardIsDetectedWhereItIs) {
@@ -242,7 +243,7 @@ TEST(Render, CharucoBoardIsDetectedWhereItIs) {
   board.position = {-0.14, -0.1, 0.03};
   board.rotation = {0.2, -0.1, 0.05};
   scene.targets = {board};
-  Renderer r(flatland::model::compile(scene));
+  Renderer r(flatland_test::render_setup(scene));
   cv::Mat gray;
   cv::cvtColor(r.render_8u(disk_at(5.0, 5.0, 0.0)), gray, cv::COLOR_BGR2GRAY);
   const auto dict = cv::aruco::getPredefinedDictionary(cv::aruco::DICT_4X4_50);

@@ -6,6 +6,7 @@
 #include "flatland/sim/spec.hpp"
 #include "flatland/vision/mapping.hpp"
 #include "flatland/vision/tracker.hpp"
+#include "render_support.hpp"
 #include "scene_support.hpp"
 
 #include "cli_support.hpp"
@@ -113,7 +114,7 @@ TEST(VisionMapping, TruthCentreGivesSimulatorContactParameter) {
 // Tracked centres (noise 2 DN, 30 Hz exposure blur) give s_h within 0.005.
 TEST(VisionMapping, TrackedCentreContactParameterError) {
   const Scene s = mapping_scene(2.0, true);
-  render::Renderer renderer(flatland::model::compile(s));
+  render::Renderer renderer(flatland_test::render_setup(s));
   const vision::HandMapping m = mapping_for(s, renderer.camera());
   const sim::RunResult r = run(s);
   vision::Tracker tracker;

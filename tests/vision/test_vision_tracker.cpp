@@ -4,6 +4,7 @@
 #include "flatland/render/renderer.hpp"
 #include "flatland/sim/spec.hpp"
 #include "flatland/vision/tracker.hpp"
+#include "render_support.hpp"
 #include "scene_support.hpp"
 
 #include <gtest/gtest.h>
@@ -39,7 +40,7 @@ const Sequence& sequence(double noise_dn, bool blur) {
   sim::SimulationSpec spec = scene.sim;
   spec.run.record = true;
   const sim::RunResult run = sim::run_spec(spec);
-  render::Renderer renderer(flatland::model::compile(scene));
+  render::Renderer renderer(flatland_test::render_setup(scene));
   Sequence seq;
   seq.camera = renderer.camera();
   const double t_end = run.trajectory.t_end();
@@ -141,7 +142,7 @@ TEST(VisionTracker, LostAndReacquired) {
   sim::SimulationSpec spec = scene.sim;
   spec.run.record = true;
   const sim::RunResult run = sim::run_spec(spec);
-  render::Renderer renderer(flatland::model::compile(scene));
+  render::Renderer renderer(flatland_test::render_setup(scene));
   std::map<int, render::Frame> frames;
   for (int k : {10, 11, 60, 61}) frames[k] = renderer.capture(run.trajectory, k / 30.0);
   render::SceneState away;
@@ -206,7 +207,7 @@ TEST(VisionTracker, ObliqueCameraPlaneFit) {
   sim::SimulationSpec spec = s.sim;
   spec.run.record = true;
   const sim::RunResult run = sim::run_spec(spec);
-  render::Renderer renderer(flatland::model::compile(s));
+  render::Renderer renderer(flatland_test::render_setup(s));
   Sequence seq;
   seq.camera = renderer.camera();
   for (int k = 0; k <= 120; k += 4)

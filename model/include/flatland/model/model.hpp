@@ -8,6 +8,7 @@
 #include "flatland/camera/camera_model.hpp"
 #include "flatland/control/controller.hpp"
 #include "flatland/control/estimator.hpp"
+#include "flatland/render/renderer.hpp"
 #include "flatland/scene/scene.hpp"
 #include "flatland/sim/curve.hpp"
 #include "flatland/sim/rolling.hpp"
@@ -54,6 +55,10 @@ struct Model {
 /// field), the camera (compile_camera), the boards (compile_target), the mapping and the loop's
 /// configs. std::invalid_argument on a value none of them can use.
 std::shared_ptr<const Model> compile(Scene scene);
+
+/// What a render::Renderer needs of a compiled scene: its camera, hand, boards, object, render and
+/// effects sections. std::invalid_argument naming camera unless the scene has one.
+render::RenderSetup render_setup(const Model& model);
 
 /// The pixel -> s_h mapping of a compiled scene's hand and disk seen by `camera` (the scene's, or
 /// a calibrated camera file's), the joint axis at `axis_table`. std::invalid_argument naming

@@ -3,10 +3,12 @@
 // targets, seen by the scene's camera with exact geometry and optional image effects.
 #pragma once
 
+#include "flatland/camera/board.hpp"
 #include "flatland/camera/camera_model.hpp"
-#include "flatland/model/model.hpp"
 #include "flatland/render/effects.hpp"
 #include "flatland/render/gl_context.hpp"
+#include "flatland/scene/scene.hpp"
+#include "flatland/sim/curve.hpp"
 #include "flatland/sim/simulate.hpp"
 
 #include <opencv2/core.hpp>
@@ -44,13 +46,23 @@ struct Frame {
   FrameTruth truth;
 };
 
+/// What a Renderer draws, and how: a compiled scene's part (model::render_setup), or put together
+/// by hand.
+struct RenderSetup {
+  camera::CameraModel camera;
+  std::shared_ptr<const sim::PolynomialHand> hand;  ///< the hand's outline (extruded)
+  std::vector<camera::PlacedBoard> boards;          ///< calibration boards on the table
+  sim::ObjectSpec object;                           ///< a disk: its radius
+  RenderSpec render;                                ///< backend, thicknesses, table extent
+  EffectsSpec effects;
+};
+
 class Renderer {
  public:
-  /// Needs the model's camera. Creates the GL context (backend from the scene's render.backend
-  /// unless `backend` is given). Throws std::invalid_argument on values it cannot draw (an
-  /// object that is not a disk) and std::runtime_error when no GL context can be made.
-  explicit Renderer(std::shared_ptr<const model::Model> model,
-                    std::optional<GlBackend> backend = std::nullopt);
+  /// Creates the GL context (backend from setup.render.backend unless `backend` is given).
+  /// Throws std::invalid_argument on values it cannot draw (an object that is not a disk, no
+  /// hand) and std::runtime_error when no GL context can be made.
+  explicit Renderer(const RenderSetup& setup, std::optional<GlBackend> backend = std::nullopt);
   ~Renderer();
   Renderer(const Renderer&) = delete;
   Renderer& operator=(const Renderer&) = delete;
