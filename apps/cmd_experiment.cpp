@@ -8,6 +8,7 @@
 #include "flatland/drivers/live.hpp"
 #include "flatland/drivers/recorded.hpp"
 #include "flatland/drivers/synthetic.hpp"
+#include "flatland/drivers/tick_log_csv.hpp"
 #include "flatland/render/video_writer.hpp"
 
 #include <opencv2/core.hpp>
@@ -42,65 +43,6 @@ enum class CameraKind { kSynthetic, kRecorded, kLive };
 /// The bundled closed-loop scene, next to the default (paper) scene.
 std::string default_experiment_scene() {
   return (fs::path(default_scene_path()).parent_path() / "airtable-feedback.yaml").string();
-}
-
-/// log.csv columns: every TickLog field, in its order, with its unit in brackets.
-const std::vector<std::string>& log_columns() {
-  static const std::vector<std::string> c = {"t[s]",
-                                             "theta[rad]",
-                                             "theta_dot[rad/s]",
-                                             "command[rad/s^2]",
-                                             "stage",
-                                             "s_est",
-                                             "sdot_est[1/s]",
-                                             "var_s",
-                                             "var_sdot[1/s^2]",
-                                             "estimating",
-                                             "measured",
-                                             "s_meas",
-                                             "t_capture[s]",
-                                             "nis",
-                                             "theta_plan[rad]",
-                                             "s_true",
-                                             "sdot_true[1/s]",
-                                             "theta_true[rad]",
-                                             "fn_ratio",
-                                             "mu_required",
-                                             "nees",
-                                             "mode_true"};
-  return c;
-}
-
-int log_column(const std::string& name) {
-  const auto& c = log_columns();
-  for (std::size_t i = 0; i < c.size(); ++i)
-    if (c[i] == name || c[i].rfind(name + "[", 0) == 0) return static_cast<int>(i) + 1;
-  throw std::logic_error("no log column " + name);
-}
-
-std::string log_csv(const std::vector<drivers::TickLog>& log) {
-  std::string out;
-  const auto& cols = log_columns();
-  for (std::size_t i = 0; i < cols.size(); ++i) out += (i ? "," : "") + cols[i];
-  out += '\n';
-  constexpr double nan = std::numeric_limits<double>::quiet_NaN();
-  for (const drivers::TickLog& r : log) {
-    // s_meas and nis mean something only at ticks that folded in a measurement.
-    const double s_meas = r.measured ? r.s_meas : nan;
-    const double t_capture = r.measured ? r.t_capture : nan;
-    const double nis = r.measured ? r.nis : nan;
-    out += format_number(r.t) + ',' + format_number(r.theta) + ',' + format_number(r.theta_dot) +
-           ',' + format_number(r.command) + ',' + control::to_string(r.stage) + ',' +
-           format_number(r.s_est) + ',' + format_number(r.sdot_est) + ',' + format_number(r.var_s) +
-           ',' + format_number(r.var_sdot) + ',' + (r.estimating ? '1' : '0') + ',' +
-           (r.measured ? '1' : '0') + ',' + format_number(s_meas) + ',' + format_number(t_capture) +
-           ',' + format_number(nis) + ',' + format_number(r.theta_plan) + ',' +
-           format_number(r.s_true) + ',' + format_number(r.sdot_true) + ',' +
-           format_number(r.theta_true) + ',' + format_number(r.fn_ratio) + ',' +
-           format_number(r.mu_required) + ',' + format_number(r.nees) + ',' +
-           (std::isfinite(r.s_true) ? sim::to_string(r.mode_true) : std::string()) + '\n';
-  }
-  return out;
 }
 
 /// The plan as an inline gnuplot data block (t, theta, s_h every 5 ms over [0, duration]; comma
@@ -373,9 +315,11 @@ void run_experiment(const ExperimentOptions& o) {
     if (!kept.empty() && !(fs::file_size(video_tmp, ec) > 0))
       throw std::runtime_error("--video: the MP4 writer (" + codec + ") produced no data");
   }
-  outputs.stage(out / "log.csv", log_csv(loop.log));
+  outputs.stage(out / "log.csv", drivers::tick_log_csv(loop.log));
   if (plots) {
-    const auto col = [](const char* name) { return std::to_string(log_column(name)); };
+    const auto col = [](const char* name) {
+      return std::to_string(drivers::tick_log_column_index(name));
+    };
     const std::string t = col("t");
     const std::string title =
         gnuplot_quote(scene.controller.mode + " experiment (paper Fig. 10): planned vs actual");

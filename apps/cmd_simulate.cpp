@@ -76,40 +76,20 @@ std::string hybrid_text(const sim::SimulationSpec& spec, const sim::RunResult& r
 
 void run_simulate(const SimulateOptions& o) {
   // Everything that can be bad input is checked before anything is computed or written.
-  Scene scene = load_scene_with_overrides(o.common);
-  sim::SimulationSpec& spec = scene.sim;
+  api::SimulateRequest request;
+  request.integrator = integrator_overrides(o.common);
+  if (o.period_opt->count()) request.period = o.period;
+  if (o.k_opt->count()) request.k = o.k;
+  if (o.duration_opt->count()) request.duration = o.duration;
+  if (o.mu.opt->count()) request.mu = o.mu.value;
+  if (o.model_opt->count()) request.model = o.model;
+  request.stop_on_contact_loss = !o.no_stop_on_contact_loss;
+  const Scene scene = load_scene_option(o.common);
+  const api::PreparedSimulation prepared =
+      api::prepare_simulate(scene, request, api::Spelling::kCommandLine);
+  const sim::SimulationSpec& spec = prepared.spec;
   const bool butterfly = spec.motion.kind == sim::MotionSpec::Kind::kButterfly;
-  if ((o.period_opt->count() || o.k_opt->count()) && !butterfly)
-    throw UsageError("--period/--k: the scene's motion is not the butterfly (motion.kind)");
-  if (o.period_opt->count()) {
-    require_positive("--period", o.period, "2T in s");
-    spec.motion.period = o.period;
-    if (!o.duration_opt->count()) spec.duration.reset();  // simulate the new 2T, not the scene's
-  }
-  if (o.k_opt->count()) {
-    require_finite("--k", o.k);
-    spec.motion.k = o.k;
-  }
-  if (o.duration_opt->count()) {
-    require_positive("--duration", o.duration, "s");
-    spec.duration = o.duration;
-  }
   if (o.sample_dt_opt->count()) require_positive("--sample-dt", o.sample_dt, "s");
-  if (o.no_stop_on_contact_loss) spec.run.events.stop_on_contact_loss = false;
-  apply_mu_option(o.mu, spec);
-  if (o.model_opt && o.model_opt->count())
-    spec.run.model = o.model == "hybrid" ? sim::ContactModel::kHybrid : sim::ContactModel::kRolling;
-  if (o.no_stop_on_contact_loss && spec.run.model == sim::ContactModel::kHybrid)
-    throw UsageError(
-        "--no-stop-on-contact-loss: only for the rolling model (the hybrid model flies where "
-        "contact is lost)");
-  std::vector<std::pair<std::string, std::string>> given;
-  if (o.k_opt->count()) given.emplace_back("motion.k", "--k");
-  if (o.period_opt->count()) given.emplace_back("motion.period", "--period");
-  if (o.mu.opt->count()) given.emplace_back("contact.mu", "--mu");
-  if (o.model_opt->count()) given.emplace_back("contact.model", "--model");
-  const auto problem = build_problem_checked(spec, given);
-  sim::resolve_formulation(*problem, spec.run.formulation);  // e.g. reduced for an ellipse
 
   OutputSet outputs(o.common.force);
   const fs::path out = o.common.out;
@@ -119,9 +99,7 @@ void run_simulate(const SimulateOptions& o) {
 
   std::cerr << "flatland: simulating " << scene.origin << " for "
             << format_number(spec.end_time() - spec.initial.t0) << " s\n";
-  sim::RunOptions run_opts = sim::run_options(spec);
-  run_opts.record = true;  // the report needs the dense output and the per-step samples
-  const sim::RunResult r = sim::simulate(problem, spec.initial, run_opts);
+  const sim::RunResult r = api::simulate(prepared);
 
   if (!out.empty()) {
     if (r.trajectory.empty()) throw std::runtime_error("the run recorded no trajectory");
@@ -136,38 +114,7 @@ void run_simulate(const SimulateOptions& o) {
   const double fn_apex = r.fn_apex_ratio ? *r.fn_apex_ratio : std::nan("");
   const bool contact_lost = r.contact_lost || r.fn_min_ratio < 0;
   if (o.common.json) {
-    Json j;
-    j["period"] = butterfly ? number(spec.motion.period) : Json(nullptr);
-    j["k"] = butterfly ? number(spec.motion.k) : Json(nullptr);
-    j["s_T"] = number(s_T);
-    j["s_end"] = number(r.final.s_h);
-    j["sdot_end"] = number(r.final.sdot_h);
-    j["fn_apex_ratio"] = number(fn_apex);
-    j["fn_min_ratio"] = number(r.fn_min_ratio);
-    j["mu_required"] = number(r.mu_required);
-    j["steps"] = r.stats.steps;
-    j["rhs_evals"] = r.stats.rhs_evals;
-    j["contact_lost"] = contact_lost;
-    j["formulation"] = sim::to_string(r.formulation);
-    j["method"] = sim::to_string(r.method);
-    j["stop_reason"] = sim::to_string(r.reason);
-    j["t_end"] = number(r.final.t);
-    j["rejected"] = r.stats.rejected;
-    j["restarts"] = r.stats.restarts;
-    j["junction_crossings"] = r.stats.junction_crossings;
-    j["max_constraint_residual"] = number(r.stats.max_constraint_residual);
-    j["max_redundant_residual"] = number(r.stats.max_redundant_residual);
-    j["model"] = sim::to_string(spec.run.model);
-    j["mu"] = spec.contact.mu ? number(*spec.contact.mu) : Json(nullptr);
-    j["end_mode"] = sim::to_string(r.final.mode);
-    j["mode_changes"] = r.stats.mode_changes;
-    j["impacts"] = r.stats.impacts;
-    Json modes;
-    for (int m = 0; m < 4; ++m)
-      modes[sim::to_string(static_cast<sim::ContactMode>(m))] = number(r.stats.mode_time[m]);
-    j["mode_time"] = modes;
-    j["flights"] = flights_json(sim::flight_reports(r));
-    j["events"] = contact_events_json(r.events);
+    Json j = api::simulate_json(spec, r);
     j["csv"] = out.empty() ? Json(nullptr) : Json(out.string());
     emit_json(j);
     return;

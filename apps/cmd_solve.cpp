@@ -18,34 +18,23 @@ struct SolveOptions {
 };
 
 void run_solve(const SolveOptions& o) {
-  Scene scene = load_scene_with_overrides(o.common);
-  sim::SimulationSpec& spec = scene.sim;
-  spec.motion.kind = sim::MotionSpec::Kind::kButterfly;  // the search is over butterfly motions
-  if (o.period_opt->count()) {
-    require_positive("--period", o.period, "2T in s");
-    spec.motion.period = o.period;
-  }
-  if (o.k_opt->count()) {
-    require_finite("--k", o.k);
-    spec.motion.k = o.k;
-  }
-  require_positive("--tolerance", o.tolerance, "");
-  std::vector<std::pair<std::string, std::string>> given;
-  if (o.k_opt->count()) given.emplace_back("motion.k", "--k");
-  if (o.period_opt->count()) given.emplace_back("motion.period", "--period");
-  build_problem_checked(spec, given);  // the scene with the overrides must be valid
+  api::SolveRequest request;
+  request.integrator = integrator_overrides(o.common);
+  if (o.period_opt->count()) request.period = o.period;
+  if (o.k_opt->count()) request.k = o.k;
+  request.solve_for = o.solve_for;
+  request.tolerance = o.tolerance;
+  const Scene scene = load_scene_option(o.common);
+  const sim::SimulationSpec spec = api::prepare_solve(scene, request, api::Spelling::kCommandLine);
   const bool plots = !o.common.out.empty() && !o.common.no_plot;
   const fs::path dir = o.common.out;
   if (!dir.empty()) check_output_directory("--out", dir, o.common.force);
   if (plots) require_gnuplot();
 
-  sim::SearchSettings settings;
-  settings.tolerance = o.tolerance;
   const bool for_d = o.solve_for == "d";
   std::cerr << "flatland: solving for " << o.solve_for
             << " at 2T = " << format_number(spec.motion.period) << " s (" << scene.origin << ")\n";
-  const sim::SolveReport r = for_d ? sim::solve_d(spec, spec.motion.period, spec.motion.k, settings)
-                                   : sim::solve_k(spec, spec.motion.period, settings);
+  const sim::SolveReport r = api::solve(spec, request);
 
   OutputSet outputs(o.common.force);
   if (!dir.empty()) {

@@ -16,29 +16,25 @@ struct TimeOptimalOptions {
 };
 
 void run_time_optimal(const TimeOptimalOptions& o) {
-  Scene scene = load_scene_with_overrides(o.common);
-  sim::SimulationSpec& spec = scene.sim;
-  spec.motion.kind = sim::MotionSpec::Kind::kButterfly;
-  require_positive("--from", o.from, "2T in s");
-  require_positive("--to", o.to, "2T in s");
-  require_increasing("--from", o.from, "--to", o.to);
-  require_positive("--period-tolerance", o.period_tolerance, "s");
-  require_positive("--tolerance", o.tolerance, "");
-  apply_mu_option(o.mu, spec);
-  spec.motion.period = o.from;
-  build_problem_checked(sim::paper_model(spec), {{"contact.mu", "--mu"}});
+  api::TimeOptimalRequest request;
+  request.integrator = integrator_overrides(o.common);
+  if (o.mu.opt->count()) request.mu = o.mu.value;
+  request.from = o.from;
+  request.to = o.to;
+  request.period_tolerance = o.period_tolerance;
+  request.tolerance = o.tolerance;
+  const Scene scene = load_scene_option(o.common);
+  const sim::SimulationSpec spec =
+      api::prepare_time_optimal(scene, request, api::Spelling::kCommandLine);
   const fs::path dir = o.common.out;
   if (!dir.empty()) check_output_directory("--out", dir, o.common.force);
   if (!dir.empty() && !o.common.no_plot) require_gnuplot();
   const bool friction = spec.contact.mu.has_value();
 
-  sim::SearchSettings settings;
-  settings.tolerance = o.tolerance;
   std::cerr << "flatland: searching the fastest butterfly keeping contact"
             << (friction ? " within mu = " + format_number(*spec.contact.mu) : std::string())
             << " in [" << format_number(o.from) << ", " << format_number(o.to) << "] s\n";
-  const sim::TimeOptimalReport r =
-      sim::time_optimal(spec, o.from, o.to, o.period_tolerance, settings);
+  const sim::TimeOptimalReport r = api::time_optimal(spec, request);
 
   OutputSet outputs(o.common.force);
   if (!dir.empty()) {
@@ -46,16 +42,7 @@ void run_time_optimal(const TimeOptimalOptions& o) {
     outputs.commit();
   }
   if (o.common.json) {
-    Json j;
-    j["period"] = number(r.period);
-    j["k"] = number(r.k);
-    j["fn_min_ratio"] = number(r.fn_min_ratio);
-    j["mu"] = friction ? number(*spec.contact.mu) : Json(nullptr);
-    j["friction_margin"] = number(r.friction_margin);
-    j["limit"] = sim::to_string(r.limit);
-    j["solves"] = r.solves;
-    j["contact_lost"] = r.fn_min_ratio < 0;
-    j["solution"] = solve_report_json(r.solution);
+    Json j = api::time_optimal_json(r, spec);
     j["files"] = outputs.paths();
     emit_json(j);
     return;

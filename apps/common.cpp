@@ -69,67 +69,26 @@ void add_common_options(CLI::App& cmd, CommonOptions& o, const std::string& out_
           ->group(group);
 }
 
+api::IntegratorOverrides integrator_overrides(const CommonOptions& o) {
+  api::IntegratorOverrides v;
+  const auto given = [](const CLI::Option* opt) { return opt && opt->count() > 0; };
+  if (given(o.method_opt)) v.method = o.method;
+  if (given(o.rtol_opt)) v.rtol = o.rtol;
+  if (given(o.atol_opt)) v.atol = o.atol;
+  if (given(o.step_opt)) v.step = o.step;
+  if (given(o.formulation_opt)) v.formulation = o.formulation;
+  return v;
+}
+
+Scene load_scene_option(const CommonOptions& o) {
+  return load_scene(o.scene.empty() ? default_scene_path() : o.scene);
+}
+
 Scene load_scene_with_overrides(const CommonOptions& o) {
-  Scene scene = load_scene(o.scene.empty() ? default_scene_path() : o.scene);
-  sim::IntegratorSettings& in = scene.sim.run.integrator;
-  if (o.method_opt && o.method_opt->count())
-    in.method = o.method == "rk4"      ? sim::Method::kRungeKutta4
-                : o.method == "dop853" ? sim::Method::kDormandPrince853
-                                       : sim::Method::kDormandPrince54;
-  if (o.rtol_opt && o.rtol_opt->count()) {
-    require_positive("--rtol", o.rtol, "");
-    in.rtol = o.rtol;
-  }
-  if (o.atol_opt && o.atol_opt->count()) {
-    require_positive("--atol", o.atol, "");
-    in.atol = o.atol;
-  }
-  if (o.step_opt && o.step_opt->count()) {
-    require_positive("--step", o.step, "s");
-    in.fixed_step = o.step;
-  }
-  if (o.formulation_opt && o.formulation_opt->count()) {
-    scene.sim.run.formulation = o.formulation == "general"   ? sim::Formulation::kGeneral
-                                : o.formulation == "reduced" ? sim::Formulation::kReduced
-                                                             : sim::Formulation::kAuto;
-  }
+  Scene scene = load_scene_option(o);
+  api::apply_integrator_overrides(integrator_overrides(o), scene, api::Spelling::kCommandLine);
   return scene;
 }
-
-std::shared_ptr<const sim::RollingProblem> build_problem_checked(
-    const sim::SimulationSpec& spec,
-    const std::vector<std::pair<std::string, std::string>>& given) {
-  try {
-    return sim::build_problem(spec);
-  } catch (const std::invalid_argument& e) {
-    const std::string what = e.what();
-    for (const auto& [field, option] : given)
-      if (what.rfind(field + ":", 0) == 0) throw UsageError(what + " (set by " + option + ")");
-    throw;
-  }
-}
-
-void require_finite(const std::string& option, double v) {
-  if (!std::isfinite(v))
-    throw UsageError(option + ": must be a finite number, got " + format_number(v));
-}
-
-void require_positive(const std::string& option, double v, const std::string& unit) {
-  if (!std::isfinite(v) || !(v > 0))
-    throw UsageError(option + ": must be positive and finite" +
-                     (unit.empty() ? "" : " (" + unit + ")") + ", got " + format_number(v));
-}
-
-void require_increasing(const std::string& from_option, double from, const std::string& to_option,
-                        double to) {
-  require_finite(from_option, from);
-  require_finite(to_option, to);
-  if (!(from < to))
-    throw UsageError(to_option + ": must be larger than " + from_option + " (got " + from_option +
-                     " " + format_number(from) + ", " + to_option + " " + format_number(to) + ")");
-}
-
-Json number(double v) { return std::isfinite(v) ? Json(v) : Json(nullptr); }
 
 void emit_json(const Json& j) {
   std::cout << j.dump(2) << '\n';
@@ -339,111 +298,12 @@ void run_plot(OutputSet& outputs, const fs::path& dir, const PlotJob& job) {
 
 // ---- reports ----------------------------------------------------------------------------------
 
-double s_at_half_period(const sim::SimulationSpec& spec, const sim::RunResult& r) {
-  if (spec.motion.kind != sim::MotionSpec::Kind::kButterfly || r.trajectory.empty())
-    return std::nan("");
-  const double T = spec.initial.t0 + 0.5 * spec.motion.period;  // as sim::evaluate does
-  const double eps = 1e-9 * std::max(1.0, std::abs(T));
-  if (T < r.trajectory.t_begin() - eps || T > r.trajectory.t_end() + eps) return std::nan("");
-  return r.trajectory.s_h(T);
-}
-
 void add_mu_option(CLI::App& cmd, MuOption& mu, const std::string& help) {
   mu.opt = cmd.add_option("--mu", mu.value, help);
 }
 
 void apply_mu_option(const MuOption& mu, sim::SimulationSpec& spec) {
-  if (!mu.opt || !mu.opt->count()) return;
-  if (!std::isfinite(mu.value) || mu.value < 0)
-    throw UsageError("--mu: must be a finite number >= 0, got " + format_number(mu.value));
-  if (spec.contact.mu_kinetic && *spec.contact.mu_kinetic > mu.value)
-    throw UsageError("--mu: must not be below the scene's contact.mu_kinetic (" +
-                     format_number(*spec.contact.mu_kinetic) + "), got " +
-                     format_number(mu.value));
-  spec.contact.mu = mu.value;
-}
-
-Json contact_events_json(const std::vector<sim::RecordedEvent>& all) {
-  std::vector<const sim::RecordedEvent*> events;
-  for (const auto& e : all)
-    if (e.kind != sim::EventKind::kJunction && e.kind != sim::EventKind::kApex) events.push_back(&e);
-  std::stable_sort(events.begin(), events.end(),
-                   [](const auto* a, const auto* b) { return a->t < b->t; });
-  Json arr = Json::array();
-  for (const auto* e : events) {
-    Json j;
-    j["kind"] = sim::to_string(e->kind);
-    j["t"] = number(e->t);
-    j["s_h"] = number(e->s_h);
-    if (e->impact) {
-      j["impulse_normal"] = number(e->impact->impulse_normal);
-      j["impulse_tangential"] = number(e->impact->impulse_tangential);
-      j["vn_before"] = number(e->impact->vn_before);
-      j["vn_after"] = number(e->impact->vn_after);
-      j["vt_before"] = number(e->impact->vt_before);
-      j["vt_after"] = number(e->impact->vt_after);
-      j["sticking"] = e->impact->sticking;
-      j["caught"] = e->caught;
-      j["energy_change"] = number(e->energy_change);
-      j["hand_rate_change"] = number(e->hand_rate_change);
-    }
-    arr.push_back(j);
-  }
-  return arr;
-}
-
-Json flights_json(const std::vector<sim::FlightReport>& flights) {
-  Json arr = Json::array();
-  for (const sim::FlightReport& f : flights) {
-    const bool landed = f.t_landing.has_value();
-    Json j;
-    j["t_lift_off"] = number(f.t_lift_off);
-    j["s_lift_off"] = number(f.s_lift_off);
-    j["t_landing"] = landed ? number(*f.t_landing) : Json(nullptr);
-    j["duration"] = landed ? number(*f.t_landing - f.t_lift_off) : Json(nullptr);
-    j["s_landing"] = landed ? number(f.s_landing) : Json(nullptr);
-    j["landing_x"] = landed ? number(f.landing_position.x()) : Json(nullptr);
-    j["landing_y"] = landed ? number(f.landing_position.y()) : Json(nullptr);
-    j["impulse_normal"] = landed ? number(f.impulse_normal) : Json(nullptr);
-    j["impulse_tangential"] = landed ? number(f.impulse_tangential) : Json(nullptr);
-    j["bounces"] = f.bounces;
-    j["t_caught"] = f.t_caught ? number(*f.t_caught) : Json(nullptr);
-    j["dropped"] = f.dropped;
-    arr.push_back(j);
-  }
-  return arr;
-}
-
-Json contact_summary_json(const std::array<double, 4>& mode_time, int mode_changes, int impacts,
-                          const std::vector<sim::RecordedEvent>& events,
-                          const sim::Sample& initial) {
-  Json j;
-  Json modes;
-  for (int m = 0; m < 4; ++m)
-    modes[sim::to_string(static_cast<sim::ContactMode>(m))] = number(mode_time[m]);
-  j["mode_time"] = modes;
-  j["mode_changes"] = mode_changes;
-  j["impacts"] = impacts;
-  j["flights"] = flights_json(sim::flight_reports(events, initial));
-  j["events"] = contact_events_json(events);
-  return j;
-}
-
-Json solve_report_json(const sim::SolveReport& r) {
-  Json j;
-  j["period"] = number(r.period);
-  j["k"] = number(r.k);
-  j["s_T"] = number(r.s_T);
-  j["s_end"] = number(r.s_end);
-  j["sdot_end"] = number(r.sdot_end);
-  j["fn_apex_ratio"] = number(r.fn_apex_ratio);
-  j["fn_min_ratio"] = number(r.fn_min_ratio);
-  j["mu_required"] = number(r.mu_required);
-  j["friction_margin"] = number(r.friction_margin);
-  j["contact_lost"] = r.fn_min_ratio < 0;
-  j["simulations"] = r.simulations;
-  j["rhs_evals"] = r.rhs_evals;
-  return j;
+  if (mu.opt && mu.opt->count()) api::apply_mu(mu.value, spec, api::Spelling::kCommandLine);
 }
 
 std::string solve_report_text(const sim::SolveReport& r) {

@@ -3,6 +3,8 @@
 #pragma once
 
 #include "commands.hpp"
+#include "flatland/api/reports.hpp"
+#include "flatland/api/sim_operations.hpp"
 #include "flatland/files/output_set.hpp"
 #include "flatland/scene/scene.hpp"
 #include "flatland/sim/hybrid.hpp"
@@ -25,13 +27,8 @@
 namespace flatland::app {
 
 namespace fs = std::filesystem;
-using Json = nlohmann::ordered_json;
 
-/// Bad command-line input that CLI11 itself does not catch (exit code 2, like SceneError).
-class UsageError : public std::invalid_argument {
- public:
-  using std::invalid_argument::invalid_argument;
-};
+using api::UsageError;
 
 /// Files named by shell patterns (glob(3) with ~ and {a,b}; a plain file name matches itself),
 /// sorted and without duplicates. A pattern that matches nothing is a UsageError naming `option`.
@@ -58,23 +55,10 @@ struct CommonOptions {
 /// What `out_help` says about --out for this command.
 void add_common_options(CLI::App& cmd, CommonOptions& o, const std::string& out_help, bool plots);
 
+/// The scene --scene names (the bundled default without it); SceneError on bad input.
+Scene load_scene_option(const CommonOptions& o);
 /// Load the scene (SceneError on bad input) and apply the integrator overrides.
 Scene load_scene_with_overrides(const CommonOptions& o);
-
-/// sim::build_problem, with " (set by --opt)" added to its message when the field it names was
-/// given on the command line: `given` pairs a scene field ("motion.k") with its option ("--k").
-std::shared_ptr<const sim::RollingProblem> build_problem_checked(
-    const sim::SimulationSpec& spec, const std::vector<std::pair<std::string, std::string>>& given);
-
-/// The events of a run that change the contact (junction crossings and the apex left out), in
-/// time order, with the impacts' impulses and velocities.
-Json contact_events_json(const std::vector<sim::RecordedEvent>& events);
-/// Each flight: lift-off, landing (time, s_h, point), first impulse, bounces, catch or drop.
-Json flights_json(const std::vector<sim::FlightReport>& flights);
-/// Seconds in each mode, changes, impacts, flights and events: what the contact did.
-Json contact_summary_json(const std::array<double, 4>& mode_time, int mode_changes, int impacts,
-                          const std::vector<sim::RecordedEvent>& events,
-                          const sim::Sample& initial);
 
 /// --mu: the static friction coefficient for this run (the scene's contact.mu).
 struct MuOption {
@@ -86,15 +70,21 @@ void add_mu_option(CLI::App& cmd, MuOption& mu, const std::string& help);
 /// scene's contact.mu_kinetic).
 void apply_mu_option(const MuOption& mu, sim::SimulationSpec& spec);
 
-/// UsageError unless v is finite (and, with `positive`, > 0). `what` names the option and unit.
-void require_finite(const std::string& option, double v);
-void require_positive(const std::string& option, double v, const std::string& unit);
-/// UsageError unless from < to.
-void require_increasing(const std::string& from_option, double from, const std::string& to_option,
-                        double to);
+using api::build_problem_checked;
+using api::contact_events_json;
+using api::contact_summary_json;
+using api::flights_json;
+using api::Json;
+using api::number;
+using api::require_finite;
+using api::require_increasing;
+using api::require_positive;
+using api::s_at_half_period;
+using api::solve_report_json;
 
-/// A JSON number, or null when it is inf/NaN (JSON has no such numbers).
-Json number(double v);
+/// The integrator options the user gave (--method, --rtol, --atol, --step, --formulation).
+api::IntegratorOverrides integrator_overrides(const CommonOptions& o);
+
 /// Print the one JSON object on stdout.
 void emit_json(const Json& j);
 
@@ -167,12 +157,6 @@ std::string shell_quote(const std::string& s);
 /// Quote for a gnuplot single-quoted string.
 std::string gnuplot_quote(const std::string& s);
 
-/// s_h(T) from the dense output (NaN when the run does not cover t = T or the motion is not the
-/// butterfly).
-double s_at_half_period(const sim::SimulationSpec& spec, const sim::RunResult& r);
-
-/// Keys shared by the solve and time-optimal reports.
-Json solve_report_json(const sim::SolveReport& r);
 /// Human-readable lines for a solve report (stdout when not --json).
 std::string solve_report_text(const sim::SolveReport& r);
 

@@ -8,6 +8,7 @@ set(FLATLAND_LAYERS
   "files:"
   "sim:"
   "scene:sim"
+  "api:scene,sim"
   "camera:"
   "render:scene,sim,camera"
   "model:render,scene,sim,camera,vision,control"
@@ -19,7 +20,7 @@ set(FLATLAND_LAYERS
 # Modules whose headers must not include flatland/scene, flatland/model or flatland/render.
 set(FLATLAND_BELOW_MODEL files sim camera vision calibration control)
 # Modules that read the scene's sections but sit below the compiled Model: no flatland/model.
-set(FLATLAND_BELOW_MODEL_WITH_SCENE render)
+set(FLATLAND_BELOW_MODEL_WITH_SCENE render api)
 
 # The flatland modules that `target` links, transitively (flatland_x targets, by module name).
 function(flatland_module_closure target out)

@@ -21,6 +21,9 @@
 
 #include "flatland/scene/scene.hpp"
 
+#include "flatland/api/reports.hpp"
+#include "flatland/api/sim_operations.hpp"
+
 #include "flatland/camera/board.hpp"
 #include "flatland/camera/camera_file.hpp"
 #include "flatland/camera/camera_model.hpp"
@@ -56,6 +59,7 @@
 #include "flatland/drivers/montecarlo.hpp"
 #include "flatland/drivers/recorded.hpp"
 #include "flatland/drivers/synthetic.hpp"
+#include "flatland/drivers/tick_log_csv.hpp"
 
 #include "flatland/studies/calibration_study.hpp"
 #include "flatland/studies/closed_loop_study.hpp"

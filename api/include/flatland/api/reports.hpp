@@ -1,0 +1,45 @@
+// The JSON reports of the simulator's results: the keys that `flatland COMMAND --json` prints and
+// that the Python module returns as dicts, written once for both. Numbers are SI; a value that is
+// not finite is null (JSON has no inf or NaN).
+#pragma once
+
+#include "flatland/sim/hybrid.hpp"
+#include "flatland/sim/search.hpp"
+#include "flatland/sim/simulate.hpp"
+#include "flatland/sim/spec.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <array>
+#include <vector>
+
+namespace flatland::api {
+
+using Json = nlohmann::ordered_json;
+
+/// A JSON number, or null when it is inf/NaN.
+Json number(double v);
+
+/// The events of a run that change the contact (junction crossings and the apex left out), in
+/// time order, with the impacts' impulses and velocities.
+Json contact_events_json(const std::vector<sim::RecordedEvent>& events);
+/// Each flight: lift-off, landing (time, s_h, point), first impulse, bounces, catch or drop.
+Json flights_json(const std::vector<sim::FlightReport>& flights);
+/// Seconds in each mode, changes, impacts, flights and events: what the contact did.
+Json contact_summary_json(const std::array<double, 4>& mode_time, int mode_changes, int impacts,
+                          const std::vector<sim::RecordedEvent>& events,
+                          const sim::Sample& initial);
+
+/// Keys shared by the solve and time-optimal reports.
+Json solve_report_json(const sim::SolveReport& r);
+/// `time-optimal --json` without its files.
+Json time_optimal_json(const sim::TimeOptimalReport& r, const sim::SimulationSpec& spec);
+
+/// s_h(T) from the dense output (NaN when the run does not cover t = T or the motion is not the
+/// butterfly).
+double s_at_half_period(const sim::SimulationSpec& spec, const sim::RunResult& r);
+/// `simulate --json` without its csv key: the run's end, extrema, integrator statistics and
+/// contact (modes, flights, events).
+Json simulate_json(const sim::SimulationSpec& spec, const sim::RunResult& r);
+
+}  // namespace flatland::api

@@ -1,0 +1,104 @@
+// The simulator's operations as `flatland solve|simulate|time-optimal` and the Python module's
+// flatland.solve/simulate/time_optimal offer them: a request of optional overrides of the scene,
+// checked one way before any work, then run. A bad value is a UsageError (exit 2 in the CLI,
+// ValueError in Python) whose message names the option as the caller spells it: `--sample-dt` on
+// the command line, `sample_dt` in Python; the reason is the same text.
+#pragma once
+
+#include "flatland/scene/scene.hpp"
+#include "flatland/sim/search.hpp"
+#include "flatland/sim/simulate.hpp"
+
+#include <memory>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+namespace flatland::api {
+
+/// Bad input that the scene loader does not see: an option's value (exit code 2, like SceneError).
+class UsageError : public std::invalid_argument {
+ public:
+  using std::invalid_argument::invalid_argument;
+};
+
+/// How messages name an option.
+enum class Spelling {
+  kCommandLine,  ///< --sample-dt
+  kPython,       ///< sample_dt
+};
+/// `name` is the Python spelling (sample_dt).
+std::string option_name(std::string_view name, Spelling spelling);
+
+/// UsageError unless v is finite (and, with require_positive, > 0). `option` is spelled already.
+void require_finite(const std::string& option, double v);
+void require_positive(const std::string& option, double v, const std::string& unit);
+/// UsageError unless from < to.
+void require_increasing(const std::string& from_option, double from, const std::string& to_option,
+                        double to);
+
+/// Overrides of the scene's `simulator` section.
+struct IntegratorOverrides {
+  std::optional<std::string> method;       ///< dopri5, dop853 or rk4
+  std::optional<double> rtol, atol, step;  ///< step: rk4's fixed step, s
+  std::optional<std::string> formulation;  ///< auto, general or reduced
+};
+/// Check the overrides and set them in scene.sim.run.
+void apply_integrator_overrides(const IntegratorOverrides& o, Scene& scene, Spelling spelling);
+
+/// Set spec.contact.mu (UsageError for a negative value or one below the scene's
+/// contact.mu_kinetic).
+void apply_mu(double mu, sim::SimulationSpec& spec, Spelling spelling);
+
+/// sim::build_problem, with " (set by OPTION)" added to its message when the field it names was
+/// given as an option: `given` pairs a scene field ("motion.k") with its option (spelled).
+std::shared_ptr<const sim::RollingProblem> build_problem_checked(
+    const sim::SimulationSpec& spec, const std::vector<std::pair<std::string, std::string>>& given);
+
+/// `solve`: the butterfly's k (or the hand's cubic coefficient d) that brings the disk to
+/// s_h(T) = 0.
+struct SolveRequest {
+  IntegratorOverrides integrator;
+  std::optional<double> period;  ///< 2T, s
+  std::optional<double> k;       ///< solving for k: the start; for d: the motion's k
+  std::string solve_for = "k";   ///< k or d
+  double tolerance = 1e-9;
+};
+/// The scene with the request applied and checked (a butterfly motion).
+sim::SimulationSpec prepare_solve(Scene scene, const SolveRequest& request, Spelling spelling);
+sim::SolveReport solve(const sim::SimulationSpec& spec, const SolveRequest& request);
+
+/// `simulate`: one run of the scene.
+struct SimulateRequest {
+  IntegratorOverrides integrator;
+  std::optional<double> period;  ///< 2T, s; also the duration unless `duration` is given
+  std::optional<double> k;
+  std::optional<double> duration;  ///< s
+  std::optional<double> mu;
+  std::optional<std::string> model;  ///< rolling or hybrid
+  bool stop_on_contact_loss = true;  ///< rolling model only
+};
+struct PreparedSimulation {
+  sim::SimulationSpec spec;
+  std::shared_ptr<const sim::RollingProblem> problem;
+};
+PreparedSimulation prepare_simulate(Scene scene, const SimulateRequest& request, Spelling spelling);
+/// The run, recorded (dense output and per-step samples).
+sim::RunResult simulate(const PreparedSimulation& prepared);
+
+/// `time-optimal`: the fastest butterfly in [from, to] that keeps contact (and friction, with mu).
+struct TimeOptimalRequest {
+  IntegratorOverrides integrator;
+  std::optional<double> mu;
+  double from = 0.9, to = 1.5;  ///< 2T bracket, s
+  double period_tolerance = 1e-7, tolerance = 1e-9;
+};
+sim::SimulationSpec prepare_time_optimal(Scene scene, const TimeOptimalRequest& request,
+                                         Spelling spelling);
+sim::TimeOptimalReport time_optimal(const sim::SimulationSpec& spec,
+                                    const TimeOptimalRequest& request);
+
+}  // namespace flatland::api

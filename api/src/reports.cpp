@@ -1,0 +1,156 @@
+#include "flatland/api/reports.hpp"
+
+#include "flatland/sim/hybrid.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace flatland::api {
+
+Json number(double v) { return std::isfinite(v) ? Json(v) : Json(nullptr); }
+
+double s_at_half_period(const sim::SimulationSpec& spec, const sim::RunResult& r) {
+  if (spec.motion.kind != sim::MotionSpec::Kind::kButterfly || r.trajectory.empty())
+    return std::nan("");
+  const double T = spec.initial.t0 + 0.5 * spec.motion.period;  // as sim::evaluate does
+  const double eps = 1e-9 * std::max(1.0, std::abs(T));
+  if (T < r.trajectory.t_begin() - eps || T > r.trajectory.t_end() + eps) return std::nan("");
+  return r.trajectory.s_h(T);
+}
+
+Json contact_events_json(const std::vector<sim::RecordedEvent>& all) {
+  std::vector<const sim::RecordedEvent*> events;
+  for (const auto& e : all)
+    if (e.kind != sim::EventKind::kJunction && e.kind != sim::EventKind::kApex)
+      events.push_back(&e);
+  std::stable_sort(events.begin(), events.end(),
+                   [](const auto* a, const auto* b) { return a->t < b->t; });
+  Json arr = Json::array();
+  for (const auto* e : events) {
+    Json j;
+    j["kind"] = sim::to_string(e->kind);
+    j["t"] = number(e->t);
+    j["s_h"] = number(e->s_h);
+    if (e->impact) {
+      j["impulse_normal"] = number(e->impact->impulse_normal);
+      j["impulse_tangential"] = number(e->impact->impulse_tangential);
+      j["vn_before"] = number(e->impact->vn_before);
+      j["vn_after"] = number(e->impact->vn_after);
+      j["vt_before"] = number(e->impact->vt_before);
+      j["vt_after"] = number(e->impact->vt_after);
+      j["sticking"] = e->impact->sticking;
+      j["caught"] = e->caught;
+      j["energy_change"] = number(e->energy_change);
+      j["hand_rate_change"] = number(e->hand_rate_change);
+    }
+    arr.push_back(j);
+  }
+  return arr;
+}
+
+Json flights_json(const std::vector<sim::FlightReport>& flights) {
+  Json arr = Json::array();
+  for (const sim::FlightReport& f : flights) {
+    const bool landed = f.t_landing.has_value();
+    Json j;
+    j["t_lift_off"] = number(f.t_lift_off);
+    j["s_lift_off"] = number(f.s_lift_off);
+    j["t_landing"] = landed ? number(*f.t_landing) : Json(nullptr);
+    j["duration"] = landed ? number(*f.t_landing - f.t_lift_off) : Json(nullptr);
+    j["s_landing"] = landed ? number(f.s_landing) : Json(nullptr);
+    j["landing_x"] = landed ? number(f.landing_position.x()) : Json(nullptr);
+    j["landing_y"] = landed ? number(f.landing_position.y()) : Json(nullptr);
+    j["impulse_normal"] = landed ? number(f.impulse_normal) : Json(nullptr);
+    j["impulse_tangential"] = landed ? number(f.impulse_tangential) : Json(nullptr);
+    j["bounces"] = f.bounces;
+    j["t_caught"] = f.t_caught ? number(*f.t_caught) : Json(nullptr);
+    j["dropped"] = f.dropped;
+    arr.push_back(j);
+  }
+  return arr;
+}
+
+Json contact_summary_json(const std::array<double, 4>& mode_time, int mode_changes, int impacts,
+                          const std::vector<sim::RecordedEvent>& events,
+                          const sim::Sample& initial) {
+  Json j;
+  Json modes;
+  for (int m = 0; m < 4; ++m)
+    modes[sim::to_string(static_cast<sim::ContactMode>(m))] = number(mode_time[m]);
+  j["mode_time"] = modes;
+  j["mode_changes"] = mode_changes;
+  j["impacts"] = impacts;
+  j["flights"] = flights_json(sim::flight_reports(events, initial));
+  j["events"] = contact_events_json(events);
+  return j;
+}
+
+Json solve_report_json(const sim::SolveReport& r) {
+  Json j;
+  j["period"] = number(r.period);
+  j["k"] = number(r.k);
+  j["s_T"] = number(r.s_T);
+  j["s_end"] = number(r.s_end);
+  j["sdot_end"] = number(r.sdot_end);
+  j["fn_apex_ratio"] = number(r.fn_apex_ratio);
+  j["fn_min_ratio"] = number(r.fn_min_ratio);
+  j["mu_required"] = number(r.mu_required);
+  j["friction_margin"] = number(r.friction_margin);
+  j["contact_lost"] = r.fn_min_ratio < 0;
+  j["simulations"] = r.simulations;
+  j["rhs_evals"] = r.rhs_evals;
+  return j;
+}
+
+Json time_optimal_json(const sim::TimeOptimalReport& r, const sim::SimulationSpec& spec) {
+  Json j;
+  j["period"] = number(r.period);
+  j["k"] = number(r.k);
+  j["fn_min_ratio"] = number(r.fn_min_ratio);
+  j["mu"] = spec.contact.mu ? number(*spec.contact.mu) : Json(nullptr);
+  j["friction_margin"] = number(r.friction_margin);
+  j["limit"] = sim::to_string(r.limit);
+  j["solves"] = r.solves;
+  j["contact_lost"] = r.fn_min_ratio < 0;
+  j["solution"] = solve_report_json(r.solution);
+  return j;
+}
+
+Json simulate_json(const sim::SimulationSpec& spec, const sim::RunResult& r) {
+  const bool butterfly = spec.motion.kind == sim::MotionSpec::Kind::kButterfly;
+  Json j;
+  j["period"] = butterfly ? number(spec.motion.period) : Json(nullptr);
+  j["k"] = butterfly ? number(spec.motion.k) : Json(nullptr);
+  j["s_T"] = number(s_at_half_period(spec, r));
+  j["s_end"] = number(r.final.s_h);
+  j["sdot_end"] = number(r.final.sdot_h);
+  j["fn_apex_ratio"] = number(r.fn_apex_ratio ? *r.fn_apex_ratio : std::nan(""));
+  j["fn_min_ratio"] = number(r.fn_min_ratio);
+  j["mu_required"] = number(r.mu_required);
+  j["steps"] = r.stats.steps;
+  j["rhs_evals"] = r.stats.rhs_evals;
+  j["contact_lost"] = r.contact_lost || r.fn_min_ratio < 0;
+  j["formulation"] = sim::to_string(r.formulation);
+  j["method"] = sim::to_string(r.method);
+  j["stop_reason"] = sim::to_string(r.reason);
+  j["t_end"] = number(r.final.t);
+  j["rejected"] = r.stats.rejected;
+  j["restarts"] = r.stats.restarts;
+  j["junction_crossings"] = r.stats.junction_crossings;
+  j["max_constraint_residual"] = number(r.stats.max_constraint_residual);
+  j["max_redundant_residual"] = number(r.stats.max_redundant_residual);
+  j["model"] = sim::to_string(spec.run.model);
+  j["mu"] = spec.contact.mu ? number(*spec.contact.mu) : Json(nullptr);
+  j["end_mode"] = sim::to_string(r.final.mode);
+  j["mode_changes"] = r.stats.mode_changes;
+  j["impacts"] = r.stats.impacts;
+  Json modes;
+  for (int m = 0; m < 4; ++m)
+    modes[sim::to_string(static_cast<sim::ContactMode>(m))] = number(r.stats.mode_time[m]);
+  j["mode_time"] = modes;
+  j["flights"] = flights_json(sim::flight_reports(r));
+  j["events"] = contact_events_json(r.events);
+  return j;
+}
+
+}  // namespace flatland::api

@@ -1,0 +1,206 @@
+#include "flatland/api/sim_operations.hpp"
+
+#include "flatland/sim/format.hpp"
+
+#include <cmath>
+
+namespace flatland::api {
+
+using sim::format_number;
+
+std::string option_name(std::string_view name, Spelling spelling) {
+  if (spelling == Spelling::kPython) return std::string(name);
+  std::string out = "--";
+  for (char c : name) out += c == '_' ? '-' : c;
+  return out;
+}
+
+void require_finite(const std::string& option, double v) {
+  if (!std::isfinite(v))
+    throw UsageError(option + ": must be a finite number, got " + format_number(v));
+}
+
+void require_positive(const std::string& option, double v, const std::string& unit) {
+  if (!std::isfinite(v) || !(v > 0))
+    throw UsageError(option + ": must be positive and finite" +
+                     (unit.empty() ? "" : " (" + unit + ")") + ", got " + format_number(v));
+}
+
+void require_increasing(const std::string& from_option, double from, const std::string& to_option,
+                        double to) {
+  require_finite(from_option, from);
+  require_finite(to_option, to);
+  if (!(from < to))
+    throw UsageError(to_option + ": must be larger than " + from_option + " (got " + from_option +
+                     " " + format_number(from) + ", " + to_option + " " + format_number(to) + ")");
+}
+
+namespace {
+
+/// `value` if it is one of `choices`, else a UsageError listing them.
+const std::string& require_choice(const std::string& option, const std::string& value,
+                                  const std::vector<std::string>& choices) {
+  for (const auto& c : choices)
+    if (value == c) return value;
+  std::string list;
+  for (const auto& c : choices) list += (list.empty() ? "" : ", ") + c;
+  throw UsageError(option + ": must be one of " + list + ", got '" + value + "'");
+}
+
+}  // namespace
+
+void apply_integrator_overrides(const IntegratorOverrides& o, Scene& scene, Spelling spelling) {
+  const auto name = [spelling](std::string_view n) { return option_name(n, spelling); };
+  sim::IntegratorSettings& in = scene.sim.run.integrator;
+  if (o.method) {
+    const std::string& m = require_choice(name("method"), *o.method, {"dopri5", "dop853", "rk4"});
+    in.method = m == "rk4"      ? sim::Method::kRungeKutta4
+                : m == "dop853" ? sim::Method::kDormandPrince853
+                                : sim::Method::kDormandPrince54;
+  }
+  if (o.rtol) {
+    require_positive(name("rtol"), *o.rtol, "");
+    in.rtol = *o.rtol;
+  }
+  if (o.atol) {
+    require_positive(name("atol"), *o.atol, "");
+    in.atol = *o.atol;
+  }
+  if (o.step) {
+    require_positive(name("step"), *o.step, "s");
+    in.fixed_step = *o.step;
+  }
+  if (o.formulation) {
+    const std::string& f =
+        require_choice(name("formulation"), *o.formulation, {"auto", "general", "reduced"});
+    scene.sim.run.formulation = f == "general"   ? sim::Formulation::kGeneral
+                                : f == "reduced" ? sim::Formulation::kReduced
+                                                 : sim::Formulation::kAuto;
+  }
+}
+
+void apply_mu(double mu, sim::SimulationSpec& spec, Spelling spelling) {
+  const std::string option = option_name("mu", spelling);
+  if (!std::isfinite(mu) || mu < 0)
+    throw UsageError(option + ": must be a finite number >= 0, got " + format_number(mu));
+  if (spec.contact.mu_kinetic && *spec.contact.mu_kinetic > mu)
+    throw UsageError(option + ": must not be below the scene's contact.mu_kinetic (" +
+                     format_number(*spec.contact.mu_kinetic) + "), got " + format_number(mu));
+  spec.contact.mu = mu;
+}
+
+std::shared_ptr<const sim::RollingProblem> build_problem_checked(
+    const sim::SimulationSpec& spec,
+    const std::vector<std::pair<std::string, std::string>>& given) {
+  try {
+    return sim::build_problem(spec);
+  } catch (const std::invalid_argument& e) {
+    const std::string what = e.what();
+    for (const auto& [field, option] : given)
+      if (what.rfind(field + ":", 0) == 0) throw UsageError(what + " (set by " + option + ")");
+    throw;
+  }
+}
+
+sim::SimulationSpec prepare_solve(Scene scene, const SolveRequest& r, Spelling spelling) {
+  const auto name = [spelling](std::string_view n) { return option_name(n, spelling); };
+  apply_integrator_overrides(r.integrator, scene, spelling);
+  sim::SimulationSpec& spec = scene.sim;
+  spec.motion.kind = sim::MotionSpec::Kind::kButterfly;  // the search is over butterfly motions
+  if (r.period) {
+    require_positive(name("period"), *r.period, "2T in s");
+    spec.motion.period = *r.period;
+  }
+  if (r.k) {
+    require_finite(name("k"), *r.k);
+    spec.motion.k = *r.k;
+  }
+  require_choice(name("solve_for"), r.solve_for, {"k", "d"});
+  require_positive(name("tolerance"), r.tolerance, "");
+  std::vector<std::pair<std::string, std::string>> given;
+  if (r.k) given.emplace_back("motion.k", name("k"));
+  if (r.period) given.emplace_back("motion.period", name("period"));
+  build_problem_checked(spec, given);  // the scene with the overrides must be valid
+  return spec;
+}
+
+sim::SolveReport solve(const sim::SimulationSpec& spec, const SolveRequest& r) {
+  sim::SearchSettings settings;
+  settings.tolerance = r.tolerance;
+  return r.solve_for == "d" ? sim::solve_d(spec, spec.motion.period, spec.motion.k, settings)
+                            : sim::solve_k(spec, spec.motion.period, settings);
+}
+
+PreparedSimulation prepare_simulate(Scene scene, const SimulateRequest& r, Spelling spelling) {
+  const auto name = [spelling](std::string_view n) { return option_name(n, spelling); };
+  apply_integrator_overrides(r.integrator, scene, spelling);
+  sim::SimulationSpec& spec = scene.sim;
+  const bool butterfly = spec.motion.kind == sim::MotionSpec::Kind::kButterfly;
+  if ((r.period || r.k) && !butterfly)
+    throw UsageError(name("period") + "/" + name("k") +
+                     ": the scene's motion is not the butterfly (motion.kind)");
+  if (r.period) {
+    require_positive(name("period"), *r.period, "2T in s");
+    spec.motion.period = *r.period;
+    if (!r.duration) spec.duration.reset();  // simulate the new 2T, not the scene's
+  }
+  if (r.k) {
+    require_finite(name("k"), *r.k);
+    spec.motion.k = *r.k;
+  }
+  if (r.duration) {
+    require_positive(name("duration"), *r.duration, "s");
+    spec.duration = *r.duration;
+  }
+  if (!r.stop_on_contact_loss) spec.run.events.stop_on_contact_loss = false;
+  if (r.mu) apply_mu(*r.mu, spec, spelling);
+  if (r.model) {
+    const std::string& m = require_choice(name("model"), *r.model, {"rolling", "hybrid"});
+    spec.run.model = m == "hybrid" ? sim::ContactModel::kHybrid : sim::ContactModel::kRolling;
+  }
+  if (!r.stop_on_contact_loss && spec.run.model == sim::ContactModel::kHybrid)
+    throw UsageError((spelling == Spelling::kPython ? std::string("stop_on_contact_loss=False")
+                                                    : std::string("--no-stop-on-contact-loss")) +
+                     ": only for the rolling model (the hybrid model flies where contact is lost)");
+  std::vector<std::pair<std::string, std::string>> given;
+  if (r.k) given.emplace_back("motion.k", name("k"));
+  if (r.period) given.emplace_back("motion.period", name("period"));
+  if (r.mu) given.emplace_back("contact.mu", name("mu"));
+  if (r.model) given.emplace_back("contact.model", name("model"));
+  auto problem = build_problem_checked(spec, given);
+  sim::resolve_formulation(*problem, spec.run.formulation);  // e.g. reduced for an ellipse
+  return {spec, std::move(problem)};
+}
+
+sim::RunResult simulate(const PreparedSimulation& p) {
+  sim::RunOptions options = sim::run_options(p.spec);
+  options.record = true;  // the report needs the dense output and the per-step samples
+  return sim::simulate(p.problem, p.spec.initial, options);
+}
+
+sim::SimulationSpec prepare_time_optimal(Scene scene, const TimeOptimalRequest& r,
+                                         Spelling spelling) {
+  const auto name = [spelling](std::string_view n) { return option_name(n, spelling); };
+  apply_integrator_overrides(r.integrator, scene, spelling);
+  sim::SimulationSpec& spec = scene.sim;
+  spec.motion.kind = sim::MotionSpec::Kind::kButterfly;
+  // Python's `from` is a keyword: the argument is from_.
+  const std::string from = spelling == Spelling::kPython ? "from_" : "--from";
+  require_positive(from, r.from, "2T in s");
+  require_positive(name("to"), r.to, "2T in s");
+  require_increasing(from, r.from, name("to"), r.to);
+  require_positive(name("period_tolerance"), r.period_tolerance, "s");
+  require_positive(name("tolerance"), r.tolerance, "");
+  if (r.mu) apply_mu(*r.mu, spec, spelling);
+  spec.motion.period = r.from;
+  build_problem_checked(sim::paper_model(spec), {{"contact.mu", name("mu")}});
+  return spec;
+}
+
+sim::TimeOptimalReport time_optimal(const sim::SimulationSpec& spec, const TimeOptimalRequest& r) {
+  sim::SearchSettings settings;
+  settings.tolerance = r.tolerance;
+  return sim::time_optimal(spec, r.from, r.to, r.period_tolerance, settings);
+}
+
+}  // namespace flatland::api
