@@ -29,34 +29,28 @@ std::string locus_csv(const std::vector<sim::SolveReport>& points) {
 }
 
 void run_locus(const LocusOptions& o) {
-  Scene scene = load_scene_with_overrides(o.common);
-  sim::SimulationSpec& spec = scene.sim;
-  spec.motion.kind = sim::MotionSpec::Kind::kButterfly;
-  require_positive("--from", o.from, "2T in s");
-  require_positive("--to", o.to, "2T in s");
-  require_increasing("--from", o.from, "--to", o.to);
-  if (o.n < 1 || o.n > 10000)
-    throw UsageError("--n: must be in [1, 10000] (each is a solve of ~10 simulations), got " +
-                     std::to_string(o.n));
-  require_positive("--tolerance", o.tolerance, "");
-  apply_mu_option(o.mu, spec);
-  spec.motion.period = o.from;
-  build_problem_checked(sim::paper_model(spec), {{"contact.mu", "--mu"}});
+  api::LocusRequest request;
+  request.integrator = integrator_overrides(o.common);
+  if (o.mu.opt->count()) request.mu = o.mu.value;
+  request.from = o.from;
+  request.to = o.to;
+  request.n = o.n;
+  request.tolerance = o.tolerance;
+  const Scene scene = load_scene_option(o.common);
+  const sim::SimulationSpec spec = api::prepare_locus(scene, request, api::Spelling::kCommandLine);
   const bool friction = spec.contact.mu.has_value();
   const fs::path dir = o.common.out;
   if (!dir.empty()) check_output_directory("--out", dir, o.common.force);
   const bool plots = !dir.empty() && !o.common.no_plot;
   if (plots) require_gnuplot();
 
-  sim::SearchSettings settings;
-  settings.tolerance = o.tolerance;
   std::cerr << "flatland: solving the locus at " << o.n << " periods in [" << format_number(o.from)
             << ", " << format_number(o.to) << "] s\n";
   const auto start = std::chrono::steady_clock::now();
   std::vector<sim::SolveReport> points;
   {
     ProgressBar bar("locus");
-    points = sim::locus(spec, o.from, o.to, o.n, settings, bar.callback());
+    points = api::locus(spec, request, bar.callback());
   }
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -88,21 +82,7 @@ void run_locus(const LocusOptions& o) {
   }
 
   if (o.common.json) {
-    Json j;
-    Json arr = Json::array();
-    for (const auto& p : points) {
-      Json q;
-      q["period"] = number(p.period);
-      q["k"] = number(p.k);
-      q["fn_min_ratio"] = number(p.fn_min_ratio);
-      q["mu_required"] = number(p.mu_required);
-      q["friction_margin"] = number(p.friction_margin);
-      q["slips"] = friction && p.friction_margin < 0;
-      q["contact_lost"] = p.fn_min_ratio < 0;
-      arr.push_back(q);
-    }
-    j["points"] = arr;
-    j["mu"] = friction ? number(*spec.contact.mu) : Json(nullptr);
+    Json j = api::locus_json(points, spec);
     j["csv"] = csv_path.empty() ? Json(nullptr) : Json(csv_path);
     j["png"] = png_path.empty() ? Json(nullptr) : Json(png_path);
     j["seconds"] = seconds;

@@ -41,31 +41,18 @@ std::string zero_crossings(const sim::SurfaceResult& s) {
 }
 
 void run_surface(const SurfaceOptions& o) {
-  Scene scene = load_scene_with_overrides(o.common);
-  sim::SimulationSpec& spec = scene.sim;
-  spec.motion.kind = sim::MotionSpec::Kind::kButterfly;
-  require_increasing("--k-from", o.k_from, "--k-to", o.k_to);
-  if (o.k_from <= -2 && o.k_to >= -2)
-    throw UsageError(
-        "--k-from/--k-to: the range must not contain k = -2 (the motion is undefined there)");
-  require_positive("--period-from", o.p_from, "2T in s");
-  require_positive("--period-to", o.p_to, "2T in s");
-  require_increasing("--period-from", o.p_from, "--period-to", o.p_to);
-  // Each grid point is one simulation (~0.1 ms to 1 ms): a million points is minutes.
-  constexpr long kMaxSide = 10000, kMaxPoints = 1000000;
-  if (o.nk < 2 || o.nk > kMaxSide)
-    throw UsageError("--nk: must be in [2, 10000], got " + std::to_string(o.nk));
-  if (o.np < 2 || o.np > kMaxSide)
-    throw UsageError("--np: must be in [2, 10000], got " + std::to_string(o.np));
-  if (static_cast<long>(o.nk) * o.np > kMaxPoints)
-    throw UsageError("--nk/--np: " + std::to_string(static_cast<long>(o.nk) * o.np) +
-                     " grid points; at most 1000000 in one run");
-  if (o.threads < 0 || o.threads > 1024)
-    throw UsageError("--threads: must be in [0, 1024] (0 = all cores), got " +
-                     std::to_string(o.threads));
-  spec.motion.period = o.p_from;
-  spec.motion.k = o.k_from;
-  sim::build_problem(spec);
+  api::SurfaceRequest request;
+  request.integrator = integrator_overrides(o.common);
+  request.k_from = o.k_from;
+  request.k_to = o.k_to;
+  request.period_from = o.p_from;
+  request.period_to = o.p_to;
+  request.nk = o.nk;
+  request.np = o.np;
+  request.threads = o.threads;
+  const Scene scene = load_scene_option(o.common);
+  const sim::SimulationSpec spec =
+      api::prepare_surface(scene, request, api::Spelling::kCommandLine);
   const fs::path dir = o.common.out;
   if (!dir.empty()) check_output_directory("--out", dir, o.common.force);
   const bool plots = !dir.empty() && !o.common.no_plot;
@@ -76,8 +63,7 @@ void run_surface(const SurfaceOptions& o) {
   sim::SurfaceResult s;
   {
     ProgressBar bar("surface");
-    s = sim::surface(spec, o.k_from, o.k_to, o.nk, o.p_from, o.p_to, o.np, o.threads,
-                     bar.callback());
+    s = api::surface(spec, request, bar.callback());
   }
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

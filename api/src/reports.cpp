@@ -116,6 +116,26 @@ Json time_optimal_json(const sim::TimeOptimalReport& r, const sim::SimulationSpe
   return j;
 }
 
+Json locus_json(const std::vector<sim::SolveReport>& points, const sim::SimulationSpec& spec) {
+  const bool friction = spec.contact.mu.has_value();
+  Json arr = Json::array();
+  for (const auto& p : points) {
+    Json q;
+    q["period"] = number(p.period);
+    q["k"] = number(p.k);
+    q["fn_min_ratio"] = number(p.fn_min_ratio);
+    q["mu_required"] = number(p.mu_required);
+    q["friction_margin"] = number(p.friction_margin);
+    q["slips"] = friction && p.friction_margin < 0;
+    q["contact_lost"] = p.fn_min_ratio < 0;
+    arr.push_back(q);
+  }
+  Json j;
+  j["points"] = arr;
+  j["mu"] = friction ? number(*spec.contact.mu) : Json(nullptr);
+  return j;
+}
+
 Json simulate_json(const sim::SimulationSpec& spec, const sim::RunResult& r) {
   const bool butterfly = spec.motion.kind == sim::MotionSpec::Kind::kButterfly;
   Json j;

@@ -203,4 +203,68 @@ sim::TimeOptimalReport time_optimal(const sim::SimulationSpec& spec, const TimeO
   return sim::time_optimal(spec, r.from, r.to, r.period_tolerance, settings);
 }
 
+sim::SimulationSpec prepare_locus(Scene scene, const LocusRequest& r, Spelling spelling) {
+  const auto name = [spelling](std::string_view n) { return option_name(n, spelling); };
+  apply_integrator_overrides(r.integrator, scene, spelling);
+  sim::SimulationSpec& spec = scene.sim;
+  spec.motion.kind = sim::MotionSpec::Kind::kButterfly;
+  const std::string from = spelling == Spelling::kPython ? "from_" : "--from";
+  require_positive(from, r.from, "2T in s");
+  require_positive(name("to"), r.to, "2T in s");
+  require_increasing(from, r.from, name("to"), r.to);
+  if (r.n < 1 || r.n > 10000)
+    throw UsageError(name("n") +
+                     ": must be in [1, 10000] (each is a solve of ~10 simulations), got " +
+                     std::to_string(r.n));
+  require_positive(name("tolerance"), r.tolerance, "");
+  if (r.mu) apply_mu(*r.mu, spec, spelling);
+  spec.motion.period = r.from;
+  build_problem_checked(sim::paper_model(spec), {{"contact.mu", name("mu")}});
+  return spec;
+}
+
+std::vector<sim::SolveReport> locus(const sim::SimulationSpec& spec, const LocusRequest& r,
+                                    const sim::Progress& progress) {
+  sim::SearchSettings settings;
+  settings.tolerance = r.tolerance;
+  return sim::locus(spec, r.from, r.to, r.n, settings, progress);
+}
+
+sim::SimulationSpec prepare_surface(Scene scene, const SurfaceRequest& r, Spelling spelling) {
+  const auto name = [spelling](std::string_view n) { return option_name(n, spelling); };
+  apply_integrator_overrides(r.integrator, scene, spelling);
+  sim::SimulationSpec& spec = scene.sim;
+  spec.motion.kind = sim::MotionSpec::Kind::kButterfly;
+  require_increasing(name("k_from"), r.k_from, name("k_to"), r.k_to);
+  if (r.k_from <= -2 && r.k_to >= -2)
+    throw UsageError(name("k_from") + "/" + name("k_to") +
+                     ": the range must not contain k = -2 (the motion is undefined there)");
+  require_positive(name("period_from"), r.period_from, "2T in s");
+  require_positive(name("period_to"), r.period_to, "2T in s");
+  require_increasing(name("period_from"), r.period_from, name("period_to"), r.period_to);
+  // Each grid point is one simulation (~0.1 ms to 1 ms): a million points is minutes.
+  constexpr long kMaxSide = 10000, kMaxPoints = 1000000;
+  if (r.nk < 2 || r.nk > kMaxSide)
+    throw UsageError(name("nk") + ": must be in [2, 10000], got " + std::to_string(r.nk));
+  if (r.np < 2 || r.np > kMaxSide)
+    throw UsageError(name("np") + ": must be in [2, 10000], got " + std::to_string(r.np));
+  if (static_cast<long>(r.nk) * r.np > kMaxPoints)
+    throw UsageError(name("nk") + "/" + name("np") + ": " +
+                     std::to_string(static_cast<long>(r.nk) * r.np) +
+                     " grid points; at most 1000000 in one run");
+  if (r.threads < 0 || r.threads > 1024)
+    throw UsageError(name("threads") + ": must be in [0, 1024] (0 = all cores), got " +
+                     std::to_string(r.threads));
+  spec.motion.period = r.period_from;
+  spec.motion.k = r.k_from;
+  sim::build_problem(spec);
+  return spec;
+}
+
+sim::SurfaceResult surface(const sim::SimulationSpec& spec, const SurfaceRequest& r,
+                           const sim::Progress& progress) {
+  return sim::surface(spec, r.k_from, r.k_to, r.nk, r.period_from, r.period_to, r.np, r.threads,
+                      progress);
+}
+
 }  // namespace flatland::api

@@ -35,6 +35,9 @@ Json solve_report_json(const sim::SolveReport& r);
 /// `time-optimal --json` without its files.
 Json time_optimal_json(const sim::TimeOptimalReport& r, const sim::SimulationSpec& spec);
 
+/// `locus --json`'s points and mu (without its files and timing).
+Json locus_json(const std::vector<sim::SolveReport>& points, const sim::SimulationSpec& spec);
+
 /// s_h(T) from the dense output (NaN when the run does not cover t = T or the motion is not the
 /// butterfly).
 double s_at_half_period(const sim::SimulationSpec& spec, const sim::RunResult& r);

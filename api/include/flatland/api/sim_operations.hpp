@@ -101,4 +101,28 @@ sim::SimulationSpec prepare_time_optimal(Scene scene, const TimeOptimalRequest& 
 sim::TimeOptimalReport time_optimal(const sim::SimulationSpec& spec,
                                     const TimeOptimalRequest& request);
 
+/// `locus`: the butterfly solutions k(2T) at n periods evenly spaced over [from, to] (Fig. 7).
+struct LocusRequest {
+  IntegratorOverrides integrator;
+  std::optional<double> mu;
+  double from = 1.1, to = 3.0;  ///< 2T, s
+  int n = 20;                   ///< 1 to 10000
+  double tolerance = 1e-9;
+};
+sim::SimulationSpec prepare_locus(Scene scene, const LocusRequest& request, Spelling spelling);
+std::vector<sim::SolveReport> locus(const sim::SimulationSpec& spec, const LocusRequest& request,
+                                    const sim::Progress& progress = {});
+
+/// `surface`: s_h(T) on a k x 2T grid (Fig. 6).
+struct SurfaceRequest {
+  IntegratorOverrides integrator;
+  double k_from = -1.6, k_to = -0.8;
+  double period_from = 0.8, period_to = 2.0;  ///< 2T, s
+  int nk = 50, np = 50;                       ///< 2 to 10000 each, at most 1e6 points
+  int threads = 0;                            ///< 0: all cores
+};
+sim::SimulationSpec prepare_surface(Scene scene, const SurfaceRequest& request, Spelling spelling);
+sim::SurfaceResult surface(const sim::SimulationSpec& spec, const SurfaceRequest& request,
+                           const sim::Progress& progress = {});
+
 }  // namespace flatland::api
