@@ -23,15 +23,16 @@ void parallel_for(long n, unsigned threads, const std::function<void(long i)>& b
       if (i >= n) return;
       try {
         body(i);
+        if (done) {
+          std::lock_guard lock(mutex);
+          done(++finished);  // under the lock, so the calls count up in order
+        }
       } catch (...) {
+        // From the body or from `done` (a progress callback that stops the work on Ctrl-C).
         std::lock_guard lock(mutex);
         if (!error) error = std::current_exception();
         stop = true;
         return;
-      }
-      if (done) {
-        std::lock_guard lock(mutex);
-        done(++finished);  // under the lock, so the calls count up in order
       }
     }
   };

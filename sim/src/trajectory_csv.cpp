@@ -44,42 +44,46 @@ int sample_column(const std::string& name) {
   throw std::logic_error("no sample column " + name);
 }
 
+std::array<double, kSampleNumbers> sample_numbers(const Sample& s) {
+  return {s.t,
+          s.theta,
+          s.theta_dot,
+          s.theta_ddot,
+          s.s_h,
+          s.sdot_h,
+          s.sddot_h,
+          s.s_o,
+          s.sdot_o,
+          s.object_position.x(),
+          s.object_position.y(),
+          s.object_angle,
+          s.object_velocity.x(),
+          s.object_velocity.y(),
+          s.object_angular_velocity,
+          s.force_normal,
+          s.force_tangential,
+          s.fn_ratio,
+          s.ft_ratio,
+          s.mu_required,
+          s.constraint_residual,
+          s.redundant_residual,
+          s.slip_velocity,
+          s.gap,
+          s.rolling_couple};
+}
+
 std::string samples_csv(const std::vector<Sample>& samples) {
   std::string out;
   const auto& cols = sample_columns();
   for (std::size_t i = 0; i < cols.size(); ++i) out += (i ? "," : "") + cols[i];
   out += '\n';
+  const std::size_t mode = sample_column("mode") - 1;
   for (const Sample& s : samples) {
-    const double v[] = {s.t,
-                        s.theta,
-                        s.theta_dot,
-                        s.theta_ddot,
-                        s.s_h,
-                        s.sdot_h,
-                        s.sddot_h,
-                        s.s_o,
-                        s.sdot_o,
-                        s.object_position.x(),
-                        s.object_position.y(),
-                        s.object_angle,
-                        s.object_velocity.x(),
-                        s.object_velocity.y(),
-                        s.object_angular_velocity,
-                        s.force_normal,
-                        s.force_tangential,
-                        s.fn_ratio,
-                        s.ft_ratio,
-                        s.mu_required,
-                        s.constraint_residual,
-                        s.redundant_residual};
-    static_assert(sizeof v / sizeof v[0] == 22);
-    for (std::size_t i = 0; i < sizeof v / sizeof v[0]; ++i) {
+    const auto v = sample_numbers(s);
+    for (std::size_t i = 0, j = 0; i < cols.size(); ++i) {
       if (i) out += ',';
-      out += format_number(v[i]);
+      out += i == mode ? to_string(s.mode) : format_number(v[j++]);
     }
-    // The contact mode (a word) and what the hybrid model adds.
-    out += ',' + to_string(s.mode) + ',' + format_number(s.slip_velocity) + ',' +
-           format_number(s.gap) + ',' + format_number(s.rolling_couple);
     out += '\n';
   }
   return out;
