@@ -136,6 +136,24 @@ void Render(benchmark::State& state, render::GlBackend backend, int width, int h
       benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
 }
 
+// The bundled butterfly-camera scene (640 x 480, 2 x 2 supersampling) at its run's t = 0.45 s:
+// the frame bench/python_bindings.py renders through Python, for the binding's overhead.
+void RenderButterflyCamera(benchmark::State& state) {
+  const auto model =
+      model::compile(load_scene(std::string(FLATLAND_ASSET_DIR) + "/scenes/butterfly-camera.yaml"));
+  render::Renderer r(model::render_setup(*model));
+  sim::SimulationSpec spec = model->spec.sim;
+  spec.run.record = true;
+  const render::SceneState st =
+      render::SceneState::from_sample(sim::run_spec(spec).trajectory.sample(0.45));
+  for (auto _ : state) {
+    cv::Mat image = r.render_8u(st);
+    benchmark::DoNotOptimize(image.data);
+  }
+  state.counters["fps"] =
+      benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
+}
+
 // H.264 ('avc1') encoding through OpenCV's FFmpeg writer, of rendered 640x480 frames.
 void Mp4Encode(benchmark::State& state) {
   render::Renderer r(
@@ -186,6 +204,9 @@ void register_all() {
       }
     }
   }
+  benchmark::RegisterBenchmark("BM_RenderButterflyCamera", RenderButterflyCamera)
+      ->Unit(benchmark::kMicrosecond)
+      ->UseRealTime();
   benchmark::RegisterBenchmark("BM_Mp4Encode/640x480", Mp4Encode)
       ->Unit(benchmark::kMicrosecond)
       ->UseRealTime();

@@ -24,6 +24,8 @@ packages=(
   libeigen3-dev libyaml-cpp-dev libcli11-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   gnuplot-nox python3
+  python3-dev pybind11-dev python3-numpy python3-pytest python3-matplotlib python3-scipy
+  libmujoco-dev
   libopencv-dev libavutil-dev libosmesa6-dev mesa-common-dev libegl-dev libegl-mesa0 ffmpeg
   libceres-dev
   clang libclang-rt-14-dev

@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
 # The tests, after scripts/setup.sh has built build/:
 #   1. the GoogleTest suite on the Release build (build/);
-#   2. the install: build/ installed into a temporary prefix, a downstream project built against it
+#   2. the Python suite (pytest, python/tests) against build/python, and the examples (examples/);
+#   3. the install: build/ installed into a temporary prefix, a downstream project built against it
 #      with find_package(flatland), and it and the installed CLI run (tests/downstream/check.sh);
-#   3. the same suite built with AddressSanitizer + UndefinedBehaviorSanitizer (build-asan/,
+#   4. the same suite built with AddressSanitizer + UndefinedBehaviorSanitizer (build-asan/,
 #      -O1, no benchmarks): any memory error, leak or undefined behaviour fails the test;
-#   4. when clang with libFuzzer is installed, each libFuzzer target (fuzz/) over its seed corpus
+#   5. when clang with libFuzzer is installed, each libFuzzer target (fuzz/) over its seed corpus
 #      and the kept crash reproducers (tests/fuzz/), a smoke run of seconds (build-fuzz/).
 # docs/DEVELOPING.md explains each stage and how to run it alone.
 #
@@ -31,7 +32,14 @@ log "stage 1: ctest --test-dir build"
 # Every test has its own temporary directory and no test measures time, so they run in parallel.
 ctest --test-dir build --output-on-failure -j"$jobs"
 
-log "stage 2: install into a temporary prefix, and a find_package(flatland) project against it"
+log "stage 2: the Python module's suite (pytest) and examples, with Debian's python3"
+# Debian's numpy and pybind11 are /usr/bin/python3's (python/CMakeLists.txt); a pyenv or venv
+# python3 earlier on PATH would not find them.
+python=$(sed -n 's/^Python3_EXECUTABLE:FILEPATH=//p' build/CMakeCache.txt)
+PYTHONPATH="$root/build/python" MPLBACKEND=Agg "${python:-/usr/bin/python3}" -m pytest -q \
+  -p no:cacheprovider python/tests
+
+log "stage 3: install into a temporary prefix, and a find_package(flatland) project against it"
 bash tests/downstream/check.sh build
 
 [ "$sanitizers" -eq 1 ] || { log "--no-sanitizers: done"; exit 0; }
@@ -47,12 +55,12 @@ export ASAN_OPTIONS="detect_leaks=1:detect_stack_use_after_return=1:intercept_tl
 export LSAN_OPTIONS="suppressions=$root/tests/sanitizers/lsan.supp:print_suppressions=0"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
 
-log "stage 3: AddressSanitizer + UndefinedBehaviorSanitizer build in build-asan/"
+log "stage 4: AddressSanitizer + UndefinedBehaviorSanitizer build in build-asan/"
 # -g1: line tables are all the sanitizers' stack traces need, and full debug information would
 # make this build (the longest step of CI) markedly slower.
 cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1" -DFLATLAND_SANITIZE=address,undefined \
-  -DFLATLAND_BUILD_BENCHMARKS=OFF >&2
+  -DFLATLAND_BUILD_BENCHMARKS=OFF -DFLATLAND_BUILD_PYTHON=OFF >&2
 cmake --build build-asan -j"$jobs" >&2
 # Sanitized code is several times slower; the tests are independent (each has its own temporary
 # directory), so they run in parallel. The longest tests run the same code paths for less long
@@ -69,13 +77,13 @@ ctest --test-dir build-asan --output-on-failure -j"$jobs"
 if ! command -v clang++ >/dev/null 2>&1 ||
   ! echo 'extern "C" int LLVMFuzzerTestOneInput(const char*, long) { return 0; }' |
   clang++ -x c++ -fsanitize=fuzzer - -o /dev/null 2>/dev/null; then
-  log "stage 4 skipped: no clang++ with libFuzzer (apt-get install clang libclang-rt-14-dev)"
+  log "stage 5 skipped: no clang++ with libFuzzer (apt-get install clang libclang-rt-14-dev)"
   exit 0
 fi
-log "stage 4: libFuzzer targets over their seed corpora in build-fuzz/"
+log "stage 5: libFuzzer targets over their seed corpora in build-fuzz/"
 CC=clang CXX=clang++ cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g" -DFLATLAND_FUZZ=ON -DFLATLAND_BUILD_TESTS=OFF \
-  -DFLATLAND_BUILD_BENCHMARKS=OFF >&2
+  -DFLATLAND_BUILD_BENCHMARKS=OFF -DFLATLAND_BUILD_PYTHON=OFF >&2
 cmake --build build-fuzz -j"$jobs" --target scene_fuzzer camera_file_fuzzer >&2
 for target in scene camera_file; do
   # -runs=0: every seed and reproducer once, nothing new written into the repository.

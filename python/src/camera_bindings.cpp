@@ -1,0 +1,313 @@
+// Cameras: Renderer (frames as numpy arrays, with their truth), Tracker (the disk in a frame, and
+// its s_h), calibrate (a camera from board images or corners) and a rendered calibration session.
+#include "convert.hpp"
+
+#include "flatland/calibration/intrinsics.hpp"
+#include "flatland/drivers/calibration_session.hpp"
+#include "flatland/model/compile.hpp"
+#include "flatland/render/renderer.hpp"
+#include "flatland/sim/format.hpp"
+#include "flatland/sim/spec.hpp"
+#include "flatland/vision/mapping.hpp"
+#include "flatland/vision/tracker.hpp"
+
+#include <pybind11/stl.h>
+
+#include <cmath>
+#include <optional>
+
+namespace flatland::python {
+
+using namespace pybind11::literals;
+
+py::dict camera_to_python(const camera::CameraModel& c) {
+  const auto matrix = [](const cv::Matx33d& m) {
+    py::array_t<double> a({3, 3});
+    for (int r = 0; r < 3; ++r)
+      for (int col = 0; col < 3; ++col) a.mutable_at(r, col) = m(r, col);
+    return a;
+  };
+  py::dict d;
+  d["width"] = c.width;
+  d["height"] = c.height;
+  d["fps"] = c.fps;
+  d["exposure"] = c.exposure;
+  d["K"] = matrix(c.K);
+  const int n = c.rational() ? 8 : 5;
+  py::array_t<double> dist(n);
+  for (int i = 0; i < n; ++i) dist.mutable_at(i) = c.dist[i];
+  d["dist"] = dist;
+  d["R"] = matrix(c.R);
+  d["t"] = py::array_t<double>(3, c.t.val);
+  return d;
+}
+
+namespace {
+
+py::tuple point(const cv::Point2d& p) { return py::make_tuple(p.x, p.y); }
+py::tuple point(const cv::Point3d& p) { return py::make_tuple(p.x, p.y, p.z); }
+
+py::dict truth_to_python(const render::FrameTruth& t) {
+  py::dict d;
+  d["t"] = t.t;
+  d["theta"] = t.theta;
+  d["s_h"] = t.s_h;
+  d["disk_center_table"] = point(t.disk_center_table);
+  d["marker_table"] = point(t.marker_table);
+  d["disk_center_px"] = point(t.disk_center_px);
+  d["marker_px"] = point(t.marker_px);
+  d["dropped"] = t.dropped;
+  return d;
+}
+
+/// A Renderer of a compiled scene, with the scene's run (simulated at the first render(t=...)).
+class PyRenderer {
+ public:
+  PyRenderer(const py::object& scene, const std::optional<std::string>& backend,
+             std::optional<double> duration)
+      : model_(model_argument(scene)), duration_(duration) {
+    if (duration && !(std::isfinite(*duration) && *duration > 0))
+      throw std::invalid_argument("duration: must be positive and finite (s), got " +
+                                  sim::format_number(*duration));
+    std::optional<render::GlBackend> gl;
+    if (backend) gl = render::parse_backend(*backend);
+    renderer_ = std::make_unique<render::Renderer>(model::render_setup(*model_), gl);
+  }
+
+  py::tuple render_at(double t) {
+    if (!std::isfinite(t)) throw std::invalid_argument("t: must be a finite time, s");
+    render::Frame frame = run_interruptible([&] {
+      if (!run_) {
+        sim::SimulationSpec spec = model_->spec.sim;
+        if (duration_) spec.duration = *duration_;
+        spec.run.record = true;  // the frames sample the dense output
+        run_ = std::make_unique<sim::RunResult>(sim::run_spec(spec));
+        if (run_->trajectory.empty()) throw std::runtime_error("the run recorded no trajectory");
+      }
+      const double t0 = run_->trajectory.t_begin(), t1 = run_->trajectory.t_end();
+      if (t < t0 - 1e-12 || t > t1 + 1e-12)
+        throw std::invalid_argument("t: outside the scene's run [" + sim::format_number(t0) + ", " +
+                                    sim::format_number(t1) + "] s, got " + sim::format_number(t));
+      return renderer_->capture(run_->trajectory, t);
+    });
+    return py::make_tuple(
+        frame.truth.dropped ? py::object(py::none()) : image_to_numpy(frame.image),
+        truth_to_python(frame.truth));
+  }
+
+  py::tuple render_state(double hand_angle, std::pair<double, double> disk_center,
+                         double disk_angle, double t) {
+    render::SceneState state;
+    state.t = t;
+    state.hand_angle = hand_angle;
+    state.disk_center = {disk_center.first, disk_center.second};
+    state.disk_angle = disk_angle;
+    for (double v : {hand_angle, disk_center.first, disk_center.second, disk_angle, t})
+      if (!std::isfinite(v)) throw std::invalid_argument("state: every value must be finite");
+    cv::Mat image;
+    {
+      py::gil_scoped_release release;
+      image = renderer_->render_8u(state);
+    }
+    return py::make_tuple(image_to_numpy(image), truth_to_python(renderer_->truth(state)));
+  }
+
+  /// The run's end: the scene's (or the duration's) until the run is made, then where it stopped.
+  double t_end() const {
+    if (run_) return run_->trajectory.t_end();
+    return duration_ ? model_->spec.sim.initial.t0 + *duration_ : model_->spec.sim.end_time();
+  }
+  std::string gl() const { return renderer_->gl_description(); }
+  py::dict camera() const { return camera_to_python(renderer_->camera()); }
+
+ private:
+  std::shared_ptr<const model::Model> model_;
+  std::unique_ptr<render::Renderer> renderer_;
+  std::optional<double> duration_;
+  std::unique_ptr<sim::RunResult> run_;
+};
+
+/// A Tracker knowing a compiled scene's camera (and its hand, for s_h), or none.
+class PyTracker {
+ public:
+  PyTracker(const py::object& scene, const std::optional<std::string>& method) {
+    vision::TrackerConfig config;
+    if (!scene.is_none()) {
+      model_ = model_argument(scene);
+      config = model_->tracker;
+      mapping_ = model_->mapping;
+    }
+    if (method) config.method = vision::parse_track_method(*method);
+    tracker_ = std::make_unique<vision::Tracker>(config);
+  }
+
+  py::dict track(const py::array& frame, std::optional<double> theta) {
+    const cv::Mat image = numpy_to_image(frame, "frame");
+    if (theta && !std::isfinite(*theta)) throw std::invalid_argument("theta: must be finite, rad");
+    vision::TrackResult r;
+    std::optional<vision::ContactEstimate> contact;
+    {
+      py::gil_scoped_release release;
+      r = tracker_->track(image);
+      if (r.ok() && theta && mapping_) {
+        // Near the previous frame's s_h when there is one, else over a whole period of the
+        // closed outline (s is periodic with period 4), as `flatland track` does.
+        contact = std::isfinite(s_guess_)
+                      ? vision::pixel_to_contact(*mapping_, r.center, *theta, s_guess_, 0.5)
+                      : vision::pixel_to_contact(*mapping_, r.center, *theta, 0.0, 2.0);
+        if (contact) s_guess_ = contact->s_h;
+      }
+    }
+    py::dict d;
+    d["state"] = vision::to_string(r.state);
+    d["center"] = r.ok() ? py::object(point(r.center)) : py::none();
+    d["radius_px"] = r.radius_px;
+    d["sigma_px"] = r.sigma_px;
+    d["quality"] = r.quality;
+    d["edge_points"] = r.edge_points;
+    d["s_h"] = contact ? py::object(py::float_(contact->s_h)) : py::none();
+    return d;
+  }
+
+  void reset() {
+    tracker_->reset();
+    s_guess_ = std::nan("");
+  }
+
+ private:
+  std::shared_ptr<const model::Model> model_;
+  std::optional<vision::HandMapping> mapping_;
+  std::unique_ptr<vision::Tracker> tracker_;
+  double s_guess_ = std::nan("");
+};
+
+std::vector<cv::Point2f> points2(const py::array_t<double>& a, const std::string& name) {
+  if (a.ndim() != 2 || a.shape(1) != 2)
+    throw std::invalid_argument(name + ": an array of shape (N, 2)");
+  std::vector<cv::Point2f> out;
+  for (py::ssize_t i = 0; i < a.shape(0); ++i)
+    out.emplace_back(static_cast<float>(a.at(i, 0)), static_cast<float>(a.at(i, 1)));
+  return out;
+}
+
+std::vector<cv::Point3f> points3(const py::array_t<double>& a, const std::string& name) {
+  if (a.ndim() != 2 || a.shape(1) != 3)
+    throw std::invalid_argument(name + ": an array of shape (N, 3)");
+  std::vector<cv::Point3f> out;
+  for (py::ssize_t i = 0; i < a.shape(0); ++i)
+    out.emplace_back(static_cast<float>(a.at(i, 0)), static_cast<float>(a.at(i, 1)),
+                     static_cast<float>(a.at(i, 2)));
+  return out;
+}
+
+py::dict calibrate_binding(const std::string& board_text, const std::optional<py::list>& images,
+                           const std::optional<py::list>& corners,
+                           std::optional<std::pair<int, int>> image_size, const std::string& fix,
+                           bool rational) {
+  const camera::Board board = camera::Board::parse(board_text, "board");
+  if (images.has_value() == corners.has_value())
+    throw std::invalid_argument("images/corners: give exactly one of them");
+  calibration::IntrinsicsOptions options;
+  options.parse_fixed(fix);
+  options.rational_model = rational;
+  std::vector<calibration::BoardView> views;
+  std::vector<std::string> not_found;
+  if (images) {
+    std::vector<py::array> arrays;  // kept alive while their Mats are read
+    for (std::size_t i = 0; i < images->size(); ++i)
+      arrays.push_back((*images)[i].cast<py::array>());
+    std::vector<cv::Mat> mats;
+    for (std::size_t i = 0; i < arrays.size(); ++i)
+      mats.push_back(numpy_to_image(arrays[i], ("images[" + std::to_string(i) + "]").c_str()));
+    py::gil_scoped_release release;
+    for (std::size_t i = 0; i < mats.size(); ++i) {
+      const std::string name = "images[" + std::to_string(i) + "]";
+      if (auto v = calibration::detect_board(mats[i], board, name))
+        views.push_back(std::move(*v));
+      else
+        not_found.push_back(name);
+    }
+  } else {
+    if (!image_size)
+      throw std::invalid_argument("image_size: (width, height) is needed with corners");
+    if (image_size->first < 1 || image_size->second < 1)
+      throw std::invalid_argument("image_size: width and height must be positive");
+    for (std::size_t i = 0; i < corners->size(); ++i) {
+      const std::string name = "corners[" + std::to_string(i) + "]";
+      const py::tuple pair = (*corners)[i].cast<py::tuple>();
+      if (pair.size() != 2)
+        throw std::invalid_argument(name + ": a pair (image_points (N, 2), object_points (N, 3))");
+      calibration::BoardView v;
+      v.name = name;
+      v.image_size = {image_size->first, image_size->second};
+      v.image_points = points2(pair[0].cast<py::array_t<double>>(), name + "[0]");
+      v.object_points = points3(pair[1].cast<py::array_t<double>>(), name + "[1]");
+      if (v.image_points.size() != v.object_points.size())
+        throw std::invalid_argument(name + ": as many image points as object points");
+      views.push_back(std::move(v));
+    }
+  }
+  const calibration::IntrinsicsResult r =
+      run_interruptible([&] { return calibration::calibrate_intrinsics(views, options); });
+  py::dict d;
+  d["camera"] = camera_to_python(r.camera());
+  d["rms_px"] = r.rms_px;
+  d["views_used"] = r.views_used();
+  d["view_rms_px"] = r.view_rms_px;
+  d["rejected"] = r.rejected;
+  d["not_found"] = not_found;
+  d["std"] = r.std;
+  return d;
+}
+
+py::dict render_calibration_binding(const py::object& scene, int intrinsics_views, int table_views,
+                                    int joint_views, std::uint64_t seed, const std::string& board) {
+  const auto compiled = model_argument(scene);
+  drivers::SessionOptions options;
+  options.intrinsics_views = intrinsics_views;
+  options.table_views = table_views;
+  options.joint_views = joint_views;
+  options.seed = seed;
+  options.board = board;
+  std::vector<std::pair<std::string, cv::Mat>> images;
+  const drivers::CalibrationSession session = run_interruptible([&] {
+    return drivers::render_calibration_session(*compiled, options,
+                                               [&](const std::string& path, const cv::Mat& image) {
+                                                 InterruptScope::check();
+                                                 images.emplace_back(path, image.clone());
+                                               });
+  });
+  py::dict out;
+  py::dict by_path;
+  for (const auto& [path, image] : images) by_path[py::str(path)] = image_to_numpy(image);
+  out["images"] = by_path;
+  out["board"] = session.board.notation();
+  out["intrinsics_images"] = session.intrinsics_images;
+  out["camera"] = camera_to_python(session.truth.camera);
+  return out;
+}
+
+}  // namespace
+
+void bind_camera(py::module_& m) {
+  py::class_<PyRenderer>(m, "Renderer")
+      .def(py::init<const py::object&, const std::optional<std::string>&, std::optional<double>>(),
+           "model"_a, "backend"_a = py::none(), "duration"_a = py::none())
+      .def("render_at", &PyRenderer::render_at, "t"_a)
+      .def("render_state", &PyRenderer::render_state, "hand_angle"_a, "disk_center"_a,
+           "disk_angle"_a, "t"_a)
+      .def_property_readonly("t_end", &PyRenderer::t_end)
+      .def_property_readonly("gl", &PyRenderer::gl)
+      .def_property_readonly("camera", &PyRenderer::camera);
+  py::class_<PyTracker>(m, "Tracker")
+      .def(py::init<const py::object&, const std::optional<std::string>&>(), "model"_a,
+           "method"_a = py::none())
+      .def("track", &PyTracker::track, "frame"_a, "theta"_a = py::none())
+      .def("reset", &PyTracker::reset);
+  m.def("calibrate", &calibrate_binding, "board"_a, "images"_a, "corners"_a, "image_size"_a,
+        "fix"_a, "rational"_a);
+  m.def("render_calibration", &render_calibration_binding, "scene"_a, "intrinsics_views"_a,
+        "table_views"_a, "joint_views"_a, "seed"_a, "board"_a);
+}
+
+}  // namespace flatland::python

@@ -1,0 +1,186 @@
+// The closed loop: a synthetic experiment (its result and its 1 kHz log as arrays) and a Monte
+// Carlo study of perturbed worlds.
+#include "convert.hpp"
+
+#include "flatland/drivers/experiment.hpp"
+#include "flatland/drivers/montecarlo.hpp"
+#include "flatland/drivers/synthetic.hpp"
+#include "flatland/drivers/tick_log_csv.hpp"
+#include "flatland/model/compile.hpp"
+
+#include <pybind11/stl.h>
+
+#include <cmath>
+
+namespace flatland::python {
+
+using namespace pybind11::literals;
+
+namespace {
+
+/// The experiments' default scene, as `flatland experiment` has it: the closed-loop air table.
+Scene experiment_scene(const py::object& scene) {
+  if (!scene.is_none()) return scene_argument(scene);
+  return load_scene(data_directory() + "/scenes/airtable-feedback.yaml");
+}
+
+py::object optional_number(const std::optional<double>& v) {
+  return v ? py::object(py::float_(*v)) : py::none();
+}
+
+/// The log as one array per column of log.csv, named without the unit (t, theta, theta_dot, ...);
+/// stage and mode_true as str arrays.
+py::dict log_columns(const std::vector<drivers::TickLog>& log) {
+  const auto& columns = drivers::tick_log_columns();
+  const py::object numpy_array = py::module_::import("numpy").attr("array");
+  py::dict out;
+  for (int c = 0; c < static_cast<int>(columns.size()); ++c) {
+    const std::string name = drivers::tick_log_column_name(columns[c]);
+    if (drivers::tick_log_column_is_text(c)) {
+      py::list values;
+      for (const auto& row : log) values.append(py::str(drivers::tick_log_text(row, c)));
+      out[py::str(name)] = numpy_array(values, "U16");
+      continue;
+    }
+    py::array_t<double> values(static_cast<py::ssize_t>(log.size()));
+    double* data = values.mutable_data();
+    for (std::size_t i = 0; i < log.size(); ++i) data[i] = drivers::tick_log_number(log[i], c);
+    out[py::str(name)] = values;
+  }
+  return out;
+}
+
+py::tuple experiment_binding(const py::object& scene_arg,
+                             const std::optional<std::string>& controller) {
+  Scene scene = experiment_scene(scene_arg);
+  if (controller) {
+    if (*controller != "open-loop" && *controller != "feedback")
+      throw std::invalid_argument("controller: must be open-loop or feedback, got '" + *controller +
+                                  "'");
+    scene.controller.mode = *controller;
+  }
+  const std::shared_ptr<const model::Model> nominal = model::compile(scene);
+  drivers::require_friction(scene);
+  const drivers::SyntheticResult s = run_interruptible([&] {
+    const drivers::LoopSetup setup(nominal);
+    drivers::SyntheticOptions options;
+    options.progress = [](double, double) { InterruptScope::check(); };
+    return drivers::run_synthetic(setup, nominal, options);
+  });
+  const drivers::LoopResult& loop = s.loop;
+  // The keys of `flatland experiment --json` that a synthetic run has.
+  py::dict r;
+  r["success"] = s.success;
+  r["outcome"] = drivers::to_string(s.outcome);
+  r["failure"] = s.failure.empty() ? py::object(py::none()) : py::object(py::str(s.failure));
+  r["duration_s"] = std::isfinite(loop.duration_s) ? py::object(py::float_(loop.duration_s))
+                                                   : py::object(py::none());
+  r["s_end"] = s.s_end;
+  r["fn_min_ratio"] = s.fn_min_ratio;
+  r["mu_max"] = s.mu_max;
+  r["frames"] = loop.frames;
+  r["frames_lost"] = loop.frames_lost;
+  r["safe_stop"] = loop.safe_stop;
+  r["stop_reason"] =
+      loop.stop_reason ? py::object(py::str(loop.stop_reason->detail)) : py::object(py::none());
+  r["finished"] = loop.finished;
+  r["k"] = loop.k;
+  r["period"] = loop.period;
+  r["controller"] = scene.controller.mode;
+  r["nees_mean"] = s.nees_mean;
+  r["measurements"] = loop.measurements;
+  r["estimator_steps"] = loop.estimator_steps;
+  r["ticks"] = static_cast<long>(loop.log.size());
+  r["t_stage2"] = optional_number(loop.t_stage2);
+  r["t_stage3"] = optional_number(loop.t_stage3);
+  r["frames_rendered"] = s.frames_rendered;
+  r["frames_dropped"] = s.frames_dropped;
+  sim::Sample start;
+  start.t = loop.log.empty() ? 0.0 : loop.log.front().t;
+  r["contact"] = to_python(
+      api::contact_summary_json(s.mode_time, s.mode_changes, s.impacts, s.contact_events, start));
+  r["scene"] = scene.origin;
+  return py::make_tuple(r, log_columns(loop.log));
+}
+
+py::dict montecarlo_binding(const py::object& scene, int runs, std::uint64_t seed,
+                            const std::vector<std::string>& controllers, unsigned threads,
+                            const std::optional<py::dict>& perturbations) {
+  const std::shared_ptr<const model::Model> nominal = model::compile(experiment_scene(scene));
+  drivers::require_friction(nominal->spec);
+  drivers::Perturbations p;
+  if (perturbations) {
+    for (const auto& [key, value] : *perturbations) {
+      const std::string name = py::str(key);
+      const double v = value.cast<double>();
+      if (name == "s_h")
+        p.s_h = v;
+      else if (name == "tilt_deg")
+        p.tilt_deg = v;
+      else if (name == "radius_rel")
+        p.radius_rel = v;
+      else if (name == "noise_dn")
+        p.noise_dn = v;
+      else if (name == "latency")
+        p.latency = v;
+      else if (name == "latency_jitter")
+        p.latency_jitter = v;
+      else if (name == "drop")
+        p.drop = v;
+      else if (name == "friction_rel")
+        p.friction_rel = v;
+      else if (name == "contact_rel")
+        p.contact_rel = v;
+      else
+        throw std::invalid_argument("perturbations." + name +
+                                    ": unknown (s_h, tilt_deg, radius_rel, noise_dn, latency, "
+                                    "latency_jitter, drop, friction_rel, contact_rel)");
+    }
+  }
+  drivers::validate(p);
+  const drivers::MonteCarloResult r = run_interruptible([&] {
+    return drivers::run_montecarlo(*nominal, p, runs, seed, controllers, threads,
+                                   InterruptScope::progress());
+  });
+  py::dict out;
+  out["runs"] = r.runs;
+  out["success_open_loop"] =
+      r.success_open_loop >= 0 ? py::object(py::int_(r.success_open_loop)) : py::object(py::none());
+  out["success_feedback"] =
+      r.success_feedback >= 0 ? py::object(py::int_(r.success_feedback)) : py::object(py::none());
+  out["ci_open_loop"] = py::make_tuple(r.ci_open_loop.lo, r.ci_open_loop.hi);
+  out["ci_feedback"] = py::make_tuple(r.ci_feedback.lo, r.ci_feedback.hi);
+  py::list records;
+  for (const drivers::RunRecord& rec : r.records) {
+    py::dict d;
+    d["run"] = rec.run;
+    d["controller"] = rec.controller;
+    d["success"] = rec.success;
+    d["outcome"] = drivers::to_string(rec.outcome);
+    d["failure"] = rec.failure;
+    d["slide_s"] = rec.slide_s;
+    d["flight_s"] = rec.flight_s;
+    d["impacts"] = rec.impacts;
+    d["duration_s"] = rec.duration_s;
+    d["s_end"] = rec.s_end;
+    d["fn_min_ratio"] = rec.fn_min_ratio;
+    d["mu_max"] = rec.mu_max;
+    d["safe_stop"] = rec.safe_stop;
+    d["frames"] = rec.frames;
+    d["frames_lost"] = rec.frames_lost;
+    records.append(d);
+  }
+  out["records"] = records;
+  out["seconds"] = r.seconds;
+  return out;
+}
+
+}  // namespace
+
+void bind_loop(py::module_& m) {
+  m.def("experiment", &experiment_binding, "scene"_a, "controller"_a);
+  m.def("montecarlo", &montecarlo_binding, "scene"_a, "runs"_a, "seed"_a, "controllers"_a,
+        "threads"_a, "perturbations"_a);
+}
+
+}  // namespace flatland::python
