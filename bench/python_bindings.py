@@ -33,7 +33,7 @@ import solve_scipy  # noqa: E402
 
 
 def cpp_benchmark(binary, name, min_time):
-    out = subprocess.run([str(binary), f"--benchmark_filter=^{name}$",
+    out = subprocess.run([str(binary), f"--benchmark_filter=^{name}(/real_time)?$",
                           f"--benchmark_min_time={min_time}", "--benchmark_format=json"],
                          capture_output=True, text=True, check=True).stdout
     run = json.loads(out)["benchmarks"][0]
