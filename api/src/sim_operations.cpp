@@ -10,6 +10,8 @@ using sim::format_number;
 
 std::string option_name(std::string_view name, Spelling spelling) {
   if (spelling == Spelling::kPython) return std::string(name);
+  // A Python keyword takes a trailing underscore (from_); the option has none (--from).
+  if (name.size() > 1 && name.back() == '_') name.remove_suffix(1);
   std::string out = "--";
   for (char c : name) out += c == '_' ? '-' : c;
   return out;
@@ -45,6 +47,28 @@ const std::string& require_choice(const std::string& option, const std::string& 
   std::string list;
   for (const auto& c : choices) list += (list.empty() ? "" : ", ") + c;
   throw UsageError(option + ": must be one of " + list + ", got '" + value + "'");
+}
+
+/// What time-optimal and locus check alike, first: the overrides, a butterfly motion and the
+/// bracket of periods [from, to]. Returns the scene's spec.
+sim::SimulationSpec& start_period_search(Scene& scene, const IntegratorOverrides& integrator,
+                                         double from, double to, Spelling spelling) {
+  const std::string from_name = option_name("from_", spelling),
+                    to_name = option_name("to", spelling);
+  apply_integrator_overrides(integrator, scene, spelling);
+  scene.sim.motion.kind = sim::MotionSpec::Kind::kButterfly;
+  require_positive(from_name, from, "2T in s");
+  require_positive(to_name, to, "2T in s");
+  require_increasing(from_name, from, to_name, to);
+  return scene.sim;
+}
+
+/// ... and last: mu, and the lossless problem at the bracket's start.
+void finish_period_search(sim::SimulationSpec& spec, std::optional<double> mu, double from,
+                          Spelling spelling) {
+  if (mu) apply_mu(*mu, spec, spelling);
+  spec.motion.period = from;
+  build_problem_checked(sim::paper_model(spec), {{"contact.mu", option_name("mu", spelling)}});
 }
 
 }  // namespace
@@ -181,19 +205,10 @@ sim::RunResult simulate(const PreparedSimulation& p) {
 sim::SimulationSpec prepare_time_optimal(Scene scene, const TimeOptimalRequest& r,
                                          Spelling spelling) {
   const auto name = [spelling](std::string_view n) { return option_name(n, spelling); };
-  apply_integrator_overrides(r.integrator, scene, spelling);
-  sim::SimulationSpec& spec = scene.sim;
-  spec.motion.kind = sim::MotionSpec::Kind::kButterfly;
-  // Python's `from` is a keyword: the argument is from_.
-  const std::string from = spelling == Spelling::kPython ? "from_" : "--from";
-  require_positive(from, r.from, "2T in s");
-  require_positive(name("to"), r.to, "2T in s");
-  require_increasing(from, r.from, name("to"), r.to);
+  sim::SimulationSpec& spec = start_period_search(scene, r.integrator, r.from, r.to, spelling);
   require_positive(name("period_tolerance"), r.period_tolerance, "s");
   require_positive(name("tolerance"), r.tolerance, "");
-  if (r.mu) apply_mu(*r.mu, spec, spelling);
-  spec.motion.period = r.from;
-  build_problem_checked(sim::paper_model(spec), {{"contact.mu", name("mu")}});
+  finish_period_search(spec, r.mu, r.from, spelling);
   return spec;
 }
 
@@ -205,21 +220,13 @@ sim::TimeOptimalReport time_optimal(const sim::SimulationSpec& spec, const TimeO
 
 sim::SimulationSpec prepare_locus(Scene scene, const LocusRequest& r, Spelling spelling) {
   const auto name = [spelling](std::string_view n) { return option_name(n, spelling); };
-  apply_integrator_overrides(r.integrator, scene, spelling);
-  sim::SimulationSpec& spec = scene.sim;
-  spec.motion.kind = sim::MotionSpec::Kind::kButterfly;
-  const std::string from = spelling == Spelling::kPython ? "from_" : "--from";
-  require_positive(from, r.from, "2T in s");
-  require_positive(name("to"), r.to, "2T in s");
-  require_increasing(from, r.from, name("to"), r.to);
+  sim::SimulationSpec& spec = start_period_search(scene, r.integrator, r.from, r.to, spelling);
   if (r.n < 1 || r.n > 10000)
     throw UsageError(name("n") +
                      ": must be in [1, 10000] (each is a solve of ~10 simulations), got " +
                      std::to_string(r.n));
   require_positive(name("tolerance"), r.tolerance, "");
-  if (r.mu) apply_mu(*r.mu, spec, spelling);
-  spec.motion.period = r.from;
-  build_problem_checked(sim::paper_model(spec), {{"contact.mu", name("mu")}});
+  finish_period_search(spec, r.mu, r.from, spelling);
   return spec;
 }
 

@@ -215,7 +215,8 @@ py::dict calibrate_binding(const std::string& board_text, const std::optional<py
   if (images) {
     std::vector<py::array> arrays;  // kept alive while their Mats are read
     for (std::size_t i = 0; i < images->size(); ++i)
-      arrays.push_back((*images)[i].cast<py::array>());
+      arrays.push_back(cast_argument<py::array>((*images)[i], "images[" + std::to_string(i) + "]",
+                                                "an image array"));
     std::vector<cv::Mat> mats;
     for (std::size_t i = 0; i < arrays.size(); ++i)
       mats.push_back(numpy_to_image(arrays[i], ("images[" + std::to_string(i) + "]").c_str()));
@@ -234,14 +235,17 @@ py::dict calibrate_binding(const std::string& board_text, const std::optional<py
       throw std::invalid_argument("image_size: width and height must be positive");
     for (std::size_t i = 0; i < corners->size(); ++i) {
       const std::string name = "corners[" + std::to_string(i) + "]";
-      const py::tuple pair = (*corners)[i].cast<py::tuple>();
+      const auto pair = cast_argument<py::tuple>(
+          (*corners)[i], name, "a pair (image_points (N, 2), object_points (N, 3))");
       if (pair.size() != 2)
         throw std::invalid_argument(name + ": a pair (image_points (N, 2), object_points (N, 3))");
       calibration::BoardView v;
       v.name = name;
       v.image_size = {image_size->first, image_size->second};
-      v.image_points = points2(pair[0].cast<py::array_t<double>>(), name + "[0]");
-      v.object_points = points3(pair[1].cast<py::array_t<double>>(), name + "[1]");
+      v.image_points = points2(cast_argument<py::array_t<double>>(pair[0], name + "[0]", "numbers"),
+                               name + "[0]");
+      v.object_points = points3(
+          cast_argument<py::array_t<double>>(pair[1], name + "[1]", "numbers"), name + "[1]");
       if (v.image_points.size() != v.object_points.size())
         throw std::invalid_argument(name + ": as many image points as object points");
       views.push_back(std::move(v));

@@ -43,6 +43,22 @@ py::array image_to_numpy(const cv::Mat& image);
 /// array must stay alive while the Mat is used. ValueError naming `argument` otherwise.
 cv::Mat numpy_to_image(const py::array& array, const char* argument);
 
+/// h as a T, or std::invalid_argument (ValueError) "NAME: WHAT, got a TYPE" when it is not one.
+template <class T>
+T cast_argument(const py::handle& h, const std::string& name, const std::string& what) {
+  const auto wrong = [&] {
+    return std::invalid_argument(name + ": " + what + ", got a " +
+                                 std::string(py::str(py::type::of(h).attr("__name__"))));
+  };
+  try {
+    return h.cast<T>();
+  } catch (const py::cast_error&) {
+    throw wrong();
+  } catch (const py::error_already_set&) {  // a conversion that raised (tuple(5): TypeError)
+    throw wrong();
+  }
+}
+
 /// Thrown by a progress callback after Ctrl-C: not a std::exception, so that no library code
 /// that turns exceptions into results (a failed study cell) can swallow it.
 struct Interrupted {};

@@ -10,7 +10,10 @@
 
 #include <pybind11/stl.h>
 
+#include <algorithm>
 #include <cmath>
+#include <iterator>
+#include <utility>
 
 namespace flatland::python {
 
@@ -109,32 +112,28 @@ py::dict montecarlo_binding(const py::object& scene, int runs, std::uint64_t see
   const std::shared_ptr<const model::Model> nominal = model::compile(experiment_scene(scene));
   drivers::require_friction(nominal->spec);
   drivers::Perturbations p;
+  using P = drivers::Perturbations;
+  static const std::pair<const char*, double P::*> fields[] = {
+      {"s_h", &P::s_h},
+      {"tilt_deg", &P::tilt_deg},
+      {"radius_rel", &P::radius_rel},
+      {"noise_dn", &P::noise_dn},
+      {"latency", &P::latency},
+      {"latency_jitter", &P::latency_jitter},
+      {"drop", &P::drop},
+      {"friction_rel", &P::friction_rel},
+      {"contact_rel", &P::contact_rel}};
   if (perturbations) {
     for (const auto& [key, value] : *perturbations) {
       const std::string name = py::str(key);
-      const double v = value.cast<double>();
-      if (name == "s_h")
-        p.s_h = v;
-      else if (name == "tilt_deg")
-        p.tilt_deg = v;
-      else if (name == "radius_rel")
-        p.radius_rel = v;
-      else if (name == "noise_dn")
-        p.noise_dn = v;
-      else if (name == "latency")
-        p.latency = v;
-      else if (name == "latency_jitter")
-        p.latency_jitter = v;
-      else if (name == "drop")
-        p.drop = v;
-      else if (name == "friction_rel")
-        p.friction_rel = v;
-      else if (name == "contact_rel")
-        p.contact_rel = v;
-      else
-        throw std::invalid_argument("perturbations." + name +
-                                    ": unknown (s_h, tilt_deg, radius_rel, noise_dn, latency, "
-                                    "latency_jitter, drop, friction_rel, contact_rel)");
+      const auto* field = std::find_if(std::begin(fields), std::end(fields),
+                                       [&](const auto& f) { return name == f.first; });
+      if (field == std::end(fields)) {
+        std::string known;
+        for (const auto& f : fields) known += (known.empty() ? "" : ", ") + std::string(f.first);
+        throw std::invalid_argument("perturbations." + name + ": unknown (" + known + ")");
+      }
+      p.*(field->second) = cast_argument<double>(value, "perturbations." + name, "a number");
     }
   }
   drivers::validate(p);

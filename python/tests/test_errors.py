@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import flatland
-from conftest import ROOT, cli_error
+from conftest import ROOT, SCENES, cli_error
 
 
 def test_a_bad_period_names_the_keyword_with_the_clis_reason(cli):
@@ -48,6 +48,13 @@ def test_a_missing_scene_file(cli, tmp_path):
     (lambda: flatland.surface(nk=1), "nk: must be in [2, 10000]"),
     (lambda: flatland.solve(solve_for="x"), "solve_for: must be one of k, d"),
     (lambda: flatland.calibrate("chessboard:2x6:0.02", corners=[]), "board:"),
+    (lambda: flatland.Renderer(SCENES / "butterfly-camera.yaml", duration=-1),
+     "duration: must be positive"),
+    (lambda: flatland.Renderer(SCENES / "butterfly-camera.yaml").render(t=99),
+     "t: outside the scene's run"),
+    (lambda: flatland.Renderer(SCENES / "butterfly-camera.yaml").render(),
+     "render: give exactly one of t and state"),
+    (lambda: flatland.Renderer(SCENES / "butterfly-camera.yaml", backend="vulkan"), "vulkan"),
     (lambda: flatland.calibrate("chessboard:9x6:0.02"), "images/corners: give exactly one"),
     (lambda: flatland.Tracker().track(np.zeros((4, 4, 2), np.uint8)), "frame: an image of shape"),
     (lambda: flatland.Tracker().track(np.zeros((4, 4), np.int32)), "frame: uint8 or float32"),
@@ -55,6 +62,15 @@ def test_a_missing_scene_file(cli, tmp_path):
     (lambda: flatland.experiment(controller="psychic"), "controller: must be open-loop or feedback"),
     (lambda: flatland.montecarlo(perturbations={"gravity": 1}), "perturbations.gravity: unknown"),
     (lambda: flatland.montecarlo(perturbations={"drop": 2}), "perturbations.drop"),
+    (lambda: flatland.montecarlo(perturbations={"drop": "often"}),
+     "perturbations.drop: a number, got a str"),
+    (lambda: flatland.calibrate("chessboard:9x6:0.02", corners=[5], image_size=(640, 480)),
+     "corners[0]: a pair (image_points (N, 2), object_points (N, 3)), got a int"),
+    (lambda: flatland.calibrate("chessboard:9x6:0.02", corners=[(np.zeros((4, 3)), np.zeros((4, 3)))],
+                                image_size=(640, 480)), "corners[0][0]: an array of shape (N, 2)"),
+    (lambda: flatland.calibrate("chessboard:9x6:0.02", [np.zeros((8, 8), np.float64)]),
+     "images[0]: uint8 or float32 pixels"),
+    (lambda: flatland.calibrate("chessboard:9x6:0.02", corners=[]), "image_size:"),
     (lambda: flatland.Renderer(flatland.default_scene_path()), "camera"),
     (lambda: flatland.load(123), "scene: a Model, a path or None"),
 ])
