@@ -17,6 +17,7 @@
 #include "flatland/sim/search.hpp"
 #include "flatland/sim/simulate.hpp"
 #include "flatland/sim/spec.hpp"
+#include "flatland/sim/surface.hpp"
 #include "flatland/sim/trajectory_csv.hpp"
 
 #include "flatland/scene/scene.hpp"
