@@ -17,6 +17,8 @@
 #include "flatland/sim/search.hpp"
 #include "flatland/sim/simulate.hpp"
 #include "flatland/sim/spec.hpp"
+#include "flatland/sim/spatial.hpp"
+#include "flatland/sim/spatial_run.hpp"
 #include "flatland/sim/surface.hpp"
 #include "flatland/sim/trajectory_csv.hpp"
 
