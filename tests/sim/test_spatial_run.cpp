@@ -74,6 +74,48 @@ TEST(SpatialRun, BallOnATurntableCirclesAsWeltnerSays) {
   EXPECT_LT(run.stats.max_redundant_residual, 1e-10);
 }
 
+TEST(SpatialRun, BallOnAnInclinedTurntableDriftsAcrossTheSlope) {
+  // Weltner: on a plate inclined by theta and spinning at Omega about its normal n, the centre
+  // obeys dv/dt = (2/7) Omega n x v + (5/7) g_t (g_t gravity along the plate), so it circles at
+  // k = (2/7) Omega about a centre that drifts at v_d = (5 / (2 Omega)) n x g_t, across the slope,
+  // |v_d| = (5/2) (g / Omega) sin(theta): p(t) = p0 + v_d t + (sin(kt)/k) u + ((1 - cos kt)/k)
+  // n x u, u = v0 - v_d.
+  // The ball's speed over the plate grows as (5/2) g sin(theta) t wherever it starts (the plate
+  // turns under the drifting centre): a few circles of a fast plate keep that moderate.
+  const double omega = 40.0, theta = 0.05, r = 0.03, g = 9.8, k = 2.0 / 7.0 * omega;
+  SpatialRollingProblem pb;
+  pb.hand = std::make_shared<PlaneSurface>(Vec3::Zero(), Vec3::UnitX(), Vec3::UnitY());
+  pb.object = uniform_ball(r, 0.2);
+  pb.gravity = Vec3(0, 0, -g);
+  const Eigen::Matrix3d tilt = Eigen::AngleAxisd(theta, Vec3::UnitX()).toRotationMatrix();
+  const Vec3 n = tilt * Vec3::UnitZ();
+  const SpinningHand3 table(n, omega, Vec3::Zero(), tilt);
+  const HandPose3 start = table.at(0);
+  const Vec3 v0 = tilt * Vec3(0.04, -0.02, 0);
+  const SpatialState initial = ball_on(pb, start, r, SurfaceParam(0.05, 0.03), v0, 1.0);
+  const Vec3 g_t = pb.gravity - pb.gravity.dot(n) * n;
+  const Vec3 v_d = 5.0 / (2.0 * omega) * n.cross(g_t);
+  ASSERT_NEAR(v_d.norm(), 2.5 * g / omega * std::sin(theta), 1e-12);
+  SpatialRunOptions o;
+  o.t_end = 3 * 2 * kPi / k;  // three circles
+  o.rtol = 1e-11;
+  o.atol = 1e-13;
+  o.max_steps = 200000;
+  const SpatialRunResult run = simulate_spatial(pb, table, initial, 0.0, o);
+  ASSERT_EQ(run.stop, SpatialStop::kEndTime);
+  const Vec3 p0 = run.steps.front().state.position, u = v0 - v_d;
+  double worst = 0;
+  for (const SpatialSample& s : run.steps) {
+    const double t = s.t;
+    const Vec3 expected =
+        p0 + v_d * t + std::sin(k * t) / k * u + (1 - std::cos(k * t)) / k * n.cross(u);
+    worst = std::max(worst, (s.state.position - expected).norm());
+  }
+  const double travelled = v_d.norm() * o.t_end;
+  EXPECT_LT(worst / travelled, 1e-8) << "drifted " << travelled << " m";
+  EXPECT_LT(run.stats.max_constraint_residual, 1e-12);
+}
+
 TEST(SpatialRun, BallRollsStraightOnForManyTurnsAcrossItsChartsPoles) {
   // Without gravity along the plane a rolling ball keeps its velocity. The ball's chart has its
   // poles on the rolling axis's great circle, so the contact reaches them within a quarter turn:
