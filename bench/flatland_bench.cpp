@@ -4,6 +4,7 @@
 #include "flatland/sim/rolling.hpp"
 #include "flatland/sim/search.hpp"
 #include "flatland/sim/simulate.hpp"
+#include "flatland/sim/spatial_run.hpp"
 #include "flatland/sim/spec.hpp"
 
 #include <benchmark/benchmark.h>
@@ -167,6 +168,58 @@ std::string tolerance_name(double rtol) {
   return buf;
 }
 
+// Spatial rolling (issue 16): a uniform ball (r 2 cm) on a turntable spinning at 10 rad/s about
+// the vertical, rolling at 5.8 cm/s 12.6 cm from the axis (Weltner's problem).
+struct Turntable {
+  sim::SpatialRollingProblem problem;
+  sim::SpinningHand3 table{sim::Vec3::UnitZ(), 10.0};
+  sim::SpatialState state;
+  Turntable() {
+    const double r = 0.02;
+    problem.hand = std::make_shared<sim::PlaneSurface>(sim::Vec3::Zero(), sim::Vec3::UnitX(),
+                                                       sim::Vec3::UnitY());
+    problem.object = sim::uniform_ball(r, 0.2);
+    const sim::Vec3 contact(0.12, -0.04, 0), v(0.05, 0.03, 0);
+    const sim::Vec3 w = v - table.at(0).angular_velocity.cross(contact);
+    state.position = contact + sim::Vec3(0, 0, r);
+    state.orientation = Eigen::Quaterniond::FromTwoVectors(sim::Vec3::UnitX(), -sim::Vec3::UnitZ());
+    state.velocity = v;
+    state.angular_velocity = sim::Vec3(-w.y() / r, w.x() / r, 1.5);
+    state.s_h = sim::SurfaceParam(contact.x(), contact.y());
+    state.sdot_h = sim::SurfaceParam(w.x(), w.y());
+    state.sdot_o = sim::SurfaceParam(w.y() / r, w.x() / r);
+  }
+};
+
+// One evaluation of the spatial equations: the surfaces' geometry, A x = b (11 x 10) assembled
+// and solved by column-pivoting QR.
+void SpatialRhs(benchmark::State& state) {
+  const Turntable t;
+  const sim::HandPose3 hand = t.table.at(0);
+  for (auto _ : state) {
+    sim::SpatialSolution s = sim::solve_spatial_rolling(t.problem, hand, t.state);
+    benchmark::DoNotOptimize(s.x);
+  }
+}
+
+// 10 s of Weltner's turntable (2.9 of the ball's circles) at rtol 1e-10, steps not kept.
+void SpatialWeltner10s(benchmark::State& state) {
+  const Turntable t;
+  sim::SpatialRunOptions o;
+  o.t_end = 10.0;
+  o.rtol = 1e-10;
+  o.atol = 1e-12;
+  o.record = false;
+  sim::SpatialRunResult run;
+  for (auto _ : state) {
+    run = sim::simulate_spatial(t.problem, t.table, t.state, 0.0, o);
+    benchmark::DoNotOptimize(run.final);
+  }
+  state.counters["steps"] = benchmark::Counter(static_cast<double>(run.stats.steps));
+  state.counters["rhs_evals"] = benchmark::Counter(static_cast<double>(run.stats.rhs_evals));
+  state.counters["charts"] = benchmark::Counter(run.stats.chart_changes);
+}
+
 void register_all() {
   for (const auto formulation : {sim::Formulation::kGeneral, sim::Formulation::kReduced}) {
     for (const double rtol : {1e-6, 1e-9, 1e-12}) {
@@ -192,6 +245,9 @@ void register_all() {
   benchmark::RegisterBenchmark("BM_Solve/rtol:1e-07", Solve, 1e-7, 1e-9)
       ->Unit(benchmark::kMillisecond);
   benchmark::RegisterBenchmark("BM_Solve/rtol:1e-10", Solve, 1e-10, 1e-12)
+      ->Unit(benchmark::kMillisecond);
+  benchmark::RegisterBenchmark("BM_SpatialRhs", SpatialRhs)->Unit(benchmark::kMicrosecond);
+  benchmark::RegisterBenchmark("BM_SpatialWeltner10s", SpatialWeltner10s)
       ->Unit(benchmark::kMillisecond);
   benchmark::RegisterBenchmark("BM_Surface100", Surface100)
       ->Iterations(1)
