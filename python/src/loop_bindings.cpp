@@ -130,7 +130,12 @@ py::dict montecarlo_binding(const py::object& scene, int runs, std::uint64_t see
                                        [&](const auto& f) { return name == f.first; });
       if (field == std::end(fields)) {
         std::string known;
-        for (const auto& f : fields) known += (known.empty() ? "" : ", ") + std::string(f.first);
+        // Appended piece by piece: GCC 12 warns falsely (-Wstringop-overflow, under LTO) about
+        // "literal" + std::string.
+        for (const auto& f : fields) {
+          if (!known.empty()) known += ", ";
+          known += f.first;
+        }
         throw std::invalid_argument("perturbations." + name + ": unknown (" + known + ")");
       }
       p.*(field->second) = cast_argument<double>(value, "perturbations." + name, "a number");
