@@ -14,6 +14,7 @@
 #include <pybind11/stl.h>
 
 #include <cmath>
+#include <mutex>
 #include <optional>
 
 namespace flatland::python {
@@ -77,6 +78,7 @@ class PyRenderer {
   py::tuple render_at(double t) {
     if (!std::isfinite(t)) throw std::invalid_argument("t: must be a finite time, s");
     render::Frame frame = run_interruptible([&] {
+      const std::lock_guard<std::mutex> lock(mutex_);
       if (!run_) {
         sim::SimulationSpec spec = model_->spec.sim;
         if (duration_) spec.duration = *duration_;
@@ -105,11 +107,14 @@ class PyRenderer {
     for (double v : {hand_angle, disk_center.first, disk_center.second, disk_angle, t})
       if (!std::isfinite(v)) throw std::invalid_argument("state: every value must be finite");
     cv::Mat image;
+    render::FrameTruth truth;
     {
       py::gil_scoped_release release;
+      const std::lock_guard<std::mutex> lock(mutex_);
       image = renderer_->render_8u(state);
+      truth = renderer_->truth(state);
     }
-    return py::make_tuple(image_to_numpy(image), truth_to_python(renderer_->truth(state)));
+    return py::make_tuple(image_to_numpy(image), truth_to_python(truth));
   }
 
   /// The run's end: the scene's (or the duration's) until the run is made, then where it stopped.
@@ -125,6 +130,8 @@ class PyRenderer {
   std::unique_ptr<render::Renderer> renderer_;
   std::optional<double> duration_;
   std::unique_ptr<sim::RunResult> run_;
+  // The GIL is released while a frame renders: calls from several Python threads take turns.
+  std::mutex mutex_;
 };
 
 /// A Tracker knowing a compiled scene's camera (and its hand, for s_h), or none.
@@ -148,6 +155,7 @@ class PyTracker {
     std::optional<vision::ContactEstimate> contact;
     {
       py::gil_scoped_release release;
+      const std::lock_guard<std::mutex> lock(mutex_);
       r = tracker_->track(image);
       if (r.ok() && theta && mapping_) {
         // Near the previous frame's s_h when there is one, else over a whole period of the
@@ -170,6 +178,7 @@ class PyTracker {
   }
 
   void reset() {
+    const std::lock_guard<std::mutex> lock(mutex_);
     tracker_->reset();
     s_guess_ = std::nan("");
   }
@@ -179,6 +188,7 @@ class PyTracker {
   std::optional<vision::HandMapping> mapping_;
   std::unique_ptr<vision::Tracker> tracker_;
   double s_guess_ = std::nan("");
+  std::mutex mutex_;  ///< as the Renderer's: a stateful tracker, one frame at a time
 };
 
 std::vector<cv::Point2f> points2(const py::array_t<double>& a, const std::string& name) {
