@@ -249,6 +249,29 @@ class SpatialIntegration {
     return out;
   }
 
+  /// std::invalid_argument unless the object fits the hand at the contact: the relative curvature
+  /// S_o + S_h (the shape operators on the common tangent plane, > 0 where a body bulges towards
+  /// the other) must be positive definite, or the object touches the hand along more than a point
+  /// (a ball larger than the bowl it sits in).
+  void require_fit(double t, const Y& y) const {
+    const SpatialState s = unpack(y);
+    const World w = world(motion_.at(t), s.orientation.toRotationMatrix(), s);
+    const Eigen::HouseholderQR<Mat32> qr(w.Jh);
+    const Mat32 E = qr.householderQ() * Mat32::Identity();  // an orthonormal tangent basis
+    const auto shape = [&](const Mat32& J, const Mat32& K) -> Eigen::Matrix2d {
+      const Eigen::Matrix2d S =
+          E.transpose() * K * (J.transpose() * J).inverse() * J.transpose() * E;
+      return 0.5 * (S + S.transpose());
+    };
+    const Eigen::Matrix2d relative = shape(w.Jo, w.Ko) + shape(w.Jh, w.Kh);
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(relative);
+    if (!(eig.eigenvalues().minCoeff() > 0))
+      throw std::invalid_argument(
+          "spatial run: the object does not fit the hand's curvature at the contact (" +
+          pb_.object.surface->describe() + " on " + pb_.hand->describe() + ": relative curvature " +
+          format_significant(eig.eigenvalues().minCoeff()) + " 1/m, must be > 0)");
+  }
+
   bool inside_patches(const Y& y) const {
     const SpatialState s = unpack(y);
     return pb_.hand->patch().contains(s.s_h) && pb_.object.surface->patch().contains(s.s_o);
@@ -313,6 +336,7 @@ SpatialRunResult simulate_spatial(const SpatialRollingProblem& pb, const HandMot
   Y y = in.pack(initial);
   in.rechart(y);
   in.project(t, y);
+  in.require_fit(t, y);
   const auto record = [&](double tt, const Y& yy) {
     SpatialSample s = in.sample(tt, yy);
     in.stats.max_constraint_residual =

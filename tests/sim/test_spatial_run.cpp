@@ -230,6 +230,24 @@ TEST(SpatialRun, BallInABowlOscillatesAtTheClosedFormFrequency) {
   EXPECT_NEAR(measured / period, 1.0, 1e-6) << crossings.size() << " crossings";
 }
 
+TEST(SpatialRun, ABallLargerThanItsBowlIsRefused) {
+  // Relative curvature 1/r - 1/R: positive for a ball smaller than the bowl, negative for one
+  // larger (it would touch the rim, not the bottom).
+  BowlRun b = ball_in_bowl(0.3, 0.05, 0.1, 0.0);
+  SpatialRunOptions o;
+  o.t_end = 0.01;
+  EXPECT_NO_THROW(simulate_spatial(b.pb, *b.hand, b.initial, 0.0, o));
+  b = ball_in_bowl(0.3, 0.4, 0.1, 0.0);
+  try {
+    simulate_spatial(b.pb, *b.hand, b.initial, 0.0, o);
+    FAIL() << "a ball larger than its bowl was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("does not fit the hand's curvature"), std::string::npos)
+        << e.what();
+    EXPECT_NE(std::string(e.what()).find("-0.833333 1/m"), std::string::npos) << e.what();
+  }
+}
+
 TEST(SpatialRun, BadProblemsAndOptionsAreRefused) {
   SpatialRollingProblem pb;
   pb.hand = std::make_shared<PlaneSurface>(Vec3::Zero(), Vec3::UnitX(), Vec3::UnitY());

@@ -95,8 +95,9 @@ struct SpatialRunResult {
 };
 
 /// Run from `initial` at t0 (projected onto the contact manifold first) to options.t_end.
-/// std::invalid_argument for a bad problem or options; std::runtime_error for an integrator
-/// failure (step budget, step underflow, non-finite state).
+/// std::invalid_argument for a bad problem or options, and for an object that does not fit the
+/// hand's curvature at the start (a ball larger than its bowl); std::runtime_error for an
+/// integrator failure (step budget, step underflow, non-finite state).
 SpatialRunResult simulate_spatial(const SpatialRollingProblem& problem, const HandMotion3& motion,
                                   const SpatialState& initial, double t0,
                                   const SpatialRunOptions& options);
