@@ -218,6 +218,11 @@ void SpatialWeltner10s(benchmark::State& state) {
   state.counters["steps"] = benchmark::Counter(static_cast<double>(run.stats.steps));
   state.counters["rhs_evals"] = benchmark::Counter(static_cast<double>(run.stats.rhs_evals));
   state.counters["charts"] = benchmark::Counter(run.stats.chart_changes);
+  // The centre's error against Weltner's circle, about p0 + z x v0 / k at k = (2/7) Omega.
+  const double k = 2.0 / 7.0 * 10.0;
+  const sim::Vec3 p0 = t.state.position, c = p0 + sim::Vec3::UnitZ().cross(t.state.velocity) / k;
+  const sim::Vec3 expected = c + Eigen::AngleAxisd(k * o.t_end, sim::Vec3::UnitZ()) * (p0 - c);
+  state.counters["centre_err_m"] = benchmark::Counter((run.final.state.position - expected).norm());
 }
 
 void register_all() {
