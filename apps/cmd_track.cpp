@@ -264,12 +264,7 @@ void run_track(const TrackOptions& o) {
       std::optional<double> theta = encoder ? encoder->at(t) : std::nullopt;
       if (mapping && theta) {
         const double offset = camfile.joint ? camfile.joint->encoder_offset : 0.0;
-        // Near the previous frame's s_h when there is one, else over a whole period of the
-        // closed outline (s is periodic with period 4).
-        const auto c =
-            std::isfinite(s_guess)
-                ? vision::pixel_to_contact(*mapping, r.center, *theta + offset, s_guess, 0.5)
-                : vision::pixel_to_contact(*mapping, r.center, *theta + offset, 0.0, 2.0);
+        const auto c = vision::follow_contact(*mapping, r.center, *theta + offset, s_guess);
         if (c) {
           row += format_number(c->s_h);
           s_guess = c->s_h;

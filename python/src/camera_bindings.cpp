@@ -158,11 +158,7 @@ class PyTracker {
       const std::lock_guard<std::mutex> lock(mutex_);
       r = tracker_->track(image);
       if (r.ok() && theta && mapping_) {
-        // Near the previous frame's s_h when there is one, else over a whole period of the
-        // closed outline (s is periodic with period 4), as `flatland track` does.
-        contact = std::isfinite(s_guess_)
-                      ? vision::pixel_to_contact(*mapping_, r.center, *theta, s_guess_, 0.5)
-                      : vision::pixel_to_contact(*mapping_, r.center, *theta, 0.0, 2.0);
+        contact = vision::follow_contact(*mapping_, r.center, *theta, s_guess_);
         if (contact) s_guess_ = contact->s_h;
       }
     }

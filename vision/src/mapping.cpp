@@ -136,4 +136,10 @@ std::optional<ContactEstimate> pixel_to_contact(const HandMapping& m, cv::Point2
                            half_window);
 }
 
+std::optional<ContactEstimate> follow_contact(const HandMapping& m, cv::Point2d px, double theta,
+                                              double previous_s_h) {
+  return std::isfinite(previous_s_h) ? pixel_to_contact(m, px, theta, previous_s_h, 0.5)
+                                     : pixel_to_contact(m, px, theta, 0.0, 2.0);
+}
+
 }  // namespace flatland::vision

@@ -57,4 +57,10 @@ struct HandMapping {
 std::optional<ContactEstimate> pixel_to_contact(const HandMapping& m, cv::Point2d px, double theta,
                                                 double guess, double half_window = 1.0);
 
+/// The contact of a tracked frame in a sequence: searched near the previous frame's s_h when
+/// there is one (half a piece either side), else over a whole period of the closed outline
+/// (s is periodic with period 4). `previous_s_h`: NaN for the first frame or after a lost one.
+std::optional<ContactEstimate> follow_contact(const HandMapping& m, cv::Point2d px, double theta,
+                                              double previous_s_h);
+
 }  // namespace flatland::vision
