@@ -118,7 +118,8 @@ class SpatialIntegration {
     return s;
   }
 
-  void rhs(double t, const Y& y, Y& dy) {
+  /// dy = f(t, y); returns the solution it came from (its forces and residual, for the sample).
+  SpatialSolution rhs(double t, const Y& y, Y& dy) {
     ++stats.rhs_evals;
     const SpatialState s = unpack(y);
     const SpatialSolution x = solve_spatial_rolling(chart_pb_, motion_.at(t), s);
@@ -135,6 +136,7 @@ class SpatialIntegration {
     dy.segment<2>(15) = s.sdot_h;
     dy.segment<2>(17) = x.sddot_o;
     dy.segment<2>(19) = x.sddot_h;
+    return x;
   }
 
   /// The state back on the contact manifold: unit quaternion; (s_o, s_h) where the points
@@ -232,11 +234,11 @@ class SpatialIntegration {
     return true;
   }
 
-  SpatialSample sample(double t, const Y& y) const {
+  /// Everything at (t, y), from the solution rhs() found there.
+  SpatialSample sample(double t, const Y& y, const SpatialSolution& x) const {
     SpatialSample out;
     out.t = t;
     const SpatialState s = unpack(y);
-    const SpatialSolution x = solve_spatial_rolling(chart_pb_, motion_.at(t), s);
     out.state = s;
     // The body's orientation: R_o = R_c C^T.
     out.state.orientation =
@@ -337,8 +339,9 @@ SpatialRunResult simulate_spatial(const SpatialRollingProblem& pb, const HandMot
   in.rechart(y);
   in.project(t, y);
   in.require_fit(t, y);
-  const auto record = [&](double tt, const Y& yy) {
-    SpatialSample s = in.sample(tt, yy);
+  // Each sample reuses the evaluation that starts the next step (k1): one solve per state.
+  const auto record = [&](double tt, const Y& yy, const SpatialSolution& x) {
+    SpatialSample s = in.sample(tt, yy, x);
     in.stats.max_constraint_residual =
         std::max(in.stats.max_constraint_residual, s.constraint_residual);
     in.stats.max_redundant_residual =
@@ -346,9 +349,8 @@ SpatialRunResult simulate_spatial(const SpatialRollingProblem& pb, const HandMot
     if (o.record) res.steps.push_back(s);
     return s;
   };
-  SpatialSample last = record(t, y);
   Y k1, k2, k3, k4, k5, k6, k7, y1;
-  in.rhs(t, y, k1);
+  SpatialSample last = record(t, y, in.rhs(t, y, k1));
   double h = std::min(o.max_step, 1e-4);
   while (t < o.t_end) {
     if (in.stats.steps + in.stats.rejected >= o.max_steps)
@@ -382,17 +384,16 @@ SpatialRunResult simulate_spatial(const SpatialRollingProblem& pb, const HandMot
     y = y1;
     in.stats.max_drift = std::max(in.stats.max_drift, in.project(t, y));
     in.rechart(y);
+    // The projection moved y: no first-same-as-last, k1 is evaluated anew.
+    last = record(t, y, in.rhs(t, y, k1));
     if (!in.inside_patches(y)) {
       res.stop = SpatialStop::kLeftPatch;
-      last = record(t, y);
       break;
     }
-    last = record(t, y);
     if (last.force_normal < 0) {
       res.stop = SpatialStop::kContactLost;
       break;
     }
-    in.rhs(t, y, k1);  // the projection moved y: no first-same-as-last
     h = hh * (norm > 0 ? std::min(5.0, std::max(0.2, 0.9 * std::pow(norm, -0.2))) : 5.0);
   }
   res.final = last;
