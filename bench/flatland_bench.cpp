@@ -207,8 +207,8 @@ void SpatialWeltner10s(benchmark::State& state) {
   const Turntable t;
   sim::SpatialRunOptions o;
   o.t_end = 10.0;
-  o.rtol = 1e-10;
-  o.atol = 1e-12;
+  o.integrator.rtol = 1e-10;
+  o.integrator.atol = 1e-12;
   o.record = false;
   sim::SpatialRunResult run;
   for (auto _ : state) {

@@ -4,42 +4,56 @@
 // turned away from its poles.
 #include "flatland/sim/spatial_run.hpp"
 
-#include "dopri5_tableau.hpp"
+#include "runge_kutta.hpp"
 
 #include "flatland/sim/format.hpp"
+#include "flatland/sim/roots.hpp"
 
 #include <Eigen/Dense>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <optional>
 #include <stdexcept>
+#include <utility>
 
 namespace flatland::sim {
 
-// ---- motions
-// -------------------------------------------------------------------------------------
+// ---- motions ----
+
+int HandMotion3::segment_at(double t) const {
+  const std::vector<double> b = breakpoints();
+  return static_cast<int>(std::upper_bound(b.begin(), b.end(), t) - b.begin());
+}
 
 FixedHand3::FixedHand3(Eigen::Matrix3d rotation, Vec3 position) {
   pose_.rotation = rotation;
   pose_.position = position;
 }
 
-HandPose3 FixedHand3::at(double) const { return pose_; }
+HandPose3 FixedHand3::at(double, int) const { return pose_; }
 
-SpinningHand3::SpinningHand3(Vec3 axis, double rate, Vec3 point, Eigen::Matrix3d rotation0)
-    : axis_(axis.normalized()), point_(point), rate_(rate), rotation0_(rotation0) {
-  if (!(axis.norm() > 0) || !axis.allFinite() || !std::isfinite(rate) || !point.allFinite())
+SpinningHand3::SpinningHand3(Vec3 axis, double rate, Vec3 point, Eigen::Matrix3d rotation0,
+                             Vec3 position0)
+    : axis_(axis.normalized()),
+      point_(point),
+      position0_(position0),
+      rate_(rate),
+      rotation0_(rotation0) {
+  if (!(axis.norm() > 0) || !axis.allFinite() || !std::isfinite(rate) || !point.allFinite() ||
+      !position0.allFinite())
     throw std::invalid_argument(
         "spinning hand: the axis must be a finite non-zero vector and "
-        "the rate and point finite");
+        "the rate, point and position finite");
 }
 
-HandPose3 SpinningHand3::at(double t) const {
+HandPose3 SpinningHand3::at(double t, int) const {
   HandPose3 p;
   const Eigen::Matrix3d R = Eigen::AngleAxisd(rate_ * t, axis_).toRotationMatrix();
   p.rotation = R * rotation0_;
-  // x(t) = point - R (point): the point on the axis stays put.
-  p.position = point_ - R * point_;
+  // x(t) = point + R (x0 - point): the point on the axis stays put.
+  p.position = point_ + R * (position0_ - point_);
   p.angular_velocity = rate_ * axis_;
   p.velocity = p.angular_velocity.cross(p.position - point_);
   p.acceleration = p.angular_velocity.cross(p.velocity);
@@ -50,12 +64,112 @@ std::string SpinningHand3::describe() const {
   return "hand spinning at " + format_significant(rate_) + " rad/s";
 }
 
+namespace {
+bool is_rotation(const Eigen::Matrix3d& m) {
+  return m.allFinite() && (m.transpose() * m - Eigen::Matrix3d::Identity()).norm() < 1e-9 &&
+         std::abs(m.determinant() - 1) < 1e-9;
+}
+}  // namespace
+
+PlanarHand3::PlanarHand3(std::shared_ptr<const HandMotion> motion, Eigen::Matrix3d plane,
+                         Vec3 origin)
+    : motion_(std::move(motion)), plane_(plane), origin_(origin) {
+  if (!motion_) throw std::invalid_argument("planar hand motion: no motion");
+  if (!is_rotation(plane))
+    throw std::invalid_argument("planar hand motion: the plane's axes must form a rotation");
+  if (!origin.allFinite()) throw std::invalid_argument("planar hand motion: origin must be finite");
+}
+
+HandPose3 PlanarHand3::at(double t, int segment) const {
+  const HandKinematics k = motion_->at(t, segment);
+  const Vec3 axis = plane_.col(2);
+  const auto in_space = [&](const Vec2& v) -> Vec3 { return plane_ * Vec3(v.x(), v.y(), 0); };
+  HandPose3 p;
+  p.rotation = plane_ * Eigen::AngleAxisd(k.angle, Vec3::UnitZ()).toRotationMatrix();
+  p.position = origin_ + in_space(k.position);
+  p.velocity = in_space(k.velocity);
+  p.acceleration = in_space(k.acceleration);
+  p.angular_velocity = k.angular_velocity * axis;
+  p.angular_acceleration = k.angular_acceleration * axis;
+  return p;
+}
+
+std::string PlanarHand3::describe() const { return "planar hand motion about a fixed axis"; }
+
+TabulatedHand3::TabulatedHand3(std::vector<Row> rows, Vec3 axis, HandPose3 initial,
+                               double angular_velocity)
+    : rows_(std::move(rows)), rotation0_(initial.rotation) {
+  if (rows_.size() < 2)
+    throw std::invalid_argument("tabulated hand motion: needs at least two rows (times)");
+  for (std::size_t i = 0; i < rows_.size(); ++i) {
+    const Row& r = rows_[i];
+    if (!std::isfinite(r.t) || !r.acceleration.allFinite() ||
+        !std::isfinite(r.angular_acceleration))
+      throw std::invalid_argument("tabulated hand motion: row " + std::to_string(i) +
+                                  ": values must be finite");
+    if (i > 0 && !(r.t > rows_[i - 1].t))
+      throw std::invalid_argument("tabulated hand motion: row " + std::to_string(i) +
+                                  ": times must increase strictly");
+  }
+  if (!(axis.norm() > 0) || !axis.allFinite())
+    throw std::invalid_argument("tabulated hand motion: the axis must be a finite non-zero vector");
+  if (!is_rotation(initial.rotation) || !initial.position.allFinite() ||
+      !initial.velocity.allFinite() || !std::isfinite(angular_velocity))
+    throw std::invalid_argument(
+        "tabulated hand motion: the initial pose must be a rotation and finite");
+  axis_ = axis.normalized();
+  Knot k{rows_.front().t, 0.0, angular_velocity, initial.position, initial.velocity};
+  knots_.push_back(k);
+  for (std::size_t i = 0; i + 1 < rows_.size(); ++i) {
+    const double h = rows_[i + 1].t - rows_[i].t;
+    const Row& r = rows_[i];
+    k.t = rows_[i + 1].t;
+    k.position += h * k.velocity + 0.5 * h * h * r.acceleration;
+    k.velocity += h * r.acceleration;
+    k.angle += h * k.rate + 0.5 * h * h * r.angular_acceleration;
+    k.rate += h * r.angular_acceleration;
+    knots_.push_back(k);
+  }
+}
+
+std::vector<double> TabulatedHand3::breakpoints() const {
+  std::vector<double> b;
+  for (const Row& r : rows_) b.push_back(r.t);
+  return b;
+}
+
+HandPose3 TabulatedHand3::at(double t, int segment) const {
+  // Segment 0 lies before the table, segment n after it: no acceleration there.
+  const int n = static_cast<int>(knots_.size());
+  const int i = std::clamp(segment - 1, 0, n - 1);
+  const Knot& k = knots_[i];
+  const bool before = segment <= 0, after = segment >= n;
+  const double tau = t - k.t;
+  const Vec3 a = (before || after) ? Vec3::Zero() : rows_[i].acceleration;
+  const double alpha = (before || after) ? 0.0 : rows_[i].angular_acceleration;
+  HandPose3 p;
+  p.position = k.position + tau * k.velocity + 0.5 * tau * tau * a;
+  p.velocity = k.velocity + tau * a;
+  p.acceleration = a;
+  const double angle = k.angle + tau * k.rate + 0.5 * tau * tau * alpha;
+  p.rotation = Eigen::AngleAxisd(angle, axis_).toRotationMatrix() * rotation0_;
+  p.angular_velocity = (k.rate + tau * alpha) * axis_;
+  p.angular_acceleration = alpha * axis_;
+  return p;
+}
+
+std::string TabulatedHand3::describe() const {
+  return "tabulated hand accelerations (" + std::to_string(rows_.size() - 1) + " intervals)";
+}
+
 std::string to_string(SpatialStop s) {
   switch (s) {
     case SpatialStop::kEndTime:
       return "end_time";
     case SpatialStop::kContactLost:
       return "contact_lost";
+    case SpatialStop::kSlip:
+      return "slip";
     case SpatialStop::kLeftPatch:
       return "left_patch";
   }
@@ -75,15 +189,78 @@ namespace {
 constexpr int kN = 21;
 using Y = Eigen::Matrix<double, kN, 1>;
 
-using namespace detail;  // the Dormand-Prince 5(4) tableau
+using namespace detail;  // the Runge-Kutta steps
+
+/// The contact's geometry in the world at a state: the contact points (hand's ph, object's po)
+/// and their offsets from the hand frame's origin (rh) and the object's centre (ro), the normals,
+/// the Jacobians and curvature forms. Rc: the object's chart frame.
+struct ContactWorld {
+  Vec3 ph, po, rh, ro, Nh, No;
+  Mat32 Jh, Jo, Kh, Ko;
+};
+
+ContactWorld contact_world(const SpatialRollingProblem& pb, const HandPose3& hand,
+                           const Eigen::Matrix3d& Rc, const SpatialState& s) {
+  const SurfaceGeometry gh = pb.hand->geometry(s.s_h);
+  const SurfaceGeometry go = pb.object.surface->geometry(s.s_o);
+  ContactWorld w;
+  w.rh = hand.rotation * gh.point;
+  w.ro = Rc * go.point;
+  w.ph = hand.position + w.rh;
+  w.po = s.position + w.ro;
+  w.Nh = hand.rotation * gh.normal;
+  w.No = Rc * go.normal;
+  w.Jh = hand.rotation * gh.jacobian;
+  w.Jo = Rc * go.jacobian;
+  w.Kh = hand.rotation * gh.curvature_form;
+  w.Ko = Rc * go.curvature_form;
+  return w;
+}
+
+/// The velocities y_v = (v, omega, sdot_o, sdot_h) of a rolling contact satisfy C y_v = d:
+/// rolling (3), equal contact point rates (3), normals staying opposite (3); rank 7. `scale`
+/// makes every unknown a velocity in m/s: omega times the lever |r_o|, each sdot times its
+/// column of J.
+struct VelocityConstraints {
+  Eigen::Matrix<double, 9, 10> C = Eigen::Matrix<double, 9, 10>::Zero();
+  Eigen::Matrix<double, 9, 1> d = Eigen::Matrix<double, 9, 1>::Zero();
+  Eigen::Matrix<double, 10, 1> scale;
+};
+
+VelocityConstraints velocity_constraints(const ContactWorld& w, const HandPose3& hand) {
+  VelocityConstraints v;
+  v.C.block<3, 3>(0, 0) = Eigen::Matrix3d::Identity();
+  v.C.block<3, 3>(0, 3) = -cross_matrix(w.ro);
+  v.d.segment<3>(0) = hand.velocity + hand.angular_velocity.cross(w.rh);
+  v.C.block<3, 2>(3, 6) = -w.Jo;
+  v.C.block<3, 2>(3, 8) = w.Jh;
+  v.C.block<3, 3>(6, 3) = -cross_matrix(w.No);
+  v.C.block<3, 2>(6, 6) = w.Ko;
+  v.C.block<3, 2>(6, 8) = w.Kh;
+  v.d.segment<3>(6) = -hand.angular_velocity.cross(w.Nh);
+  const double lever = std::max(w.ro.norm(), 1e-12);
+  v.scale << 1, 1, 1, lever, lever, lever, w.Jo.col(0).norm(), w.Jo.col(1).norm(),
+      w.Jh.col(0).norm(), w.Jh.col(1).norm();
+  return v;
+}
+
+/// Where each condition a run must keep stands: >= 0 while it holds. The forces in N, the patch
+/// margin in the surfaces' parameters.
+struct Guards {
+  static constexpr int kCount = 3;
+  std::array<double, kCount> value{};
+  static constexpr std::array<SpatialStop, kCount> kStop = {
+      SpatialStop::kContactLost, SpatialStop::kSlip, SpatialStop::kLeftPatch};
+};
 
 /// The run's equations. The object's orientation in the state is its chart frame's, R_c = R_o C:
 /// the frame in which its surface is parameterised. For a ball the chart can be turned (C changes,
 /// the ball does not), which keeps the contact away from the chart's poles.
 class SpatialIntegration {
  public:
-  SpatialIntegration(const SpatialRollingProblem& pb, const HandMotion3& motion)
-      : pb_(pb), chart_pb_(pb), motion_(motion) {
+  SpatialIntegration(const SpatialRollingProblem& pb, const HandMotion3& motion,
+                     const SpatialRunOptions& o)
+      : pb_(pb), chart_pb_(pb), motion_(motion), o_(o) {
     const auto* e = dynamic_cast<const EllipsoidSurface*>(pb.object.surface.get());
     if (e) {
       const Vec3 ax = e->semi_axes();
@@ -91,6 +268,9 @@ class SpatialIntegration {
     }
   }
 
+  SpatialRunResult run(const SpatialState& initial, double t0);
+
+ private:
   Y pack(const SpatialState& s) const {
     Y y;
     y.segment<3>(0) = s.position;
@@ -122,7 +302,7 @@ class SpatialIntegration {
   SpatialSolution rhs(double t, const Y& y, Y& dy) {
     ++stats.rhs_evals;
     const SpatialState s = unpack(y);
-    const SpatialSolution x = solve_spatial_rolling(chart_pb_, motion_.at(t), s);
+    const SpatialSolution x = solve_spatial_rolling(chart_pb_, motion_.at(t, segment_), s);
     dy.segment<3>(0) = s.velocity;
     // q' = (1/2) (0, w) q, w in the world frame.
     const Eigen::Quaterniond q(y[3], y[4], y[5], y[6]);
@@ -145,11 +325,11 @@ class SpatialIntegration {
   /// Returns the constraint residual before.
   double project(double t, Y& y) {
     const double before = constraint_residual(t, y);
-    const HandPose3 hand = motion_.at(t);
+    const HandPose3 hand = motion_.at(t, segment_);
     SpatialState s = unpack(y);
     const Eigen::Matrix3d Rc = s.orientation.toRotationMatrix();
     for (int iteration = 0; iteration < 8; ++iteration) {
-      const World w = world(hand, Rc, s);
+      const ContactWorld w = world(hand, Rc, s);
       Eigen::Vector4d F;
       F.head<2>() = w.Jh.transpose() * (w.ph - w.po);
       F.tail<2>() = w.Jh.transpose() * (w.No + w.Nh);
@@ -164,31 +344,16 @@ class SpatialIntegration {
       s.s_h += d.tail<2>();
     }
     {
-      const World w = world(hand, Rc, s);
+      const ContactWorld w = world(hand, Rc, s);
       s.position += w.ph - w.po;
     }
-    const World w = world(hand, Rc, s);
-    // Velocities y_v = (v, omega, sdot_o, sdot_h): rolling (3), equal contact point rates (3),
-    // normals staying opposite (3); rank 7.
-    Eigen::Matrix<double, 9, 10> C = Eigen::Matrix<double, 9, 10>::Zero();
-    Eigen::Matrix<double, 9, 1> d = Eigen::Matrix<double, 9, 1>::Zero();
-    C.block<3, 3>(0, 0) = Eigen::Matrix3d::Identity();
-    C.block<3, 3>(0, 3) = -cross_matrix(w.ro);
-    d.segment<3>(0) = hand.velocity + hand.angular_velocity.cross(w.rh);
-    C.block<3, 2>(3, 6) = -w.Jo;
-    C.block<3, 2>(3, 8) = w.Jh;
-    C.block<3, 3>(6, 3) = -cross_matrix(w.No);
-    C.block<3, 2>(6, 6) = w.Ko;
-    C.block<3, 2>(6, 8) = w.Kh;
-    d.segment<3>(6) = -hand.angular_velocity.cross(w.Nh);
+    const ContactWorld w = world(hand, Rc, s);
+    const VelocityConstraints vc = velocity_constraints(w, hand);
+    const auto& C = vc.C;
+    const auto& d = vc.d;
+    const auto& scale = vc.scale;
     Eigen::Matrix<double, 10, 1> yv;
     yv << s.velocity, s.angular_velocity, s.sdot_o, s.sdot_h;
-    // Scaled so that every unknown is a velocity in m/s: omega times the lever |r_o|, each sdot
-    // times its column of J.
-    Eigen::Matrix<double, 10, 1> scale;
-    const double lever = std::max(w.ro.norm(), 1e-12);
-    scale << 1, 1, 1, lever, lever, lever, w.Jo.col(0).norm(), w.Jo.col(1).norm(),
-        w.Jh.col(0).norm(), w.Jh.col(1).norm();
     const Eigen::Matrix<double, 9, 10> Cs = C * scale.cwiseInverse().asDiagonal();
     const Eigen::Matrix<double, 10, 1> dz = Cs.completeOrthogonalDecomposition().solve(d - C * yv);
     yv += dz.cwiseQuotient(scale);
@@ -201,9 +366,9 @@ class SpatialIntegration {
   }
 
   double constraint_residual(double t, const Y& y) const {
-    const HandPose3 hand = motion_.at(t);
+    const HandPose3 hand = motion_.at(t, segment_);
     const SpatialState s = unpack(y);
-    const World w = world(hand, s.orientation.toRotationMatrix(), s);
+    const ContactWorld w = world(hand, s.orientation.toRotationMatrix(), s);
     const Vec3 Vo = s.velocity + s.angular_velocity.cross(w.ro);
     const Vec3 Vh = hand.velocity + hand.angular_velocity.cross(w.rh);
     return std::max({(w.ph - w.po).norm(), (w.No + w.Nh).norm(), (Vo - Vh).norm(),
@@ -243,6 +408,9 @@ class SpatialIntegration {
     // The body's orientation: R_o = R_c C^T.
     out.state.orientation =
         Eigen::Quaterniond(s.orientation.toRotationMatrix() * chart_.transpose()).normalized();
+    const HandPose3 hand = motion_.at(t, segment_);
+    out.contact = hand.position + hand.rotation * pb_.hand->geometry(s.s_h).point;
+    out.force = x.force;
     out.force_normal = x.force_normal;
     out.mu_required = x.mu_required;
     out.energy = spatial_energy(chart_pb_, s);
@@ -251,13 +419,28 @@ class SpatialIntegration {
     return out;
   }
 
+  Guards guards(const Y& y, const SpatialSolution& x) const {
+    Guards g;
+    constexpr double kHolds = std::numeric_limits<double>::infinity();
+    g.value[0] = o_.stop_on_contact_loss ? x.force_normal : kHolds;
+    g.value[1] = pb_.mu ? *pb_.mu * x.force_normal - x.force_tangential.norm() : kHolds;
+    const SpatialState s = unpack(y);
+    const auto margin = [](const SurfacePatch& p, const SurfaceParam& v) {
+      return std::min({v.x() - p.lo.x(), p.hi.x() - v.x(), v.y() - p.lo.y(), p.hi.y() - v.y()});
+    };
+    g.value[2] = margin(pb_.hand->patch(), s.s_h);
+    if (!(ball_radius_ > 0))
+      g.value[2] = std::min(g.value[2], margin(pb_.object.surface->patch(), s.s_o));
+    return g;
+  }
+
   /// std::invalid_argument unless the object fits the hand at the contact: the relative curvature
   /// S_o + S_h (the shape operators on the common tangent plane, > 0 where a body bulges towards
   /// the other) must be positive definite, or the object touches the hand along more than a point
   /// (a ball larger than the bowl it sits in).
   void require_fit(double t, const Y& y) const {
     const SpatialState s = unpack(y);
-    const World w = world(motion_.at(t), s.orientation.toRotationMatrix(), s);
+    const ContactWorld w = world(motion_.at(t, segment_), s.orientation.toRotationMatrix(), s);
     const Eigen::HouseholderQR<Mat32> qr(w.Jh);
     const Mat32 E = qr.householderQ() * Mat32::Identity();  // an orthonormal tangent basis
     const auto shape = [&](const Mat32& J, const Mat32& K) -> Eigen::Matrix2d {
@@ -274,41 +457,248 @@ class SpatialIntegration {
           format_significant(eig.eigenvalues().minCoeff()) + " 1/m, must be > 0)");
   }
 
-  bool inside_patches(const Y& y) const {
-    const SpatialState s = unpack(y);
-    return pb_.hand->patch().contains(s.s_h) && pb_.object.surface->patch().contains(s.s_o);
+  /// One step of the chosen method; the error norm (0 for RK4). The dense output is complete in
+  /// `rc` except for DOP853, whose interpolant dense() finishes from the stages in `k853_`.
+  double attempt(double t, const Y& y, const Y& k1, double h, Y& y1, Y& k7,
+                 DenseCoefficients<Y>& rc) {
+    const auto f = [this](double tt, const Y& yy, Y& dy) { rhs(tt, yy, dy); };
+    const IntegratorSettings& is = o_.integrator;
+    switch (is.method) {
+      case Method::kRungeKutta4:
+        rk4_step(f, t, y, k1, h, y1, k7, rc);
+        return 0.0;
+      case Method::kDormandPrince853:
+        return dop853_step(f, t, y, k1, h, is.rtol, is.atol, y1, k7, k853_);
+      case Method::kDormandPrince54:
+        break;
+    }
+    return dopri5_step(f, t, y, k1, h, is.rtol, is.atol, y1, k7, rc);
+  }
+  void dense(double t, const Y& y, const Y& y1, double h, DenseCoefficients<Y>& rc) {
+    if (o_.integrator.method != Method::kDormandPrince853) return;
+    dop853_dense([this](double tt, const Y& yy, Y& dy) { rhs(tt, yy, dy); }, t, y, y1, h, k853_,
+                 rc);
+  }
+  int dense_terms() const { return o_.integrator.method == Method::kDormandPrince853 ? 8 : 5; }
+
+  /// The next step size after an accepted step with error norm `err` (Hairer's controllers: PI
+  /// for DOPRI5, I for DOP853, no growth right after a rejection).
+  double next_step(double h, double err, bool after_rejection) {
+    if (o_.integrator.method == Method::kDormandPrince853) {
+      const double fac = std::clamp(std::pow(std::max(err, 1e-30), 1.0 / 8.0) / 0.9, 1.0 / 6, 3.0);
+      return after_rejection ? std::min(h / fac, h) : h / fac;
+    }
+    const double fac11 = std::pow(std::max(err, 1e-16), 0.17);
+    const double fac = std::clamp(fac11 / std::pow(facold_, 0.04) / 0.9, 0.1, 5.0);
+    facold_ = std::max(err, 1e-4);
+    return after_rejection ? std::min(h / fac, h) : h / fac;
+  }
+  double shrink(double h, double err) const {
+    if (!std::isfinite(err)) return 0.1 * h;
+    return o_.integrator.method == Method::kDormandPrince853
+               ? h * std::max(1.0 / 3.0, 0.9 * std::pow(err, -1.0 / 8.0))
+               : h * std::max(0.2, 0.9 * std::pow(err, -0.2));
   }
 
-  SpatialRunStats stats;
+  /// The first event within the step (t, t + h] from (y, k1), given the guards at both ends:
+  /// located on the step map hh -> the projected step of size hh (so that the step redone up to
+  /// the event lands on it), to the time tolerance. Returns the event's index and time, or -1.
+  std::pair<int, double> first_event(double t, const Y& y, const Y& k1, double h, const Guards& g0,
+                                     const Guards& g1) {
+    int kind = -1;
+    double t_event = t + h;
+    for (int i = 0; i < Guards::kCount; ++i) {
+      if (!(g1.value[i] < 0)) continue;
+      const auto value_after = [&](double hh) {
+        ++stats.event_evals;
+        Y out, k7_unused;
+        DenseCoefficients<Y> rc_unused;
+        Stages853<Y> saved = k853_;
+        attempt(t, y, k1, hh, out, k7_unused, rc_unused);
+        k853_ = saved;
+        project(t + hh, out);
+        Y dy;
+        const SpatialSolution x = rhs(t + hh, out, dy);
+        return guards(out, x).value[i];
+      };
+      const double te =
+          g0.value[i] < 0
+              ? t
+              : t + brent_root(value_after, 0.0, h, g0.value[i], g1.value[i], o_.time_tolerance).x;
+      if (kind < 0 || te < t_event) kind = i, t_event = te;
+    }
+    return {kind, t_event};
+  }
 
- private:
-  struct World {
-    Vec3 ph, po, rh, ro, Nh, No;
-    Mat32 Jh, Jo, Kh, Ko;
-  };
-  World world(const HandPose3& hand, const Eigen::Matrix3d& Rc, const SpatialState& s) const {
-    const SurfaceGeometry gh = pb_.hand->geometry(s.s_h);
-    const SurfaceGeometry go = pb_.object.surface->geometry(s.s_o);
-    World w;
-    w.rh = hand.rotation * gh.point;
-    w.ro = Rc * go.point;
-    w.ph = hand.position + w.rh;
-    w.po = s.position + w.ro;
-    w.Nh = hand.rotation * gh.normal;
-    w.No = Rc * go.normal;
-    w.Jh = hand.rotation * gh.jacobian;
-    w.Jo = Rc * go.jacobian;
-    w.Kh = hand.rotation * gh.curvature_form;
-    w.Ko = Rc * go.curvature_form;
-    return w;
+  void note(const SpatialSample& s, const SpatialSolution& x) {
+    stats.max_constraint_residual = std::max(stats.max_constraint_residual, s.constraint_residual);
+    stats.max_redundant_residual = std::max(stats.max_redundant_residual, s.redundant_residual);
+    stats.min_force_normal = std::min(stats.min_force_normal, x.force_normal);
+    if (std::isfinite(x.mu_required))
+      stats.max_mu_required = std::max(stats.max_mu_required, x.mu_required);
+    else
+      stats.max_mu_required = std::numeric_limits<double>::infinity();
+  }
+
+  ContactWorld world(const HandPose3& hand, const Eigen::Matrix3d& Rc,
+                     const SpatialState& s) const {
+    return contact_world(pb_, hand, Rc, s);
   }
 
   const SpatialRollingProblem& pb_;
   SpatialRollingProblem chart_pb_;  ///< the object's inertia in its chart frame
   const HandMotion3& motion_;
+  const SpatialRunOptions& o_;
   Eigen::Matrix3d chart_ = Eigen::Matrix3d::Identity();  ///< C: chart frame -> body frame
   double ball_radius_ = 0;
+  int segment_ = 0;  ///< the motion's segment the run is in
+  Stages853<Y> k853_;
+  double facold_ = 1e-4;  ///< PI step-size controller memory
+
+ public:
+  SpatialRunStats stats;
 };
+
+SpatialRunResult SpatialIntegration::run(const SpatialState& initial, double t0) {
+  SpatialRunResult res;
+  const IntegratorSettings& is = o_.integrator;
+  const bool rk4 = is.method == Method::kRungeKutta4;
+  double t = t0;
+  segment_ = motion_.segment_at(t0);
+  Y y = pack(initial);
+  rechart(y);
+  project(t, y);
+  require_fit(t, y);
+  Y k1, k7, y1;
+  SpatialSolution x = rhs(t, y, k1);
+  Guards g_start = guards(y, x);
+  if (g_start.value[2] < -1e-9)
+    throw std::invalid_argument(
+        "spatial run: the contact starts outside the patch of " +
+        (ball_radius_ > 0 || pb_.object.surface->patch().contains(unpack(y).s_o)
+             ? pb_.hand->describe()
+             : pb_.object.surface->describe()));
+  const auto record = [&](double tt, const Y& yy, const SpatialSolution& xx) {
+    const SpatialSample s = sample(tt, yy, xx);
+    note(s, xx);
+    if (o_.record) res.samples.push_back(s);
+    return s;
+  };
+  SpatialSample last = record(t, y, x);
+  // A run may start on a boundary (a disk resting at the edge of the hand's piece): a value
+  // within a rounding tolerance of it is taken as on it; one further beyond stops the run at once.
+  const double weight = pb_.object.mass * std::max(pb_.gravity.norm(), 1.0);
+  const std::array<double, Guards::kCount> start_tolerance = {1e-9 * weight, 1e-9 * weight, 1e-9};
+  const auto stop_at_start = [&]() -> std::optional<SpatialStop> {
+    for (int i = 0; i < Guards::kCount; ++i)
+      if (g_start.value[i] < -start_tolerance[i]) return Guards::kStop[i];
+    return std::nullopt;
+  };
+  std::optional<SpatialStop> stopped = stop_at_start();
+
+  std::vector<double> stops;
+  for (double b : motion_.breakpoints())
+    if (b > t0 && b < o_.t_end) stops.push_back(b);
+  stops.push_back(o_.t_end);
+  long next_grid = 1;  // the sample_dt grid's next index (t0 is sampled)
+  const auto grid_time = [&](long i) { return t0 + static_cast<double>(i) * o_.sample_dt; };
+  double h = rk4 ? is.fixed_step : 0.0;
+  bool need_k1 = false, last_rejected = false;
+  DenseCoefficients<Y> rc;
+
+  for (double t_stop : stops) {
+    while (t < t_stop && !stopped) {
+      if (need_k1) {
+        x = rhs(t, y, k1);
+        need_k1 = false;
+      }
+      if (h == 0.0)
+        h = starting_step([this](double tt, const Y& yy, Y& dy) { rhs(tt, yy, dy); }, t, y, k1,
+                          t_stop, is.rtol, is.atol, is.max_step,
+                          is.method == Method::kDormandPrince853 ? 8.0 : 5.0);
+      if (stats.steps + stats.rejected >= is.max_steps)
+        throw std::runtime_error("spatial run: step budget (" + std::to_string(is.max_steps) +
+                                 ") exhausted at t=" + format_significant(t, 10) + " s");
+      double h_try = rk4 ? is.fixed_step : std::min(h, is.max_step);
+      if (t + 1.01 * h_try >= t_stop) h_try = t_stop - t;  // land exactly on the stop
+      const double err = attempt(t, y, k1, h_try, y1, k7, rc);
+      if (!rk4 && !(err <= 1.0)) {
+        ++stats.rejected;
+        last_rejected = true;
+        h = shrink(h_try, err);
+        if (h < 1e-14 * std::max(1.0, std::abs(t)))
+          throw std::runtime_error(
+              "spatial run: step size underflow at t=" + format_significant(t, 10) + " s");
+        continue;
+      }
+      if (!y1.allFinite())
+        throw std::runtime_error("spatial run: non-finite state at t=" + format_significant(t, 10) +
+                                 " s (reduce integrator.step)");
+      double t1 = (h_try == t_stop - t) ? t_stop : t + h_try;
+      Y y1p = y1;
+      double drift = project(t1, y1p);
+      Y k1_next;
+      SpatialSolution x1 = rhs(t1, y1p, k1_next);
+      const auto [event, t_event] = first_event(t, y, k1, h_try, g_start, guards(y1p, x1));
+      if (event >= 0 && t_event < t1) {
+        // Stop exactly at the event: redo the step up to it, so that no step straddles it.
+        h_try = t_event - t;
+        if (h_try > 0) {
+          attempt(t, y, k1, h_try, y1, k7, rc);
+          t1 = t_event;
+          y1p = y1;
+          drift = project(t1, y1p);
+          x1 = rhs(t1, y1p, k1_next);
+        } else {
+          t1 = t, y1p = y, x1 = x, k1_next = k1, drift = 0;
+        }
+      }
+      if (h_try > 0) {
+        ++stats.steps;
+        stats.max_drift = std::max(stats.max_drift, drift);
+        if (o_.record && o_.sample_dt > 0 && grid_time(next_grid) < t1) {
+          dense(t, y, y1, h_try, rc);
+          for (; grid_time(next_grid) < t1; ++next_grid) {
+            const double tg = grid_time(next_grid);
+            Y yg = dense_value(rc, dense_terms(), (tg - t) / h_try);
+            project(tg, yg);
+            Y dy;
+            const SpatialSolution xg = rhs(tg, yg, dy);
+            record(tg, yg, xg);
+          }
+        }
+        t = t1;
+        y = y1p;
+        x = x1;
+        k1 = k1_next;
+        if (rechart(y)) x = rhs(t, y, k1);  // the same state in the ball's new chart
+        const SpatialSample s = sample(t, y, x);
+        note(s, x);
+        if (o_.record && o_.sample_dt == 0) res.samples.push_back(s);
+        last = s;
+        g_start = guards(y, x);
+      }
+      if (!rk4 && event < 0) h = next_step(h_try, err, last_rejected);
+      last_rejected = false;
+      if (event >= 0) stopped = Guards::kStop[event];
+    }
+    if (stopped) break;
+    if (t_stop < o_.t_end) {  // the acceleration jumps here: restart on the motion's next segment
+      ++stats.restarts;
+      ++segment_;
+      need_k1 = true;
+      x = rhs(t, y, k1);
+      need_k1 = false;
+      g_start = guards(y, x);  // the forces jump with the acceleration
+      stopped = stop_at_start();
+    }
+  }
+  if (o_.record && (res.samples.empty() || res.samples.back().t != t)) res.samples.push_back(last);
+  res.stop = stopped.value_or(SpatialStop::kEndTime);
+  res.final = last;
+  res.stats = stats;
+  return res;
+}
 
 void check(const SpatialRollingProblem& pb, const SpatialRunOptions& o, double t0) {
   if (!pb.hand) throw std::invalid_argument("spatial run: no hand surface");
@@ -320,85 +710,86 @@ void check(const SpatialRollingProblem& pb, const SpatialRunOptions& o, double t
       (pb.object.inertia - pb.object.inertia.transpose()).norm() > 1e-12 * pb.object.inertia.norm())
     throw std::invalid_argument("spatial run: object inertia must be symmetric positive definite");
   if (!pb.gravity.allFinite()) throw std::invalid_argument("spatial run: gravity must be finite");
+  if (pb.mu && !(*pb.mu >= 0 && std::isfinite(*pb.mu)))
+    throw std::invalid_argument("spatial run: mu must be >= 0 and finite");
   if (!std::isfinite(t0) || !std::isfinite(o.t_end) || !(o.t_end > t0))
     throw std::invalid_argument("spatial run: t_end must be finite and after the start");
-  if (!(o.rtol > 0) || !(o.atol > 0) || !(o.max_step > 0) || o.max_steps < 1)
-    throw std::invalid_argument("spatial run: rtol, atol, max_step and max_steps must be positive");
+  const IntegratorSettings& is = o.integrator;
+  if (!(is.rtol > 0) || !(is.atol > 0) || !(is.max_step > 0) || is.max_steps < 1 ||
+      !(is.fixed_step > 0) || !std::isfinite(is.fixed_step))
+    throw std::invalid_argument(
+        "spatial run: rtol, atol, step, max_step and max_steps must be positive");
+  if (!(o.time_tolerance > 0) || !std::isfinite(o.time_tolerance))
+    throw std::invalid_argument("spatial run: the event time tolerance must be positive");
+  if (!(o.sample_dt >= 0) || !std::isfinite(o.sample_dt))
+    throw std::invalid_argument("spatial run: sample_dt must be >= 0 and finite");
 }
 
 }  // namespace
+
+SpatialState place_in_contact(const SpatialRollingProblem& pb, const HandPose3& hand,
+                              const ContactPlacement& at) {
+  if (!pb.hand || !pb.object.surface)
+    throw std::invalid_argument("contact placement: no hand or object surface");
+  if (!at.s_h.allFinite() || !at.s_o.allFinite() || !std::isfinite(at.twist) ||
+      !at.velocity.allFinite() || !std::isfinite(at.spin))
+    throw std::invalid_argument("contact placement: values must be finite");
+  const SurfaceGeometry gh = pb.hand->geometry(at.s_h);
+  const SurfaceGeometry go = pb.object.surface->geometry(at.s_o);
+  // The object's frame at its contact point, (t_o, n_o x t_o, n_o), onto the hand's turned by the
+  // twist, (t', -n_h x t', -n_h): the normals opposite.
+  const auto frame = [](const Vec3& tangent, const Vec3& normal) {
+    const Vec3 t = (tangent - tangent.dot(normal) * normal).normalized();
+    Eigen::Matrix3d f;
+    f << t, normal.cross(t), normal;
+    return f;
+  };
+  const Vec3 nh = hand.rotation * gh.normal;
+  const Vec3 th = Eigen::AngleAxisd(at.twist, nh) * (hand.rotation * gh.jacobian.col(0));
+  const Eigen::Matrix3d Rc = frame(th, -nh) * frame(go.jacobian.col(0), go.normal).transpose();
+  SpatialState s;
+  s.s_h = at.s_h;
+  s.s_o = at.s_o;
+  s.orientation = Eigen::Quaterniond(Rc).normalized();
+  s.position = hand.position + hand.rotation * gh.point - Rc * go.point;
+  // The velocities: the rolling constraints' solutions x_p + Z z (Z spans their null space, 3
+  // dimensions), z chosen so that the centre's tangential velocity and the spin about the normal
+  // are the ones asked for.
+  const ContactWorld w = contact_world(pb, hand, Rc, s);
+  const VelocityConstraints vc = velocity_constraints(w, hand);
+  const Eigen::Matrix<double, 9, 10> Cs = vc.C * vc.scale.cwiseInverse().asDiagonal();
+  const Eigen::CompleteOrthogonalDecomposition<Eigen::Matrix<double, 9, 10>> cod(Cs);
+  const Eigen::Matrix<double, 10, 1> particular = cod.solve(vc.d);
+  const Eigen::JacobiSVD<Eigen::Matrix<double, 10, 10>> svd(
+      Eigen::Matrix<double, 10, 10>::Identity() - cod.pseudoInverse() * Cs, Eigen::ComputeFullU);
+  const Eigen::Matrix<double, 10, 3> Z = svd.matrixU().leftCols<3>();
+  const Mat32 E = frame(th, -nh).leftCols<2>();  // the tangent plane
+  Eigen::Matrix<double, 3, 10> S = Eigen::Matrix<double, 3, 10>::Zero();
+  S.block<2, 3>(0, 0) = E.transpose();
+  S.block<1, 3>(2, 3) = nh.transpose() / vc.scale[3];  // spin in the scaled unknowns
+  Eigen::Vector3d target;
+  target << E.transpose() * at.velocity, at.spin;
+  const Eigen::Matrix3d SZ = S * Z;
+  const Eigen::FullPivLU<Eigen::Matrix3d> lu(SZ);
+  if (lu.rank() < 3)
+    throw std::invalid_argument(
+        "contact placement: the centre's velocity and the spin do not fix the rolling motion "
+        "here (a degenerate contact)");
+  const Eigen::Matrix<double, 10, 1> z = particular + Z * lu.solve(target - S * particular);
+  const Eigen::Matrix<double, 10, 1> yv = z.cwiseQuotient(vc.scale);
+  s.velocity = yv.segment<3>(0);
+  s.angular_velocity = yv.segment<3>(3);
+  s.sdot_o = yv.segment<2>(6);
+  s.sdot_h = yv.segment<2>(8);
+  return s;
+}
 
 SpatialRunResult simulate_spatial(const SpatialRollingProblem& pb, const HandMotion3& motion,
                                   const SpatialState& initial, double t0,
                                   const SpatialRunOptions& o) {
   check(pb, o, t0);
-  SpatialIntegration in(pb, motion);
-  SpatialRunResult res;
-  double t = t0;
-  Y y = in.pack(initial);
-  in.rechart(y);
-  in.project(t, y);
-  in.require_fit(t, y);
-  // Each sample reuses the evaluation that starts the next step (k1): one solve per state.
-  const auto record = [&](double tt, const Y& yy, const SpatialSolution& x) {
-    SpatialSample s = in.sample(tt, yy, x);
-    in.stats.max_constraint_residual =
-        std::max(in.stats.max_constraint_residual, s.constraint_residual);
-    in.stats.max_redundant_residual =
-        std::max(in.stats.max_redundant_residual, s.redundant_residual);
-    if (o.record) res.steps.push_back(s);
-    return s;
-  };
-  Y k1, k2, k3, k4, k5, k6, k7, y1;
-  SpatialSample last = record(t, y, in.rhs(t, y, k1));
-  double h = std::min(o.max_step, 1e-4);
-  while (t < o.t_end) {
-    if (in.stats.steps + in.stats.rejected >= o.max_steps)
-      throw std::runtime_error("spatial run: step budget (" + std::to_string(o.max_steps) +
-                               ") exhausted at t=" + format_significant(t, 10) + " s");
-    const double hh = std::min({h, o.max_step, o.t_end - t});
-    in.rhs(t + c2 * hh, y + hh * a21 * k1, k2);
-    in.rhs(t + c3 * hh, y + hh * (a31 * k1 + a32 * k2), k3);
-    in.rhs(t + c4 * hh, y + hh * (a41 * k1 + a42 * k2 + a43 * k3), k4);
-    in.rhs(t + c5 * hh, y + hh * (a51 * k1 + a52 * k2 + a53 * k3 + a54 * k4), k5);
-    in.rhs(t + hh, y + hh * (a61 * k1 + a62 * k2 + a63 * k3 + a64 * k4 + a65 * k5), k6);
-    y1 = y + hh * (a71 * k1 + a73 * k3 + a74 * k4 + a75 * k5 + a76 * k6);
-    in.rhs(t + hh, y1, k7);
-    const Y err = hh * (e1 * k1 + e3 * k3 + e4 * k4 + e5 * k5 + e6 * k6 + e7 * k7);
-    double norm = 0;
-    for (int i = 0; i < kN; ++i) {
-      const double sc = o.atol + o.rtol * std::max(std::abs(y[i]), std::abs(y1[i]));
-      norm += (err[i] / sc) * (err[i] / sc);
-    }
-    norm = std::sqrt(norm / kN);
-    if (!std::isfinite(norm) || norm > 1.0) {
-      ++in.stats.rejected;
-      h = hh * (std::isfinite(norm) ? std::max(0.2, 0.9 * std::pow(norm, -0.2)) : 0.1);
-      if (h < 1e-14 * std::max(1.0, std::abs(t)))
-        throw std::runtime_error(
-            "spatial run: step size underflow at t=" + format_significant(t, 10) + " s");
-      continue;
-    }
-    ++in.stats.steps;
-    t = (hh == o.t_end - t) ? o.t_end : t + hh;
-    y = y1;
-    in.stats.max_drift = std::max(in.stats.max_drift, in.project(t, y));
-    in.rechart(y);
-    // The projection moved y: no first-same-as-last, k1 is evaluated anew.
-    last = record(t, y, in.rhs(t, y, k1));
-    if (!in.inside_patches(y)) {
-      res.stop = SpatialStop::kLeftPatch;
-      break;
-    }
-    if (last.force_normal < 0) {
-      res.stop = SpatialStop::kContactLost;
-      break;
-    }
-    h = hh * (norm > 0 ? std::min(5.0, std::max(0.2, 0.9 * std::pow(norm, -0.2))) : 5.0);
-  }
-  res.final = last;
-  res.stats = in.stats;
-  return res;
+  SpatialIntegration in(pb, motion, o);
+  return in.run(initial, t0);
 }
 
 }  // namespace flatland::sim

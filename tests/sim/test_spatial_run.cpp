@@ -4,42 +4,20 @@
 // sqrt(5 g / (7 (R - r))); the constraints hold to 1e-12 after every step.
 #include "flatland/sim/spatial_run.hpp"
 
+#include "sim/spatial_support.hpp"
+
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <numbers>
+#include <string>
+#include <vector>
 
 namespace flatland::sim {
 namespace {
 
 constexpr double kPi = std::numbers::pi;
-
-/// A ball of radius r resting on (or rolling over) the hand at the contact s_h, its centre moving
-/// at v (tangent to the hand), no spin about the normal; the rates of the contact coordinates
-/// roughly right (the run's first projection makes the state consistent).
-SpatialState ball_on(const SpatialRollingProblem& pb, const HandPose3& hand, double r,
-                     const SurfaceParam& s_h, const Vec3& v, double contact_speed_factor) {
-  const SurfaceGeometry gh = pb.hand->geometry(s_h);
-  const Vec3 nh = hand.rotation * gh.normal;
-  const Vec3 contact = hand.position + hand.rotation * gh.point;
-  SpatialState s;
-  s.s_h = s_h;
-  s.position = contact + r * nh;
-  // The ball's chart puts its (0, 0) point, body +x, at the contact.
-  s.orientation = Eigen::Quaterniond::FromTwoVectors(Vec3::UnitX(), -nh);
-  s.velocity = v;
-  const Vec3 ro = -r * nh;
-  const Vec3 Vh = hand.velocity + hand.angular_velocity.cross(contact - hand.position);
-  // Rolling: v + omega x r_o = the hand's velocity there; omega's normal part 0.
-  s.angular_velocity = (v - Vh).cross(ro) / (r * r);
-  const Vec3 w = contact_speed_factor * (v - Vh);  // the contact point over both surfaces
-  const Mat32 Jh = hand.rotation * gh.jacobian;
-  s.sdot_h = (Jh.transpose() * Jh).ldlt().solve(Jh.transpose() * w);
-  const SurfaceGeometry go = pb.object.surface->geometry(SurfaceParam::Zero());
-  const Mat32 Jo = s.orientation.toRotationMatrix() * go.jacobian;
-  s.sdot_o = (Jo.transpose() * Jo).ldlt().solve(Jo.transpose() * w);
-  return s;
-}
 
 TEST(SpatialRun, BallOnATurntableCirclesAsWeltnerSays) {
   // Weltner (Am. J. Phys. 47, 984, 1979): dv/dt = (2/7) Omega z x v, so the centre runs on a
@@ -55,15 +33,15 @@ TEST(SpatialRun, BallOnATurntableCirclesAsWeltnerSays) {
   const double revolutions = 8, t_end = revolutions * 2 * kPi / k;
   SpatialRunOptions o;
   o.t_end = t_end;
-  o.rtol = 1e-11;
-  o.atol = 1e-13;
+  o.integrator.rtol = 1e-11;
+  o.integrator.atol = 1e-13;
   const SpatialRunResult run = simulate_spatial(pb, table, initial, 0.0, o);
   ASSERT_EQ(run.stop, SpatialStop::kEndTime);
-  const Vec3 p0 = run.steps.front().state.position;
+  const Vec3 p0 = run.samples.front().state.position;
   const Vec3 c = p0 + Vec3::UnitZ().cross(v0) / k;
   const double radius = v0.norm() / k;
   double worst = 0;
-  for (const SpatialSample& s : run.steps) {
+  for (const SpatialSample& s : run.samples) {
     const Vec3 expected = c + Eigen::AngleAxisd(k * s.t, Vec3::UnitZ()) * (p0 - c);
     worst = std::max(worst, (s.state.position - expected).norm());
     ASSERT_LT(s.constraint_residual, 1e-12) << "t " << s.t;
@@ -98,14 +76,14 @@ TEST(SpatialRun, BallOnAnInclinedTurntableDriftsAcrossTheSlope) {
   ASSERT_NEAR(v_d.norm(), 2.5 * g / omega * std::sin(theta), 1e-12);
   SpatialRunOptions o;
   o.t_end = 3 * 2 * kPi / k;  // three circles
-  o.rtol = 1e-11;
-  o.atol = 1e-13;
-  o.max_steps = 200000;
+  o.integrator.rtol = 1e-11;
+  o.integrator.atol = 1e-13;
+  o.integrator.max_steps = 200000;
   const SpatialRunResult run = simulate_spatial(pb, table, initial, 0.0, o);
   ASSERT_EQ(run.stop, SpatialStop::kEndTime);
-  const Vec3 p0 = run.steps.front().state.position, u = v0 - v_d;
+  const Vec3 p0 = run.samples.front().state.position, u = v0 - v_d;
   double worst = 0;
-  for (const SpatialSample& s : run.steps) {
+  for (const SpatialSample& s : run.samples) {
     const double t = s.t;
     const Vec3 expected =
         p0 + v_d * t + std::sin(k * t) / k * u + (1 - std::cos(k * t)) / k * n.cross(u);
@@ -130,12 +108,12 @@ TEST(SpatialRun, BallRollsStraightOnForManyTurnsAcrossItsChartsPoles) {
   const double turns = 10;
   SpatialRunOptions o;
   o.t_end = turns * 2 * kPi * r / speed;
-  o.rtol = 1e-12;
-  o.atol = 1e-14;
+  o.integrator.rtol = 1e-12;
+  o.integrator.atol = 1e-14;
   const SpatialRunResult run = simulate_spatial(pb, hand, initial, 0.0, o);
   ASSERT_EQ(run.stop, SpatialStop::kEndTime);
   EXPECT_GE(run.stats.chart_changes, static_cast<int>(2 * turns));
-  for (const SpatialSample& s : run.steps) {
+  for (const SpatialSample& s : run.samples) {
     ASSERT_LT((s.state.position - Vec3(speed * s.t, 0, r)).norm(), 1e-10 * speed * o.t_end)
         << "t " << s.t;
     ASSERT_LT((s.state.angular_velocity - Vec3(0, speed / r, 0)).norm(), 1e-9 * speed / r);
@@ -178,14 +156,14 @@ TEST(SpatialRun, BallInABowlKeepsItsEnergy) {
   const BowlRun b = ball_in_bowl(R, r, 0.4, 0.3);
   SpatialRunOptions o;
   o.t_end = 10.0;
-  o.rtol = 1e-12;
-  o.atol = 1e-14;
+  o.integrator.rtol = 1e-12;
+  o.integrator.atol = 1e-14;
   const SpatialRunResult run = simulate_spatial(b.pb, *b.hand, b.initial, 0.0, o);
   ASSERT_EQ(run.stop, SpatialStop::kEndTime);
   const double scale = b.pb.object.mass * g * (R - r);  // the energy of a fall across the bowl
-  const double e0 = run.steps.front().energy;
+  const double e0 = run.samples.front().energy;
   double worst = 0, lowest_fn = INFINITY;
-  for (const SpatialSample& s : run.steps) {
+  for (const SpatialSample& s : run.samples) {
     worst = std::max(worst, std::abs(s.energy - e0));
     lowest_fn = std::min(lowest_fn, s.force_normal);
     ASSERT_LT(s.constraint_residual, 1e-12) << "t " << s.t;
@@ -193,7 +171,7 @@ TEST(SpatialRun, BallInABowlKeepsItsEnergy) {
   EXPECT_LT(worst / scale, 1e-9) << run.stats.steps << " steps";
   EXPECT_GT(lowest_fn, 0);
   // It moved: the centre swung through the bottom and round.
-  EXPECT_GT((run.final.state.position - run.steps.front().state.position).norm(), 1e-3);
+  EXPECT_GT((run.final.state.position - run.samples.front().state.position).norm(), 1e-3);
 }
 
 TEST(SpatialRun, BallInABowlOscillatesAtTheClosedFormFrequency) {
@@ -203,16 +181,16 @@ TEST(SpatialRun, BallInABowlOscillatesAtTheClosedFormFrequency) {
   const double omega = std::sqrt(5 * g / (7 * (R - r))), period = 2 * kPi / omega;
   SpatialRunOptions o;
   o.t_end = 5.2 * period;
-  o.rtol = 1e-12;
-  o.atol = 1e-15;
-  o.max_step = period / 200;
+  o.integrator.rtol = 1e-12;
+  o.integrator.atol = 1e-15;
+  o.integrator.max_step = period / 200;
   const SpatialRunResult run = simulate_spatial(b.pb, *b.hand, b.initial, 0.0, o);
   ASSERT_EQ(run.stop, SpatialStop::kEndTime);
   // Downward crossings of x = 0 (the bottom), located by cubic Hermite interpolation of x and
   // its rate between steps.
   std::vector<double> crossings;
-  for (std::size_t i = 1; i < run.steps.size(); ++i) {
-    const SpatialSample &a = run.steps[i - 1], &c = run.steps[i];
+  for (std::size_t i = 1; i < run.samples.size(); ++i) {
+    const SpatialSample &a = run.samples[i - 1], &c = run.samples[i];
     const double xa = a.state.position.x(), xc = c.state.position.x();
     if (!(xa > 0 && xc <= 0)) continue;
     double lo = 0, hi = 1;
@@ -228,6 +206,153 @@ TEST(SpatialRun, BallInABowlOscillatesAtTheClosedFormFrequency) {
   ASSERT_GE(crossings.size(), 5u);
   const double measured = (crossings.back() - crossings.front()) / (crossings.size() - 1);
   EXPECT_NEAR(measured / period, 1.0, 1e-6) << crossings.size() << " crossings";
+}
+
+TEST(SpatialRun, BallInABowlRunsConicalOrbitsAtTheClosedFormRate) {
+  // Steady circular motion of a ball rolling in a spherical bowl, its centre at the polar angle
+  // beta from the bottom on the sphere of radius rho = R - r, turning at Omega about the
+  // vertical with the spin omega_n about the contact normal: Euler's equation about the centre
+  // with the rolling constraint gives Omega omega_n = (7 rho Omega^2 cos(beta) - 5 g) / (2 r);
+  // without spin, Omega^2 = 5 g / (7 rho cos(beta)).
+  const double R = 0.3, r = 0.05, g = 9.8, rho = R - r, beta = 0.6;
+  const double no_spin_rate = std::sqrt(5 * g / (7 * rho * std::cos(beta)));
+  for (const double Omega : {no_spin_rate, 1.3 * no_spin_rate, -0.8 * no_spin_rate}) {
+    SCOPED_TRACE("Omega " + std::to_string(Omega));
+    const double omega_n = (7 * rho * Omega * Omega * std::cos(beta) - 5 * g) / (2 * r * Omega);
+    SpatialRollingProblem pb;
+    pb.hand = std::make_shared<EllipsoidSurface>(
+        EllipsoidSurface::sphere(R, EllipsoidSurface::Side::kDish));
+    pb.object = uniform_ball(r, 0.1);
+    const FixedHand3 bowl;  // the chart's poles on the vertical: the orbit follows a latitude
+    const Vec3 e(std::sin(beta), 0, -std::cos(beta));  // from the bowl's centre to the ball's
+    const Vec3 v = rho * Omega * Vec3::UnitZ().cross(e);
+    SpatialState initial = ball_on(pb, bowl.at(0), r, SurfaceParam(0, beta - kPi / 2), v, R / rho);
+    initial.angular_velocity += omega_n * e;
+    const double revolutions = 5, t_end = revolutions * 2 * kPi / std::abs(Omega);
+    SpatialRunOptions o;
+    o.t_end = t_end;
+    o.integrator.rtol = 1e-12;
+    o.integrator.atol = 1e-14;
+    const SpatialRunResult run = simulate_spatial(pb, bowl, initial, 0.0, o);
+    ASSERT_EQ(run.stop, SpatialStop::kEndTime);
+    const Vec3 p0 = run.samples.front().state.position;
+    ASSERT_LT((p0 - rho * e).norm(), 1e-12);
+    double worst = 0;
+    for (const SpatialSample& s : run.samples) {
+      const Vec3 expected = Eigen::AngleAxisd(Omega * s.t, Vec3::UnitZ()) * p0;
+      worst = std::max(worst, (s.state.position - expected).norm());
+      ASSERT_LT(s.constraint_residual, 1e-12);
+    }
+    EXPECT_LT(worst / (rho * std::sin(beta)), 1e-8) << "over " << revolutions << " revolutions";
+    EXPECT_NEAR(run.final.state.angular_velocity.dot(run.final.state.position.normalized()),
+                omega_n, 1e-7 * (1 + std::abs(omega_n)));
+  }
+}
+
+/// An ellipsoid (semi-axes a down, b along world x, c along world y) resting in an ellipsoidal
+/// dish (A down, B, C): both charts' (0, 0) points, their +x ends, at the bottom.
+struct DishRun {
+  SpatialRollingProblem pb;
+  std::unique_ptr<FixedHand3> dish;
+  SpatialState initial;
+};
+
+DishRun ellipsoid_in_dish(const Vec3& object_axes, const Vec3& dish_axes, const Vec3& velocity,
+                          double spin) {
+  DishRun d;
+  d.pb.hand = std::make_shared<EllipsoidSurface>(dish_axes.x(), dish_axes.y(), dish_axes.z(),
+                                                 EllipsoidSurface::Side::kDish);
+  d.pb.object = uniform_ellipsoid(object_axes.x(), object_axes.y(), object_axes.z(), 0.3);
+  Eigen::Matrix3d down;  // x -> world -z, y -> world x, z -> world -y
+  down << 0, 1, 0, 0, 0, -1, -1, 0, 0;
+  d.dish = std::make_unique<FixedHand3>(down);
+  ContactPlacement at;  // both (0, 0) points, the objects' y axes along world x (no twist)
+  at.velocity = velocity;
+  at.spin = spin;
+  d.initial = place_in_contact(d.pb, d.dish->at(0), at);
+  return d;
+}
+
+/// Small rolling oscillations in a symmetry plane of a body whose section there has the
+/// curvature radius rho at its lowest point, its centre of mass h above it and its moment of
+/// inertia I about the centre, in a dish whose section has the radius R_h: omega^2 =
+/// m g (rho R_h / (R_h - rho) - h) / (I + m h^2) (the potential's curvature over the inertia
+/// about the contact; for a ball in a bowl, 5 g / (7 (R - r))).
+double rocking_frequency(double m, double g, double rho, double R_h, double h, double I) {
+  return std::sqrt(m * g * (rho * R_h / (R_h - rho) - h) / (I + m * h * h));
+}
+
+TEST(SpatialRun, AnEllipsoidRocksInAnEllipsoidalDishAtBothClosedFormFrequencies) {
+  const double g = 9.8;
+  const Vec3 obj(0.03, 0.05, 0.04), dish(0.3, 0.4, 0.35);
+  const double a = obj.x(), b = obj.y(), c = obj.z(), A = dish.x(), B = dish.y(), C = dish.z();
+  struct Mode {
+    Vec3 push;  ///< the centre's initial velocity
+    int axis;   ///< the world coordinate that oscillates
+    double expected;
+  };
+  const double m = 0.3;
+  const std::array<Mode, 2> modes = {
+      Mode{Vec3(1e-3, 0, 0), 0,
+           rocking_frequency(m, g, b * b / a, B * B / A, a, m / 5 * (a * a + b * b))},
+      Mode{Vec3(0, 1e-3, 0), 1,
+           rocking_frequency(m, g, c * c / a, C * C / A, a, m / 5 * (a * a + c * c))}};
+  for (const Mode& mode : modes) {
+    SCOPED_TRACE("axis " + std::to_string(mode.axis));
+    const DishRun d = ellipsoid_in_dish(obj, dish, mode.push, 0.0);
+    ASSERT_LT((d.initial.position - Vec3(0, 0, a - A)).norm(), 1e-15);
+    const double period = 2 * kPi / mode.expected;
+    SpatialRunOptions o;
+    o.t_end = 6.2 * period;
+    o.integrator.rtol = 1e-12;
+    o.integrator.atol = 1e-15;
+    o.sample_dt = period / 400;
+    const SpatialRunResult run = simulate_spatial(d.pb, *d.dish, d.initial, 0.0, o);
+    ASSERT_EQ(run.stop, SpatialStop::kEndTime);
+    std::vector<double> crossings;  // downward zero crossings of the oscillating coordinate
+    for (std::size_t i = 1; i < run.samples.size(); ++i) {
+      const double xa = run.samples[i - 1].state.position[mode.axis];
+      const double xc = run.samples[i].state.position[mode.axis];
+      if (xa > 0 && xc <= 0)
+        crossings.push_back(run.samples[i - 1].t +
+                            xa / (xa - xc) * (run.samples[i].t - run.samples[i - 1].t));
+    }
+    ASSERT_GE(crossings.size(), 5u);
+    const double measured = (crossings.back() - crossings.front()) / (crossings.size() - 1);
+    EXPECT_NEAR(measured / period, 1.0, 1e-5) << crossings.size() << " crossings";
+    // The other horizontal coordinate stays at rest: the plane is one of symmetry.
+    double off_plane = 0;
+    for (const SpatialSample& s : run.samples)
+      off_plane = std::max(off_plane, std::abs(s.state.position[1 - mode.axis]));
+    EXPECT_LT(off_plane, 1e-12);
+  }
+}
+
+TEST(SpatialRun, AnEllipsoidWandersInAnEllipsoidalDishWithBoundedResiduals) {
+  // Woodruff's example: a large, general motion (both planes and a spin about the vertical)
+  // runs to the end with its energy kept and the constraints held.
+  const DishRun d =
+      ellipsoid_in_dish(Vec3(0.03, 0.05, 0.04), Vec3(0.3, 0.4, 0.35), Vec3(0.15, -0.1, 0), 2.0);
+  SpatialRunOptions o;
+  o.t_end = 5.0;
+  o.integrator.rtol = 1e-12;
+  o.integrator.atol = 1e-15;
+  const SpatialRunResult run = simulate_spatial(d.pb, *d.dish, d.initial, 0.0, o);
+  ASSERT_EQ(run.stop, SpatialStop::kEndTime) << to_string(run.stop) << " at " << run.final.t;
+  const double e0 = run.samples.front().energy, scale = 0.3 * 9.8 * 0.3;
+  double worst = 0, reach = 0;
+  for (const SpatialSample& s : run.samples) {
+    worst = std::max(worst, std::abs(s.energy - e0));
+    reach = std::max(reach, s.state.position.head<2>().norm());
+  }
+  EXPECT_LT(worst / scale, 1e-9);
+  EXPECT_LT(run.stats.max_constraint_residual, 1e-12);
+  EXPECT_LT(run.stats.max_redundant_residual, 1e-9);
+  EXPECT_GT(reach, 0.01) << "it went somewhere";
+  // The placement was already on the manifold: the run's first projection left it.
+  EXPECT_LT((run.samples.front().state.velocity - d.initial.velocity).norm(), 1e-14);
+  EXPECT_NEAR(run.samples.front().state.angular_velocity.z(), 2.0, 1e-14);
+  EXPECT_GT(run.stats.min_force_normal, 0);
 }
 
 TEST(SpatialRun, ABallLargerThanItsBowlIsRefused) {
@@ -258,9 +383,9 @@ TEST(SpatialRun, BadProblemsAndOptionsAreRefused) {
   o.t_end = -1;
   EXPECT_THROW(simulate_spatial(pb, hand, s, 0.0, o), std::invalid_argument);
   o.t_end = 1;
-  o.rtol = 0;
+  o.integrator.rtol = 0;
   EXPECT_THROW(simulate_spatial(pb, hand, s, 0.0, o), std::invalid_argument);
-  o.rtol = 1e-10;
+  o.integrator.rtol = 1e-10;
   pb.object.inertia(0, 1) = 1;  // not symmetric
   EXPECT_THROW(simulate_spatial(pb, hand, s, 0.0, o), std::invalid_argument);
   EXPECT_THROW(uniform_ball(-1), std::invalid_argument);

@@ -24,6 +24,8 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include <optional>
+
 namespace flatland::sim {
 
 /// A rigid object: its surface in its own frame (centre of mass at the origin), mass and inertia.
@@ -38,11 +40,13 @@ SpatialObject uniform_ball(double radius, double mass = 1.0);
 SpatialObject uniform_ellipsoid(double a, double b, double c, double mass = 1.0);
 
 /// What the spatial equations need besides the state: the hand's surface (in the hand frame), the
-/// object and gravity (world frame, m/s^2).
+/// object, gravity (world frame, m/s^2) and the static friction coefficient (a run stops where
+/// the contact would slip; absent: unlimited, the required coefficient is still reported).
 struct SpatialRollingProblem {
   SurfacePtr hand;
   SpatialObject object;
   Vec3 gravity = Vec3(0, 0, -9.8);
+  std::optional<double> mu;
 };
 
 /// The hand frame's pose and its derivatives at one instant, world frame: x_w = x + R x_hand.
