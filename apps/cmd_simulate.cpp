@@ -2,8 +2,11 @@
 #include "common.hpp"
 
 #include "flatland/sim/hybrid.hpp"
+#include "flatland/sim/spatial_spec.hpp"
+#include "flatland/sim/trajectory_csv.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <iostream>
 #include <memory>
 #include <sstream>
@@ -18,6 +21,7 @@ struct SimulateOptions {
   std::string model;
   double period = 0, k = 0, sample_dt = 0, duration = 0;
   bool no_stop_on_contact_loss = false;
+  bool no_plot = false;
   CLI::Option* model_opt = nullptr;
   CLI::Option* period_opt = nullptr;
   CLI::Option* k_opt = nullptr;
@@ -40,8 +44,7 @@ std::string hybrid_text(const sim::SimulationSpec& spec, const sim::RunResult& r
   os << ", e = " << format_number(law.restitution);
   if (law.has_losses())
     os << "; rolling resistance " << format_number(law.rolling_resistance) << " m, drag "
-       << format_number(law.drag) << " N s/m, " << format_number(law.drag_angular)
-       << " N m s/rad";
+       << format_number(law.drag) << " N s/m, " << format_number(law.drag_angular) << " N m s/rad";
   os << "\n  modes              ";
   bool first = true;
   for (int m = 0; m < 4; ++m) {
@@ -60,8 +63,9 @@ std::string hybrid_text(const sim::SimulationSpec& spec, const sim::RunResult& r
     os << "  flight " << ++i << "           leaves at t = " << format_number(f.t_lift_off)
        << " s (s_h = " << format_number(f.s_lift_off) << ")";
     if (f.t_landing)
-      os << ", lands at t = " << format_number(*f.t_landing) << " s on s_h = "
-         << format_number(f.s_landing) << " (x = " << format_number(f.landing_position.x())
+      os << ", lands at t = " << format_number(*f.t_landing)
+         << " s on s_h = " << format_number(f.s_landing)
+         << " (x = " << format_number(f.landing_position.x())
          << ", y = " << format_number(f.landing_position.y()) << " m) after "
          << format_number(*f.t_landing - f.t_lift_off) << " s, impulse "
          << format_number(f.impulse_normal) << " N s normal, "
@@ -74,6 +78,157 @@ std::string hybrid_text(const sim::SimulationSpec& spec, const sim::RunResult& r
   return os.str();
 }
 
+/// The spatial scene with the command line's overrides, checked (UsageError naming the option).
+sim::SpatialSpec spatial_spec_with_overrides(const SimulateOptions& o, const Scene& scene) {
+  sim::SpatialSpec spec = *scene.spatial;
+  const bool butterfly = spec.motion.kind == sim::SpatialMotionSpec::Kind::kButterfly;
+  if (o.model_opt->count() && o.model != "rolling")
+    throw UsageError(
+        "--model: a spatial scene has the rolling model only (it stops where the contact is "
+        "lost or slips)");
+  if (o.period_opt->count() || o.k_opt->count()) {
+    const char* which = o.period_opt->count() ? "--period" : "--k";
+    if (!butterfly)
+      throw UsageError(std::string(which) + ": only for a scene whose motion is the butterfly");
+  }
+  if (o.period_opt->count()) {
+    require_positive("--period", o.period, "s");
+    spec.motion.period = o.period;
+  }
+  if (o.k_opt->count()) spec.motion.k = o.k;
+  if (o.duration_opt->count()) {
+    require_positive("--duration", o.duration, "s");
+    spec.duration = o.duration;
+  }
+  if (o.mu.opt->count()) {
+    if (!(o.mu.value >= 0) || !std::isfinite(o.mu.value))
+      throw UsageError("--mu: must be >= 0 and finite, got " + format_number(o.mu.value));
+    spec.mu = o.mu.value;
+  }
+  if (o.no_stop_on_contact_loss) spec.stop_on_contact_loss = false;
+  api::apply_integrator_overrides(integrator_overrides(o.common), spec.integrator,
+                                  api::Spelling::kCommandLine);
+  return spec;
+}
+
+/// The plot beside a spatial run's CSV: the contact's path over the hand's surface coordinates,
+/// the object's path in the world (seen from above, and its height) and the contact force.
+std::string spatial_plot(const std::string& title) {
+  const auto col = [](const char* name) {
+    return std::to_string(sim::spatial_sample_column(name));
+  };
+  return "set multiplot layout 2,2 title " + gnuplot_quote(title) +
+         "\n"
+         "set grid\n"
+         "set title 'contact path on the hand (surface coordinates)'\n"
+         "set xlabel 'u_h'\nset ylabel 'v_h'\n"
+         "plot datafile skip 1 using " +
+         col("sh_u") + ":" + col("sh_v") +
+         " with lines lw 2 notitle\n"
+         "set title 'object centre, seen along z (m)'\n"
+         "set xlabel 'x'\nset ylabel 'y'\nset size ratio -1\n"
+         "plot datafile skip 1 using " +
+         col("x") + ":" + col("y") +
+         " with lines lw 2 notitle\n"
+         "set size noratio\n"
+         "set title 'object centre height'\n"
+         "set xlabel 't (s)'\nset ylabel 'z (m)'\n"
+         "plot datafile skip 1 using " +
+         col("t") + ":" + col("z") +
+         " with lines lw 2 notitle\n"
+         "set title 'contact force on the object'\n"
+         "set xlabel 't (s)'\nset ylabel 'N'\n"
+         "plot datafile skip 1 using " +
+         col("t") + ":" + col("f_n") + " with lines lw 2 title 'normal', datafile skip 1 using " +
+         col("t") + ":(sqrt(($" + col("f_x") + ")**2 + ($" + col("f_y") + ")**2 + ($" + col("f_z") +
+         ")**2 - ($" + col("f_n") +
+         ")**2)) with lines lw 2 title 'tangential'\n"
+         "unset multiplot\n";
+}
+
+void run_simulate_spatial(const SimulateOptions& o, const Scene& scene) {
+  // Everything that can be bad input is checked before anything is computed or written.
+  const sim::SpatialSpec spec = spatial_spec_with_overrides(o, scene);
+  if (o.sample_dt_opt->count()) require_positive("--sample-dt", o.sample_dt, "s");
+  sim::SpatialSetup setup;
+  try {
+    setup = sim::build_spatial(spec);
+  } catch (const std::invalid_argument& e) {
+    throw UsageError(scene.origin + ": " + e.what());
+  }
+  if (o.sample_dt_opt->count()) setup.options.sample_dt = o.sample_dt;
+  const fs::path out = o.common.out;
+  if (!out.empty() && (o.common.out.back() == '/' || fs::is_directory(out)))
+    throw UsageError("--out: must be a file name (FILE.csv), not a directory: " + o.common.out);
+  const bool plots = !out.empty() && !o.no_plot;
+  fs::path png, script;
+  if (!out.empty()) {
+    check_output_file("--out", out, o.common.force);
+    png = fs::path(out).replace_extension(".png");
+    script = fs::path(out).replace_extension(".gp");
+    if (plots) {
+      if (png == out) throw UsageError("--out: the CSV cannot be named .png (the plot is)");
+      check_output_file("--out", png, o.common.force);
+      check_output_file("--out", script, o.common.force);
+      require_gnuplot();
+    }
+  }
+  OutputSet outputs(o.common.force);
+
+  std::cerr << "flatland: simulating " << scene.origin << " (spatial) for "
+            << format_number(spec.end_time()) << " s\n";
+  const sim::SpatialRunResult r = sim::run_spatial(setup);
+
+  if (!out.empty()) {
+    const fs::path dir = out.parent_path().empty() ? fs::path(".") : out.parent_path();
+    outputs.ensure_directory(out.parent_path());
+    outputs.stage(dir / out.filename(), sim::spatial_samples_csv(r.samples));
+    if (plots) {
+      run_plot(outputs, dir,
+               {script.filename().string(), out.filename().string(), png.filename().string(),
+                spatial_plot(scene.name.empty() ? scene.origin : scene.name)});
+    }
+    outputs.commit();
+  }
+  if (o.common.json) {
+    Json j = api::spatial_simulate_json(spec, r);
+    j["csv"] = out.empty() ? Json(nullptr) : Json(out.string());
+    j["png"] = plots ? Json(png.string()) : Json(nullptr);
+    emit_json(j);
+    return;
+  }
+  const sim::SpatialSample& f = r.final;
+  // Six significant digits: these lines describe; the JSON and the CSV have every digit.
+  const auto f6 = [](double v) { return sim::format_significant(v, 6); };
+  const auto v3 = [&f6](const sim::Vec3& v) {
+    return "(" + f6(v.x()) + ", " + f6(v.y()) + ", " + f6(v.z()) + ")";
+  };
+  std::ostringstream os;
+  os << "flatland simulate: " << scene.origin << (scene.name.empty() ? "" : " (" + scene.name + ")")
+     << "\n"
+     << "  space              3d: " << setup.problem.object.surface->describe() << " on "
+     << setup.problem.hand->describe() << ", " << setup.motion->describe() << "\n"
+     << "  stopped            " << sim::to_string(r.stop) << " at t = " << f6(f.t) << " s"
+     << (r.stop == sim::SpatialStop::kEndTime ? "" : "  (not a success)") << "\n"
+     << "  centre             " << v3(f.state.position) << " m, moving " << v3(f.state.velocity)
+     << " m/s\n"
+     << "  contact            s_h = (" << f6(f.state.s_h.x()) << ", " << f6(f.state.s_h.y())
+     << "), at " << v3(f.contact) << " m\n"
+     << "  min f_n            " << f6(r.stats.min_force_normal) << " N\n"
+     << "  required mu        " << f6(r.stats.max_mu_required)
+     << (spec.mu ? " (mu = " + f6(*spec.mu) + ")" : std::string()) << "\n"
+     << "  energy change      "
+     << f6(f.energy - (r.samples.empty() ? f.energy : r.samples.front().energy)) << " J\n"
+     << "  steps              " << r.stats.steps << " accepted, " << r.stats.rejected
+     << " rejected, " << r.stats.rhs_evals << " rhs evaluations, " << r.stats.chart_changes
+     << " chart changes (" << sim::to_string(spec.integrator.method) << ")\n"
+     << "  residuals          constraints " << f6(r.stats.max_constraint_residual)
+     << ", redundant row " << f6(r.stats.max_redundant_residual) << "\n";
+  if (!out.empty())
+    os << "  wrote              " << out.string() << (plots ? ", " + png.string() : "") << "\n";
+  std::cout << os.str();
+}
+
 void run_simulate(const SimulateOptions& o) {
   // Everything that can be bad input is checked before anything is computed or written.
   api::SimulateRequest request;
@@ -84,7 +239,8 @@ void run_simulate(const SimulateOptions& o) {
   if (o.mu.opt->count()) request.mu = o.mu.value;
   if (o.model_opt->count()) request.model = o.model;
   request.stop_on_contact_loss = !o.no_stop_on_contact_loss;
-  const Scene scene = load_scene_option(o.common);
+  const Scene scene = load_scene_option(o.common, SceneSpaces::kPlanarOrSpatial);
+  if (scene.spatial) return run_simulate_spatial(o, scene);
   const api::PreparedSimulation prepared =
       api::prepare_simulate(scene, request, api::Spelling::kCommandLine);
   const sim::SimulationSpec& spec = prepared.spec;
@@ -177,6 +333,10 @@ Command add_simulate_command(CLI::App& app) {
                                  "(it slides, flies, bounces and is caught, with the scene's "
                                  "losses). Default: the scene's contact.model, else rolling")
                      ->check(CLI::IsMember({"rolling", "hybrid"}));
+  cmd->add_flag("--no-plot", o->no_plot,
+                "Spatial scenes: write the CSV but not the plot beside it (FILE.png and its "
+                "gnuplot script FILE.gp; no gnuplot needed). A planar run's --out writes the CSV "
+                "only. Default: off");
   add_mu_option(*cmd, o->mu,
                 "Static friction coefficient (>= 0): the rolling model stops where the disk would "
                 "slip, the hybrid model slides. Default: the scene's contact.mu, else unlimited");

@@ -80,8 +80,12 @@ api::IntegratorOverrides integrator_overrides(const CommonOptions& o) {
   return v;
 }
 
-Scene load_scene_option(const CommonOptions& o) {
-  return load_scene(o.scene.empty() ? default_scene_path() : o.scene);
+Scene load_scene_option(const CommonOptions& o, SceneSpaces spaces) {
+  Scene scene = load_scene(o.scene.empty() ? default_scene_path() : o.scene);
+  if (scene.spatial && spaces == SceneSpaces::kPlanar)
+    throw UsageError("--scene: " + scene.origin +
+                     " is a spatial scene (space: 3d); only `flatland simulate` runs those");
+  return scene;
 }
 
 Scene load_scene_with_overrides(const CommonOptions& o) {

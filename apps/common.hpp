@@ -56,7 +56,11 @@ struct CommonOptions {
 void add_common_options(CLI::App& cmd, CommonOptions& o, const std::string& out_help, bool plots);
 
 /// The scene --scene names (the bundled default without it); SceneError on bad input.
-Scene load_scene_option(const CommonOptions& o);
+/// Which scenes a command runs: planar ones (every command but simulate) or spatial ones too.
+enum class SceneSpaces { kPlanar, kPlanarOrSpatial };
+/// The scene of --scene (or the default); a UsageError for a spatial scene (`space: 3d`) unless
+/// the command runs them.
+Scene load_scene_option(const CommonOptions& o, SceneSpaces spaces = SceneSpaces::kPlanar);
 /// Load the scene (SceneError on bad input) and apply the integrator overrides.
 Scene load_scene_with_overrides(const CommonOptions& o);
 

@@ -173,4 +173,52 @@ Json simulate_json(const sim::SimulationSpec& spec, const sim::RunResult& r) {
   return j;
 }
 
+namespace {
+Json vec3(const sim::Vec3& v) { return Json::array({number(v.x()), number(v.y()), number(v.z())}); }
+Json param(const sim::SurfaceParam& v) { return Json::array({number(v.x()), number(v.y())}); }
+}  // namespace
+
+Json spatial_simulate_json(const sim::SpatialSpec& spec, const sim::SpatialRunResult& r) {
+  const sim::SpatialSample& f = r.final;
+  const sim::SpatialRunStats& st = r.stats;
+  const double e0 = r.samples.empty() ? f.energy : r.samples.front().energy;
+  Json j;
+  j["space"] = "3d";
+  j["stop_reason"] = sim::to_string(r.stop);
+  j["success"] = r.stop == sim::SpatialStop::kEndTime;
+  j["t_end"] = number(spec.end_time());
+  j["t"] = number(f.t);
+  Json fin;
+  fin["position"] = vec3(f.state.position);
+  const Eigen::Quaterniond q = f.state.orientation.normalized();
+  fin["orientation_wxyz"] =
+      Json::array({number(q.w()), number(q.x()), number(q.y()), number(q.z())});
+  fin["velocity"] = vec3(f.state.velocity);
+  fin["angular_velocity"] = vec3(f.state.angular_velocity);
+  fin["s_h"] = param(f.state.s_h);
+  fin["s_o"] = param(f.state.s_o);
+  fin["contact"] = vec3(f.contact);
+  fin["force"] = vec3(f.force);
+  fin["f_n"] = number(f.force_normal);
+  fin["mu_required"] = number(f.mu_required);
+  fin["energy"] = number(f.energy);
+  j["final"] = fin;
+  j["mu"] = spec.mu ? number(*spec.mu) : Json(nullptr);
+  j["min_f_n"] = number(st.min_force_normal);
+  j["max_mu_required"] = number(st.max_mu_required);
+  j["energy_change"] = number(f.energy - e0);
+  j["method"] = sim::to_string(spec.integrator.method);
+  j["steps"] = st.steps;
+  j["rejected"] = st.rejected;
+  j["rhs_evals"] = st.rhs_evals;
+  j["event_evals"] = st.event_evals;
+  j["restarts"] = st.restarts;
+  j["chart_changes"] = st.chart_changes;
+  j["max_constraint_residual"] = number(st.max_constraint_residual);
+  j["max_redundant_residual"] = number(st.max_redundant_residual);
+  j["max_drift"] = number(st.max_drift);
+  j["samples"] = r.samples.size();
+  return j;
+}
+
 }  // namespace flatland::api

@@ -73,9 +73,10 @@ void finish_period_search(sim::SimulationSpec& spec, std::optional<double> mu, d
 
 }  // namespace
 
-void apply_integrator_overrides(const IntegratorOverrides& o, Scene& scene, Spelling spelling) {
+namespace {
+void apply_method_and_tolerances(const IntegratorOverrides& o, sim::IntegratorSettings& in,
+                                 Spelling spelling) {
   const auto name = [spelling](std::string_view n) { return option_name(n, spelling); };
-  sim::IntegratorSettings& in = scene.sim.run.integrator;
   if (o.method) {
     const std::string& m = require_choice(name("method"), *o.method, {"dopri5", "dop853", "rk4"});
     in.method = m == "rk4"      ? sim::Method::kRungeKutta4
@@ -94,6 +95,21 @@ void apply_integrator_overrides(const IntegratorOverrides& o, Scene& scene, Spel
     require_positive(name("step"), *o.step, "s");
     in.fixed_step = *o.step;
   }
+}
+}  // namespace
+
+void apply_integrator_overrides(const IntegratorOverrides& o, sim::IntegratorSettings& in,
+                                Spelling spelling) {
+  apply_method_and_tolerances(o, in, spelling);
+  if (o.formulation)
+    throw UsageError(option_name("formulation", spelling) +
+                     ": only for planar scenes (a spatial scene has one formulation, the 11 x 10 "
+                     "system)");
+}
+
+void apply_integrator_overrides(const IntegratorOverrides& o, Scene& scene, Spelling spelling) {
+  const auto name = [spelling](std::string_view n) { return option_name(n, spelling); };
+  apply_method_and_tolerances(o, scene.sim.run.integrator, spelling);
   if (o.formulation) {
     const std::string& f =
         require_choice(name("formulation"), *o.formulation, {"auto", "general", "reduced"});

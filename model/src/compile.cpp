@@ -130,6 +130,10 @@ vision::HandMapping hand_mapping(const Model& model, const camera::CameraModel& 
 }
 
 std::shared_ptr<const Model> compile(Scene scene) {
+  if (scene.spatial)
+    throw std::invalid_argument(scene.origin +
+                                ": a spatial scene (space: 3d) compiles into no Model (no camera, "
+                                "joint or controller in space yet); `flatland simulate` runs it");
   auto m = std::make_shared<Model>();
   m->spec = std::move(scene);
   const Scene& s = m->spec;

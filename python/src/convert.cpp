@@ -54,7 +54,12 @@ Scene scene_argument(const py::object& scene) {
                                 std::string(py::str(py::type::of(scene).attr("__name__"))));
   }
   if (!py::isinstance<py::str>(path)) throw std::invalid_argument("scene: a str path is needed");
-  return load_scene(path.cast<std::string>());
+  Scene loaded = load_scene(path.cast<std::string>());
+  if (loaded.spatial)
+    throw std::invalid_argument("scene: " + loaded.origin +
+                                " is a spatial scene (space: 3d); the Python module runs planar "
+                                "scenes only (use `flatland simulate` for spatial ones)");
+  return loaded;
 }
 
 std::shared_ptr<const model::Model> model_argument(const py::object& scene) {

@@ -5,6 +5,8 @@
 // echoes what the file said, on one line, so it can be read in a terminal or a log.
 #include "flatland/scene/scene.hpp"
 #include "flatland/sim/format.hpp"
+#include "map_reader.hpp"
+#include "spatial_scene.hpp"
 
 #include <yaml-cpp/eventhandler.h>
 #include <yaml-cpp/yaml.h>
@@ -12,10 +14,10 @@
 #include <algorithm>
 #include <array>
 #include <cerrno>
-#include <cstdlib>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <initializer_list>
@@ -33,271 +35,14 @@ namespace flatland {
 
 namespace {
 
+using namespace scene_detail;
+
 constexpr double kDegToRad = std::numbers::pi / 180.0;
 // Scene files are refused above this size, before they are parsed.
 constexpr std::size_t kMaxSceneBytes = 1 << 20;
 // A camera image and a supersampled frame: a frame of a few float images must fit in memory.
 constexpr long long kMaxCameraPixels = 40000000;
 constexpr long long kMaxRenderSamples = 67108864;  // 2^26, e.g. 4096 x 4096 at 2 x 2
-
-/// what() must stay one line even when the input contains newlines (in keys, values or the path).
-std::string one_line(std::string s) {
-  std::string out;
-  out.reserve(s.size());
-  for (char ch : s) {
-    if (ch == '\n')
-      out += "\\n";
-    else if (ch == '\r')
-      out += "\\r";
-    else if (ch == '\t')
-      out += ' ';
-    else
-      out += ch;
-  }
-  return out;
-}
-
-[[noreturn]] void fail(const std::string& origin, const std::string& field,
-                       const std::string& reason) {
-  throw SceneError(one_line(origin + ": " + field + ": " + reason));
-}
-
-/// How a node looks to a user, for "expected X, got Y" messages. Long scalars are shortened.
-std::string describe(const YAML::Node& node) {
-  switch (node.Type()) {
-    case YAML::NodeType::Null:
-    case YAML::NodeType::Undefined:
-      return "an empty value";
-    case YAML::NodeType::Sequence:
-      return "a list";
-    case YAML::NodeType::Map:
-      return "a mapping";
-    case YAML::NodeType::Scalar:
-      break;
-  }
-  std::string s = node.Scalar();
-  if (s.size() > 40) s = s.substr(0, 37) + "...";
-  return "'" + s + "'";
-}
-
-/// YAML 1.2 core-schema float, without the hex/octal forms nobody writes in a scene. Parsed here
-/// rather than by yaml-cpp's stringstream conversion, which cannot tell "out of range" from "not a
-/// number" and whose result would depend on the stream's locale.
-enum class NumberParse { kOk, kNotANumber, kOutOfRange };
-NumberParse parse_number(const std::string& text, double& out) {
-  static const std::set<std::string> kPosInf = {".inf", ".Inf", ".INF", "+.inf", "+.Inf", "+.INF"};
-  static const std::set<std::string> kNegInf = {"-.inf", "-.Inf", "-.INF"};
-  static const std::set<std::string> kNaN = {".nan", ".NaN", ".NAN"};
-  if (kPosInf.count(text)) {
-    out = std::numeric_limits<double>::infinity();
-    return NumberParse::kOk;
-  }
-  if (kNegInf.count(text)) {
-    out = -std::numeric_limits<double>::infinity();
-    return NumberParse::kOk;
-  }
-  if (kNaN.count(text)) {
-    out = std::numeric_limits<double>::quiet_NaN();
-    return NumberParse::kOk;
-  }
-  std::string_view s = text;
-  if (!s.empty() && s.front() == '+') s.remove_prefix(1);  // from_chars rejects a leading '+'
-  // Only digits, sign, point and exponent: keeps from_chars' "inf"/"nan" spellings out.
-  if (s.empty() || s.find_first_not_of("0123456789.eE+-") != std::string_view::npos)
-    return NumberParse::kNotANumber;
-  if (s.find_first_of("0123456789") == std::string_view::npos) return NumberParse::kNotANumber;
-  const auto [ptr, ec] = std::from_chars(s.data(), s.data() + s.size(), out);
-  if (ec == std::errc::result_out_of_range) return NumberParse::kOutOfRange;
-  if (ec != std::errc() || ptr != s.data() + s.size()) return NumberParse::kNotANumber;
-  return NumberParse::kOk;
-}
-
-/// A YAML mapping at a field path ("" for the document, "object", ...). It rejects unknown and
-/// duplicate keys up front, so a misspelt key is reported as such rather than as a missing one.
-class MapReader {
- public:
-  MapReader(const YAML::Node& node, std::string path, const std::string& origin,
-            std::initializer_list<const char*> allowed)
-      : node_(node), path_(std::move(path)), origin_(origin) {
-    if (!node_.IsMap())
-      fail(origin_, path_.empty() ? "(document)" : path_,
-           "expected a mapping of keys, got " + describe(node_));
-    std::set<std::string> seen;
-    for (const auto& kv : node_) {
-      if (!kv.first.IsScalar())
-        fail(origin_, path_.empty() ? "(document)" : path_,
-             "keys must be plain names, got " + describe(kv.first));
-      const std::string& key = kv.first.Scalar();
-      if (!seen.insert(key).second) fail(origin_, field(key), "duplicate key");
-      if (std::find_if(allowed.begin(), allowed.end(), [&](const char* a) { return key == a; }) ==
-          allowed.end()) {
-        std::string list;
-        for (const char* a : allowed) list += std::string(list.empty() ? "" : ", ") + a;
-        fail(origin_, field(key), "unknown key (allowed: " + list + ")");
-      }
-    }
-  }
-
-  std::string field(const std::string& key) const {
-    return path_.empty() ? key : path_ + "." + key;
-  }
-  [[noreturn]] void fail_at(const std::string& key, const std::string& reason) const {
-    fail(origin_, field(key), reason);
-  }
-  bool has(const char* key) const { return static_cast<bool>(node_[key]); }
-  const std::string& origin() const { return origin_; }
-
-  /// Required finite number.
-  double number(const char* key) const {
-    require(key);
-    return to_number(node_[key], field(key));
-  }
-  double number_or(const char* key, double fallback) const {
-    return has(key) ? number(key) : fallback;
-  }
-  std::optional<double> optional_number(const char* key) const {
-    if (!has(key)) return std::nullopt;
-    return number(key);
-  }
-  /// Required number > 0.
-  double positive(const char* key) const {
-    const double v = number(key);
-    if (!(v > 0)) fail_at(key, "must be positive, got " + node_[key].Scalar());
-    return v;
-  }
-  double positive_or(const char* key, double fallback) const {
-    return has(key) ? positive(key) : fallback;
-  }
-
-  bool boolean_or(const char* key, bool fallback) const {
-    if (!has(key)) return fallback;
-    const YAML::Node n = node_[key];
-    // YAML 1.2 core schema only: yaml-cpp would also take yes/no/on/off, which YAML 1.2 reads as
-    // strings and which are easy to write by accident.
-    if (n.IsScalar() && n.Tag() != "!") {
-      const std::string& s = n.Scalar();
-      if (s == "true" || s == "True" || s == "TRUE") return true;
-      if (s == "false" || s == "False" || s == "FALSE") return false;
-    }
-    fail_at(key, "expected true or false, got " + describe(n));
-  }
-
-  /// Required plain string (any scalar).
-  std::string text(const char* key) const {
-    require(key);
-    const YAML::Node n = node_[key];
-    if (!n.IsScalar()) fail_at(key, "expected a string, got " + describe(n));
-    return n.Scalar();
-  }
-  /// Required string from a fixed set of words.
-  std::string choice(const char* key, std::initializer_list<const char*> allowed) const {
-    const std::string s = text(key);
-    return check_choice(key, s, allowed);
-  }
-  std::string choice_or(const char* key, std::initializer_list<const char*> allowed,
-                        const char* fallback) const {
-    return has(key) ? choice(key, allowed) : std::string(fallback);
-  }
-
-  /// Optional integer in [lo, hi]. Written as a plain integer: 2.0 or 2.5 are rejected, since a
-  /// count or a size with a fraction is a mistake rather than something to round.
-  long long integer_or(const char* key, long long lo, long long hi, long long fallback) const {
-    if (!has(key)) return fallback;
-    const YAML::Node n = node_[key];
-    const long long v = to_integer(n, field(key));
-    if (v < lo || v > hi)
-      fail_at(key, "must be an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) +
-                       "], got " + n.Scalar());
-    return v;
-  }
-
-  /// Optional fixed-length list of finite numbers ("[x, y, z]"); `shape` names the elements for
-  /// the error message.
-  template <std::size_t N>
-  std::array<double, N> numbers_or(const char* key, const char* shape,
-                                   const std::array<double, N>& fallback) const {
-    if (!has(key)) return fallback;
-    const YAML::Node n = node_[key];
-    if (!n.IsSequence() || n.size() != N)
-      fail_at(key, "expected a list of " + std::to_string(N) + " numbers " + shape + ", got " +
-                       (n.IsSequence() ? "a list of " + std::to_string(n.size()) : describe(n)));
-    std::array<double, N> v{};
-    for (std::size_t i = 0; i < N; ++i)
-      v[i] = to_number(n[i], field(key) + "[" + std::to_string(i) + "]");
-    return v;
-  }
-
-  const YAML::Node node(const char* key) const { return node_[key]; }
-
-  MapReader section(const char* key, std::initializer_list<const char*> allowed) const {
-    if (!has(key)) fail_at(key, "missing required section");
-    return MapReader(node_[key], field(key), origin_, allowed);
-  }
-  std::optional<MapReader> optional_section(const char* key,
-                                            std::initializer_list<const char*> allowed) const {
-    if (!has(key)) return std::nullopt;
-    return MapReader(node_[key], field(key), origin_, allowed);
-  }
-
-  /// Key present but meaningless in this context (e.g. `radius` for an ellipse).
-  void reject_if_present(const char* key, const std::string& why) const {
-    if (has(key)) fail_at(key, why);
-  }
-
-  double to_number(const YAML::Node& n, const std::string& where) const {
-    if (!n.IsScalar()) fail(origin_, where, "expected a number, got " + describe(n));
-    // A quoted scalar is a string in YAML, even if it looks like a number.
-    if (n.Tag() == "!")
-      fail(origin_, where,
-           "expected a number, got the string " + describe(n) + " (remove the quotes)");
-    double v = 0;
-    switch (parse_number(n.Scalar(), v)) {
-      case NumberParse::kOk:
-        break;
-      case NumberParse::kNotANumber:
-        fail(origin_, where, "expected a number, got " + describe(n));
-      case NumberParse::kOutOfRange:
-        fail(origin_, where, "number out of range, got " + describe(n));
-    }
-    if (!std::isfinite(v)) fail(origin_, where, "must be a finite number, got " + n.Scalar());
-    return v;
-  }
-
-  /// A plain decimal integer (optional sign); numbers with a fraction or exponent are rejected.
-  long long to_integer(const YAML::Node& n, const std::string& where) const {
-    if (!n.IsScalar()) fail(origin_, where, "expected an integer, got " + describe(n));
-    if (n.Tag() == "!")
-      fail(origin_, where,
-           "expected an integer, got the string " + describe(n) + " (remove the quotes)");
-    std::string_view s = n.Scalar();
-    if (!s.empty() && s.front() == '+') s.remove_prefix(1);
-    long long v = 0;
-    const auto [ptr, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
-    if (ec == std::errc::result_out_of_range)
-      fail(origin_, where, "number out of range, got " + describe(n));
-    if (ec != std::errc() || ptr != s.data() + s.size() || s.empty())
-      fail(origin_, where, "expected an integer, got " + describe(n));
-    return v;
-  }
-
- private:
-  void require(const char* key) const {
-    if (!has(key)) fail_at(key, "missing required key");
-  }
-  std::string check_choice(const char* key, const std::string& s,
-                           std::initializer_list<const char*> allowed) const {
-    std::string list;
-    for (const char* a : allowed) {
-      if (s == a) return s;
-      list += std::string(list.empty() ? "" : ", ") + a;
-    }
-    fail_at(key, "unknown value '" + s + "' (allowed: " + list + ")");
-  }
-
-  YAML::Node node_;
-  std::string path_;
-  const std::string& origin_;
-};
 
 void read_gravity(const MapReader& root, sim::SimulationSpec& spec) {
   const MapReader g = root.section("gravity", {"g", "tilt_deg"});
@@ -396,10 +141,10 @@ void read_integrator(const MapReader& root, sim::SimulationSpec& spec) {
 }
 
 void read_contact(const MapReader& root, sim::SimulationSpec& spec) {
-  const auto c = root.optional_section(
-      "contact", {"model", "mu", "mu_kinetic", "restitution", "capture_velocity",
-                  "rolling_resistance", "drag", "drag_angular", "stop_on_contact_loss",
-                  "event_tolerance"});
+  const auto c =
+      root.optional_section("contact", {"model", "mu", "mu_kinetic", "restitution",
+                                        "capture_velocity", "rolling_resistance", "drag",
+                                        "drag_angular", "stop_on_contact_loss", "event_tolerance"});
   if (!c) return;
   auto& ev = spec.run.events;
   auto& law = spec.contact;
@@ -431,8 +176,9 @@ void read_contact(const MapReader& root, sim::SimulationSpec& spec) {
     // The rolling model is the paper's: it enforces rolling and has no losses or impacts.
     for (const char* key : {"mu_kinetic", "restitution", "capture_velocity", "rolling_resistance",
                             "drag", "drag_angular"})
-      c->reject_if_present(key, "only for model: hybrid (the rolling model enforces rolling "
-                                "without losses; it stops where contact is lost or it slips)");
+      c->reject_if_present(key,
+                           "only for model: hybrid (the rolling model enforces rolling "
+                           "without losses; it stops where contact is lost or it slips)");
   } else {
     c->reject_if_present("stop_on_contact_loss",
                          "only for model: rolling (the hybrid model flies where contact is lost)");
@@ -462,20 +208,19 @@ double non_negative(const MapReader& m, const char* key, double fallback) {
 
 /// What the renderer's camera model needs (the rules are camera_problem's, below).
 void read_camera(const MapReader& root, Scene& scene) {
-  const auto c =
-      root.optional_section("camera", {"width", "height", "fx", "fy", "cx", "cy", "distortion",
-                                       "position", "look_at", "up", "fps", "exposure", "latency",
-                                       "latency_jitter"});
+  const auto c = root.optional_section(
+      "camera", {"width", "height", "fx", "fy", "cx", "cy", "distortion", "position", "look_at",
+                 "up", "fps", "exposure", "latency", "latency_jitter"});
   if (!c) return;
   CameraSpec cam;
   cam.width = static_cast<int>(c->integer_or("width", 1, kMaxCameraSide, cam.width));
   cam.height = static_cast<int>(c->integer_or("height", 1, kMaxCameraSide, cam.height));
   // The renderer keeps a few float images of the frame: bounded, so that a frame fits in memory.
   if (static_cast<long long>(cam.width) * cam.height > kMaxCameraPixels)
-    c->fail_at("width", "width x height = " +
-                            std::to_string(static_cast<long long>(cam.width) * cam.height) +
-                            " px; at most " + std::to_string(kMaxCameraPixels) +
-                            " (8K, 7680 x 4320, is 33177600)");
+    c->fail_at(
+        "width",
+        "width x height = " + std::to_string(static_cast<long long>(cam.width) * cam.height) +
+            " px; at most " + std::to_string(kMaxCameraPixels) + " (8K, 7680 x 4320, is 33177600)");
   cam.fx = c->positive_or("fx", cam.fx);
   cam.fy = c->positive_or("fy", cam.fy);
   cam.cx = c->number_or("cx", 0.5 * (cam.width - 1));
@@ -546,9 +291,9 @@ void read_render(const MapReader& root, Scene& scene) {
 // ---- joint, controller, estimator, faults (the closed loop's plain data) -----------------------
 
 void read_joint(const MapReader& root, Scene& scene) {
-  const auto j = root.optional_section(
-      "joint", {"inertia", "viscous", "coulomb", "torque_limit", "encoder_counts", "kp", "kd",
-                "velocity_filter", "rate"});
+  const auto j =
+      root.optional_section("joint", {"inertia", "viscous", "coulomb", "torque_limit",
+                                      "encoder_counts", "kp", "kd", "velocity_filter", "rate"});
   if (!j) return;
   JointSpec& js = scene.joint;
   js.inertia = j->positive_or("inertia", js.inertia);
@@ -574,9 +319,9 @@ void read_joint(const MapReader& root, Scene& scene) {
 
 void read_controller(const MapReader& root, Scene& scene) {
   const auto c = root.optional_section(
-      "controller", {"mode", "plan", "law", "kp", "kd", "dip_until", "finish_after", "lost_timeout",
-                     "innovation_gate", "innovation_strikes", "max_joint_jump",
-                     "stop_deceleration", "settle"});
+      "controller",
+      {"mode", "plan", "law", "kp", "kd", "dip_until", "finish_after", "lost_timeout",
+       "innovation_gate", "innovation_strikes", "max_joint_jump", "stop_deceleration", "settle"});
   if (!c) return;
   ControllerSpec& cs = scene.controller;
   cs.mode = c->choice_or("mode", {"feedback", "open-loop"}, cs.mode.c_str());
@@ -611,8 +356,8 @@ void read_estimator(const MapReader& root, Scene& scene) {
 
 void read_faults(const MapReader& root, Scene& scene) {
   const auto f = root.optional_section(
-      "faults", {"camera_stop", "camera_stall", "occlusion", "occlusion_duration",
-                 "encoder_glitch", "encoder_glitch_size"});
+      "faults", {"camera_stop", "camera_stall", "occlusion", "occlusion_duration", "encoder_glitch",
+                 "encoder_glitch_size"});
   if (!f) return;
   FaultSpec& fs = scene.faults;
   const auto time = [&](const char* key) -> std::optional<double> {
@@ -803,10 +548,14 @@ Scene parse_scene(const std::string& yaml_text, const std::string& origin) {
 
   Scene scene;
   scene.origin = origin;
+  if (is_spatial(docs.front(), origin)) {
+    scene.spatial = read_spatial_scene(docs.front(), origin, scene.name);
+    return scene;
+  }
   const MapReader root(docs.front(), "", origin,
-                       {"name", "gravity", "hand", "object", "motion", "initial", "duration",
-                        "integrator", "contact", "camera", "effects", "render", "targets",
-                        "joint", "controller", "estimator", "faults"});
+                       {"name", "space", "gravity", "hand", "object", "motion", "initial",
+                        "duration", "integrator", "contact", "camera", "effects", "render",
+                        "targets", "joint", "controller", "estimator", "faults"});
   if (root.has("name")) scene.name = root.text("name");
   sim::SimulationSpec& spec = scene.sim;
   read_gravity(root, spec);
@@ -868,7 +617,7 @@ std::string data_directory() {
   std::error_code ec;
   const fs::path self = fs::read_symlink("/proc/self/exe", ec);
   if (!ec) {
-    places.push_back(self.parent_path() / ".." / "share" / "flatland");  // PREFIX/bin
+    places.push_back(self.parent_path() / ".." / "share" / "flatland");         // PREFIX/bin
     places.push_back(self.parent_path() / ".." / ".." / "share" / "flatland");  // PREFIX/libexec/x
   }
   places.emplace_back(FLATLAND_INSTALL_DATA_DIR);

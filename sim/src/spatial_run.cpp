@@ -774,7 +774,8 @@ SpatialState place_in_contact(const SpatialRollingProblem& pb, const HandPose3& 
   if (lu.rank() < 3)
     throw std::invalid_argument(
         "contact placement: the centre's velocity and the spin do not fix the rolling motion "
-        "here (a degenerate contact)");
+        "here (a degenerate contact: the object's and the hand's curvatures match, or a "
+        "chart is singular)");
   const Eigen::Matrix<double, 10, 1> z = particular + Z * lu.solve(target - S * particular);
   const Eigen::Matrix<double, 10, 1> yv = z.cwiseQuotient(vc.scale);
   s.velocity = yv.segment<3>(0);

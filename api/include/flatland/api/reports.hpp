@@ -6,6 +6,7 @@
 #include "flatland/sim/hybrid.hpp"
 #include "flatland/sim/search.hpp"
 #include "flatland/sim/simulate.hpp"
+#include "flatland/sim/spatial_spec.hpp"
 #include "flatland/sim/spec.hpp"
 
 #include <nlohmann/json.hpp>
@@ -44,5 +45,10 @@ double s_at_half_period(const sim::SimulationSpec& spec, const sim::RunResult& r
 /// `simulate --json` without its csv key: the run's end, extrema, integrator statistics and
 /// contact (modes, flights, events).
 Json simulate_json(const sim::SimulationSpec& spec, const sim::RunResult& r);
+
+/// `simulate --json` of a spatial scene without its files: where and why the run stopped
+/// (`success` only when it reached its end time), the final state, the extrema of the forces,
+/// the energy's change and the integrator's statistics.
+Json spatial_simulate_json(const sim::SpatialSpec& spec, const sim::SpatialRunResult& r);
 
 }  // namespace flatland::api

@@ -48,6 +48,10 @@ struct IntegratorOverrides {
 };
 /// Check the overrides and set them in scene.sim.run.
 void apply_integrator_overrides(const IntegratorOverrides& o, Scene& scene, Spelling spelling);
+/// Check the method and tolerance overrides and set them in `settings` (a spatial scene's);
+/// a formulation is refused (the spatial path has one).
+void apply_integrator_overrides(const IntegratorOverrides& o, sim::IntegratorSettings& settings,
+                                Spelling spelling);
 
 /// Set spec.contact.mu (UsageError for a negative value or one below the scene's
 /// contact.mu_kinetic).

@@ -3,6 +3,7 @@
 // contain are simply off. Schema: docs/SCENE.md.
 #pragma once
 
+#include "flatland/sim/spatial_spec.hpp"
 #include "flatland/sim/spec.hpp"
 
 #include <array>
@@ -147,6 +148,9 @@ struct FaultSpec {
 struct Scene {
   std::string origin;  ///< file path (or "<string>")
   std::string name;    ///< optional `name:` key
+  /// A spatial scene (`space: 3d`): a ball or an ellipsoid on a surface hand in space. Only
+  /// `flatland simulate` runs one; every other section below then keeps its defaults, unused.
+  std::optional<sim::SpatialSpec> spatial;
   sim::SimulationSpec sim;
   std::optional<CameraSpec> camera;     ///< absent: nothing is rendered
   EffectsSpec effects;
