@@ -4,10 +4,12 @@
 
 #include "flatland/camera/camera_file.hpp"
 
+#include "flatland/model/compile.hpp"
 #include "flatland/model/model.hpp"
 #include "flatland/render/renderer.hpp"
 #include "flatland/render/video_writer.hpp"
 #include "flatland/sim/curve.hpp"
+#include "flatland/sim/spatial_spec.hpp"
 
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -21,6 +23,8 @@
 #include <cstdio>
 #include <iostream>
 #include <memory>
+#include <limits>
+#include <numbers>
 #include <optional>
 #include <sstream>
 
@@ -131,8 +135,7 @@ void draw_overlay(cv::Mat& bgr, const camera::CameraModel& camera, const sim::Po
   std::snprintf(line[0], sizeof line[0], "t = %.3f s", truth.t);
   // The contact's mode (the hybrid model's): in flight, how far the disk is from the hand.
   if (s.mode == sim::ContactMode::kFlight)
-    std::snprintf(line[1], sizeof line[1], "s_h = %+.3f  flight, gap %.1f mm", s.s_h,
-                  1e3 * s.gap);
+    std::snprintf(line[1], sizeof line[1], "s_h = %+.3f  flight, gap %.1f mm", s.s_h, 1e3 * s.gap);
   else
     std::snprintf(line[1], sizeof line[1], "s_h = %+.3f  %s", s.s_h,
                   sim::to_string(s.mode).c_str());
@@ -189,8 +192,213 @@ Json camera_json(const camera::CameraModel& m, const CameraSpec& spec) {
 constexpr long kMaxRenderFrames = 200000;
 constexpr double kMaxRenderFps = 1000;
 
+/// The part of a spatial hand's chart drawn: a sphere or ellipsoid whole, a plane or an extruded
+/// hand's piece out to render.table_extent.
+sim::SurfacePatch spatial_hand_extent(const sim::SpatialSpec& spec, double extent) {
+  const double pi = std::numbers::pi;
+  switch (spec.hand.kind) {
+    case sim::SurfaceSpec::Kind::kSphere:
+    case sim::SurfaceSpec::Kind::kEllipsoid:
+      return {{-pi, -pi / 2}, {pi, pi / 2}};
+    case sim::SurfaceSpec::Kind::kExtruded: {  // along the outline, its piece (the patch)
+      const double inf = std::numeric_limits<double>::infinity();
+      return {{-inf, -extent}, {inf, extent}};
+    }
+    case sim::SurfaceSpec::Kind::kPlane:
+      break;
+  }
+  return {{-extent, -extent}, {extent, extent}};
+}
+
+/// flatland render on a spatial scene: the run sampled at the camera's rate, each sample drawn
+/// (the hand's surface and the object at their poses) through the scene's camera, with
+/// supersampling and lens distortion; the other image effects are refused (not built for space).
+void run_render_spatial(const RenderOptions& o, Scene scene) {
+  if (!scene.camera)
+    throw UsageError(scene.origin + ": camera: the scene has no camera section (needed by render)");
+  if (o.overlay) throw UsageError("--overlay: only for planar scenes");
+  if (o.solve) throw UsageError("--solve: only for planar scenes");
+  if (o.view_opt->count())
+    throw UsageError("--view: only for planar scenes (a spatial scene is seen by its camera)");
+  const EffectsSpec& e = scene.effects;
+  if (e.blur_subframes > 1 || e.noise_read_dn > 0 || e.noise_shot_gain > 0 || e.vignetting > 0 ||
+      e.jitter_s > 0 || e.drop_probability > 0 || !e.quantize)
+    throw UsageError(scene.origin +
+                     ": effects: a spatial scene's frames have supersampling and the camera's "
+                     "distortion only (blur, noise, vignetting, jitter, drops and float images "
+                     "are not built for spatial scenes)");
+  sim::SpatialSpec spec = *scene.spatial;
+  api::apply_integrator_overrides(integrator_overrides(o.common), spec.integrator,
+                                  api::Spelling::kCommandLine);
+  if (o.duration_opt->count()) {
+    require_positive("--duration", o.duration, "s");
+    spec.duration = o.duration;
+  }
+  CameraSpec& camera = *scene.camera;
+  if (o.fps_opt->count()) {
+    require_positive("--fps", o.fps, "frames per s");
+    if (o.fps > kMaxRenderFps)
+      throw UsageError("--fps: at most " + format_number(kMaxRenderFps) + " frames per s, got " +
+                       format_number(o.fps));
+    camera.fps = o.fps;
+  }
+  if (o.gl_opt->count()) scene.render.backend = o.gl;
+  const render::GlBackend backend = render::parse_backend(scene.render.backend);
+  sim::SpatialSetup setup;
+  try {
+    setup = sim::build_spatial(spec);
+  } catch (const std::invalid_argument& err) {
+    throw UsageError(scene.origin + ": " + err.what());
+  }
+  const double frames_wanted = std::floor(spec.end_time() * camera.fps) + 1;
+  if (frames_wanted > kMaxRenderFrames)
+    throw UsageError("--fps/--duration: " + format_number(frames_wanted) + " frames; at most " +
+                     std::to_string(kMaxRenderFrames) + " are rendered in one run");
+  const std::string out_text = o.common.out;
+  if (out_text.empty()) throw UsageError("--out: required (FILE.mp4 or a directory)");
+  const fs::path out = out_text;
+  const bool mp4 = lower(out.extension().string()) == ".mp4" && out_text.back() != '/';
+  if (mp4 && fs::is_directory(out))
+    throw UsageError("--out: " + out_text + " is a directory; give a FILE.mp4 or a directory");
+  const fs::path dir = mp4 ? out.parent_path() : out;
+  const std::string stem = mp4 ? out.stem().string() + "." : std::string();
+  const fs::path truth_path = dir / (stem + "truth.csv"),
+                 meta_path = dir / (stem + (mp4 ? "json" : "meta.json")),
+                 camera_path = dir / (stem + "camera.yaml");
+  if (mp4) {
+    for (const fs::path& p : {out, truth_path, meta_path, camera_path})
+      check_output_file("--out", p, o.common.force);
+  } else {
+    check_output_directory("--out", out, o.common.force);
+  }
+  render::RenderSetup rs;
+  rs.camera = model::compile_camera(camera);
+  rs.render = scene.render;
+  rs.effects = scene.effects;
+  rs.spatial = render::SpatialBodies{setup.problem.hand, setup.problem.object.surface,
+                                     spatial_hand_extent(spec, scene.render.table_extent)};
+  render::Renderer renderer(rs, backend);
+  const camera::CameraModel& model = renderer.camera();
+  const std::string gl = renderer.gl_description();
+
+  OutputSet outputs(o.common.force);
+  const cv::Size size(model.width, model.height);
+  cv::VideoWriter writer;
+  fs::path video_tmp;
+  std::string codec;
+  if (mp4) {
+    outputs.ensure_directory(out.parent_path());
+    video_tmp = outputs.reserve_keep_extension(out);
+    codec = render::open_mp4(writer, video_tmp.string(), model.fps, size,
+                             "cannot open an MP4 writer for " + out_text + ": ",
+                             "; --out DIR writes PNG frames instead");
+  } else {
+    outputs.begin_directory(out);
+  }
+  std::cerr << "flatland: simulating " << scene.origin << " (spatial) for "
+            << format_number(spec.end_time()) << " s\n";
+  setup.options.sample_dt = 1.0 / model.fps;
+  const sim::SpatialRunResult run = sim::run_spatial(setup);
+  if (run.stop != sim::SpatialStop::kEndTime)
+    std::cerr << "flatland: the run stopped at t = " << format_number(run.final.t) << " s ("
+              << sim::to_string(run.stop) << "); rendering up to there\n";
+  std::string truth_csv = "frame,t,x,y,z,u,v\n";
+  std::vector<unsigned char> png;
+  long written = 0;
+  const auto start = std::chrono::steady_clock::now();
+  {
+    ProgressBar bar("render");
+    const long n = static_cast<long>(run.samples.size());
+    for (const sim::SpatialSample& sample : run.samples) {
+      // The run's last sample is its end (an event's time), off the frame grid: not a frame.
+      if (written > 0 && std::abs(sample.t * model.fps - std::round(sample.t * model.fps)) > 1e-6)
+        continue;
+      const render::SceneState st =
+          render::SceneState::from_spatial_sample(sample, setup.motion->at(sample.t));
+      const cv::Mat bgr = renderer.render_8u(st);
+      if (mp4) {
+        writer.write(bgr);
+      } else {
+        if (!cv::imencode(".png", bgr, png))
+          throw std::runtime_error("cannot encode frame " + std::to_string(written) + " as PNG");
+        char name[32];
+        std::snprintf(name, sizeof name, "frame_%06ld.png", written);
+        outputs.stage(out / name, std::string(png.begin(), png.end()));
+      }
+      const render::FrameTruth truth = renderer.truth(st);
+      std::string row = std::to_string(written);
+      for (double v : {sample.t, truth.disk_center_table.x, truth.disk_center_table.y,
+                       truth.disk_center_table.z, truth.disk_center_px.x, truth.disk_center_px.y})
+        row.append(",").append(format_number(v));
+      truth_csv += row + "\n";
+      ++written;
+      bar.update(written, n);
+    }
+  }
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (mp4) writer.release();
+  outputs.stage(truth_path, truth_csv);
+  camera::CameraFile camera_file;
+  camera_file.camera_name = scene.name.empty() ? "flatland" : scene.name;
+  camera_file.camera = model;
+  camera_file.has_table_pose = true;  // the pose in the scene's world frame
+  camera::write_camera_file(outputs.reserve(camera_path).string(), camera_file);
+  Json meta;
+  meta["scene"] = scene.origin;
+  meta["name"] = scene.name;
+  meta["space"] = "3d";
+  meta["format"] = mp4 ? "mp4" : "png";
+  meta["codec"] = mp4 ? Json(codec) : Json(nullptr);
+  meta["output"] = out.string();
+  meta["truth"] = truth_path.string();
+  meta["camera_file"] = camera_path.string();
+  meta["frames"] = written;
+  meta["stop_reason"] = sim::to_string(run.stop);
+  meta["camera"] = camera_json(model, camera);
+  meta["effects"] = effects_json(scene.effects);
+  meta["gl"] = {{"backend", render::to_string(backend)}, {"description", gl}};
+  meta["truth_columns"] = "frame,t,x,y,z,u,v";
+  outputs.stage(meta_path, meta.dump(2) + "\n");
+  outputs.commit();
+  const double fps_rendered = seconds > 0 ? static_cast<double>(written) / seconds : 0.0;
+  if (o.common.json) {
+    Json j;
+    j["space"] = "3d";
+    j["frames"] = written;
+    j["width"] = model.width;
+    j["height"] = model.height;
+    j["fps"] = model.fps;
+    j["fps_rendered"] = number(fps_rendered);
+    j["output"] = out.string();
+    j["codec"] = mp4 ? Json(codec) : Json(nullptr);
+    j["truth"] = truth_path.string();
+    j["meta"] = meta_path.string();
+    j["camera_file"] = camera_path.string();
+    j["stop_reason"] = sim::to_string(run.stop);
+    j["gl"] = {{"backend", render::to_string(backend)}, {"description", gl}};
+    emit_json(j);
+    return;
+  }
+  std::cout << "flatland render: " << scene.origin
+            << (scene.name.empty() ? "" : " (" + scene.name + ")") << "\n"
+            << "  camera             " << model.width << " x " << model.height << " px at "
+            << format_number(model.fps) << " fps (spatial scene)\n"
+            << "  frames             " << written << " written, run " << sim::to_string(run.stop)
+            << " at t = " << format_number(run.final.t) << " s\n"
+            << "  speed              " << format_number(std::round(fps_rendered * 10) / 10)
+            << " frames/s (" << gl << ")\n"
+            << "  wrote              " << out.string() << (mp4 ? " (" + codec + ")" : "") << ", "
+            << truth_path.string() << ", " << meta_path.string() << ", " << camera_path.string()
+            << "\n";
+}
+
 void run_render(const RenderOptions& o) {
   // ---- everything that can be bad input, before anything is computed or written
+  {
+    Scene any = load_scene_option(o.common, SceneSpaces::kPlanarOrSpatial);
+    if (any.spatial) return run_render_spatial(o, std::move(any));
+  }
   Scene scene = load_scene_with_overrides(o.common);
   if (!scene.camera)
     throw UsageError(scene.origin + ": camera: the scene has no camera section (needed by render)");
@@ -223,8 +431,8 @@ void run_render(const RenderOptions& o) {
   // The frames the run will write, known before it runs: bounded, like every output.
   const double frames_wanted = std::floor((spec.end_time() - spec.initial.t0) * camera.fps) + 1;
   if (frames_wanted > kMaxRenderFrames)
-    throw UsageError("--fps/--duration: " + format_number(frames_wanted) +
-                     " frames; at most " + std::to_string(kMaxRenderFrames) +
+    throw UsageError("--fps/--duration: " + format_number(frames_wanted) + " frames; at most " +
+                     std::to_string(kMaxRenderFrames) +
                      " are rendered in one run (lower the duration or the rate)");
 
   const std::string out_text = o.common.out;

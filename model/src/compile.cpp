@@ -109,8 +109,8 @@ void compile_vision(Model& m) {
 render::RenderSetup render_setup(const Model& model) {
   if (!model.camera)
     throw std::invalid_argument("camera: the scene has no camera section (needed to render)");
-  return {*model.camera,         model.hand,        model.boards,
-          model.spec.sim.object, model.spec.render, model.spec.effects};
+  return {*model.camera,     model.hand,         model.boards, model.spec.sim.object,
+          model.spec.render, model.spec.effects, std::nullopt};
 }
 
 vision::HandMapping hand_mapping(const Model& model, const camera::CameraModel& camera,

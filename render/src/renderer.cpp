@@ -418,6 +418,60 @@ Mesh disk_top_quad(double r, double thickness) {
   return m;
 }
 
+// ---- spatial bodies ----
+
+const cv::Vec3f kBall(0.92f, 0.92f, 0.90f);
+const cv::Vec3f kBallCell(0.10f, 0.12f, 0.55f);
+const cv::Vec3f kBackground(0.08f, 0.08f, 0.09f);
+
+/// A surface's chart tessellated over [lo, hi] (nu x nv quads, flat-shaded by each facet's
+/// normal). `cells` > 0 colours the quads in a checkerboard of that many cells along u (and half
+/// as many along v) in `color` and `cell_color`, so that the body's motion shows.
+Mesh surface_mesh(const sim::Surface& surface, const sim::SurfacePatch& range, int nu, int nv,
+                  const cv::Vec3f& color, int cells, const cv::Vec3f& cell_color) {
+  Mesh m;
+  const auto point = [&](double u, double v) {
+    const sim::Vec3 c = surface.jet(sim::SurfaceParam(u, v)).c;
+    return cv::Vec3d(c.x(), c.y(), c.z());
+  };
+  const double du = (range.hi.x() - range.lo.x()) / nu, dv = (range.hi.y() - range.lo.y()) / nv;
+  for (int i = 0; i < nu; ++i)
+    for (int j = 0; j < nv; ++j) {
+      const double u0 = range.lo.x() + i * du, v0 = range.lo.y() + j * dv;
+      const cv::Vec3d a = point(u0, v0), b = point(u0 + du, v0), c = point(u0 + du, v0 + dv),
+                      d = point(u0, v0 + dv);
+      // The facet's normal, turned outwards by the surface's orientation (also at a pole, where
+      // the chart is singular and the quad a triangle).
+      cv::Vec3d normal = (c - a).cross(d - b);
+      if (cv::norm(normal) == 0) continue;
+      normal *= surface.normal_sign() / cv::norm(normal);
+      cv::Vec3f col = color;
+      if (cells > 0) {
+        const int cu = static_cast<int>(std::floor((i + 0.5) * cells / nu));
+        const int cv_ = static_cast<int>(std::floor((j + 0.5) * std::max(1, cells / 2) / nv));
+        if ((cu + cv_) % 2 == 1) col = cell_color;
+      }
+      if (cv::norm(b - a) > 0) add_triangle(m, a, b, c, normal, col);
+      if (cv::norm(d - c) > 0) add_triangle(m, a, c, d, normal, col);
+    }
+  return m;
+}
+
+/// The part of the hand's chart drawn: the extent asked for, its unbounded sides cut at the
+/// patch. (A finite extent may go past the patch: a bowl is drawn to its poles, where the chart's
+/// formula still holds but the run cannot follow the contact.)
+sim::SurfacePatch drawn_range(const sim::Surface& s, const sim::SurfacePatch& extent) {
+  const sim::SurfacePatch p = s.patch();
+  sim::SurfacePatch r = extent;
+  for (int i = 0; i < 2; ++i) {
+    if (!std::isfinite(r.lo[i])) r.lo[i] = p.lo[i];
+    if (!std::isfinite(r.hi[i])) r.hi[i] = p.hi[i];
+  }
+  if (!(r.lo.array() < r.hi.array()).all() || !r.lo.allFinite() || !r.hi.allFinite())
+    throw std::invalid_argument("render: the hand's drawn extent is empty or unbounded");
+  return r;
+}
+
 Mesh table_mesh(double extent) {
   Mesh m;
   add_quad(m, {-extent, -extent, 0}, {extent, -extent, 0}, {extent, extent, 0},
@@ -480,6 +534,25 @@ cv::Matx33d rot_z(double a) {
 
 }  // namespace
 
+SceneState SceneState::from_spatial_sample(const sim::SpatialSample& s,
+                                           const sim::HandPose3& hand) {
+  SceneState st;
+  st.t = s.t;
+  SpatialPose pose;
+  const Eigen::Matrix3d Ro = s.state.orientation.normalized().toRotationMatrix();
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) {
+      pose.hand_rotation(r, c) = hand.rotation(r, c);
+      pose.object_rotation(r, c) = Ro(r, c);
+    }
+    pose.hand_position[r] = hand.position[r];
+    pose.object_position[r] = s.state.position[r];
+  }
+  st.spatial = pose;
+  st.force_normal_ratio = s.force_normal;
+  return st;
+}
+
 SceneState SceneState::from_sample(const sim::Sample& s) {
   SceneState st;
   st.t = s.t;
@@ -512,6 +585,7 @@ struct Renderer::Impl {
   unsigned program = 0, textured_program = 0, disk_program = 0, fbo = 0, color_rb = 0, depth_rb = 0;
   int fbo_width = 0, fbo_height = 0;
   Drawable table, hand, disk, disk_top;
+  Drawable spatial_hand, spatial_object;  // a spatial scene's bodies
   std::vector<Drawable> targets;
   bool textured_targets = false;
   bool table_fills_view = false;
@@ -532,7 +606,7 @@ struct Renderer::Impl {
     supersample = s.effects.supersample;
     if (supersample < 1 || supersample > 8)
       throw std::invalid_argument("effects.supersample: must be between 1 and 8");
-    if (s.object.kind != sim::ObjectSpec::Kind::kDisk)
+    if (!s.spatial && s.object.kind != sim::ObjectSpec::Kind::kDisk)
       throw std::invalid_argument("object.type: the renderer draws disks only");
     disk_radius = s.object.radius;
     maps = make_distortion_maps(camera, supersample);
@@ -542,8 +616,22 @@ struct Renderer::Impl {
     gl = std::make_unique<Gl>(*context);
     build_program();
     build_framebuffer();
+    if (s.spatial) {
+      if (!s.spatial->hand || !s.spatial->object)
+        throw std::invalid_argument("render: a spatial scene needs its hand and object surfaces");
+      constexpr int kHandQuads = 96, kBodyQuads = 48;
+      spatial_hand = upload(surface_mesh(*s.spatial->hand,
+                                         drawn_range(*s.spatial->hand, s.spatial->hand_extent),
+                                         kHandQuads, kHandQuads, kAluminium, 12,
+                                         kAluminium * 0.8f));
+      // The whole object: every longitude, the latitudes up to its poles.
+      const double half_pi = std::numbers::pi / 2;
+      spatial_object = upload(surface_mesh(
+          *s.spatial->object, {{-std::numbers::pi, -half_pi}, {std::numbers::pi, half_pi}},
+          kBodyQuads, kBodyQuads / 2, kBall, 8, kBallCell));
+    }
     table = upload(table_mesh(s.render.table_extent));
-    hand = upload(hand_mesh(*s.hand, s.render.hand_thickness));
+    if (s.hand) hand = upload(hand_mesh(*s.hand, s.render.hand_thickness));
     disk = upload(disk_side_mesh(disk_radius, s.render.disk_thickness));
     disk_top = upload(disk_top_quad(disk_radius, s.render.disk_thickness));
     for (const camera::PlacedBoard& b : s.boards) targets.push_back(make_target(b));
@@ -578,7 +666,8 @@ struct Renderer::Impl {
   ~Impl() {
     if (!gl) return;
     context->make_current();
-    for (Drawable* d : {&table, &hand, &disk, &disk_top}) release(*d);
+    for (Drawable* d : {&table, &hand, &disk, &disk_top, &spatial_hand, &spatial_object})
+      release(*d);
     for (Drawable& d : targets) release(d);
     gl->glDeleteFramebuffers(1, &fbo);
     gl->glDeleteRenderbuffers(1, &color_rb);
@@ -796,6 +885,28 @@ struct Renderer::Impl {
       gl->glClearColor(table_color[0], table_color[1], table_color[2], 1);
     else
       gl->glClearColor(0, 0, 0, 1);
+    if (setup.spatial) {
+      draw_spatial(st);
+    } else {
+      draw_table_scene(st);
+    }
+    gl->glPixelStorei(GL_PACK_ALIGNMENT, 4);
+    // RGBA is llvmpipe's fastest read format (BGRA and BGR go through slower paths).
+    gl->glReadPixels(0, 0, fbo_width, fbo_height, GL_RGBA, GL_UNSIGNED_BYTE, readback.data);
+  }
+
+  // A spatial scene: the hand's surface and the object at their poses, on a dark background.
+  void draw_spatial(const SceneState& st) {
+    if (!st.spatial) throw std::invalid_argument("render: a spatial scene's frame needs its poses");
+    gl->glClearColor(kBackground[0], kBackground[1], kBackground[2], 1);
+    gl->glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+    spatial_hand.model = rigid(st.spatial->hand_rotation, st.spatial->hand_position);
+    draw(spatial_hand, 0.25f);
+    spatial_object.model = rigid(st.spatial->object_rotation, st.spatial->object_position);
+    draw(spatial_object, 0.3f);
+  }
+
+  void draw_table_scene(const SceneState& st) {
     gl->glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
     if (!table_fills_view) draw(table);
     for (const Drawable& t : targets) draw(t);
@@ -805,9 +916,6 @@ struct Renderer::Impl {
     draw(disk_top, 0.0f, disk_program);
     hand.model = rigid(rot_z(st.hand_angle), {0, 0, 0});
     draw(hand, 0.25f);  // brushed aluminium: a soft highlight
-    gl->glPixelStorei(GL_PACK_ALIGNMENT, 4);
-    // RGBA is llvmpipe's fastest read format (BGRA and BGR go through slower paths).
-    gl->glReadPixels(0, 0, fbo_width, fbo_height, GL_RGBA, GL_UNSIGNED_BYTE, readback.data);
   }
 
   // The geometric image: supersampled ideal render -> distortion remap -> area downsample.
@@ -867,6 +975,12 @@ struct Renderer::Impl {
     tr.t = st.t;
     tr.theta = st.hand_angle;
     tr.s_h = st.s_h;
+    if (st.spatial) {  // the object's centre (no marker: both are the centre)
+      const cv::Vec3d c = st.spatial->object_position;
+      tr.disk_center_table = tr.marker_table = {c[0], c[1], c[2]};
+      tr.disk_center_px = tr.marker_px = camera.project(tr.disk_center_table);
+      return tr;
+    }
     const double z = setup.render.disk_thickness;
     tr.disk_center_table = {st.disk_center.x, st.disk_center.y, z};
     tr.marker_table = {st.disk_center.x + kMarkerOffset * disk_radius * std::cos(st.disk_angle),
@@ -879,7 +993,7 @@ struct Renderer::Impl {
 };
 
 Renderer::Renderer(const RenderSetup& setup, std::optional<GlBackend> backend) {
-  if (!setup.hand) throw std::invalid_argument("render: no hand to draw");
+  if (!setup.hand && !setup.spatial) throw std::invalid_argument("render: no hand to draw");
   const GlBackend chosen = backend ? *backend : parse_backend(setup.render.backend);
   impl_ = std::make_unique<Impl>(setup, chosen);
 }

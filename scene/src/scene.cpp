@@ -549,7 +549,11 @@ Scene parse_scene(const std::string& yaml_text, const std::string& origin) {
   Scene scene;
   scene.origin = origin;
   if (is_spatial(docs.front(), origin)) {
-    scene.spatial = read_spatial_scene(docs.front(), origin, scene.name);
+    const MapReader root(docs.front(), "", origin, kSpatialSceneKeys);
+    scene.spatial = read_spatial_scene(root, scene.name);
+    read_camera(root, scene);
+    read_effects(root, scene);
+    read_render(root, scene);
     return scene;
   }
   const MapReader root(docs.front(), "", origin,

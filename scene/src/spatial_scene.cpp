@@ -191,11 +191,8 @@ bool is_spatial(const YAML::Node& document, const std::string& origin) {
   fail(origin, "space", "unknown value " + describe(space) + " (allowed: 2d, 3d)");
 }
 
-sim::SpatialSpec read_spatial_scene(const YAML::Node& document, const std::string& origin,
-                                    std::string& name) {
-  const MapReader root(document, "", origin,
-                       {"name", "space", "gravity", "hand", "object", "motion", "initial",
-                        "duration", "integrator", "contact"});
+sim::SpatialSpec read_spatial_scene(const MapReader& root, std::string& name) {
+  const std::string& origin = root.origin();
   if (root.has("name")) name = root.text("name");
   sim::SpatialSpec spec;
   if (!root.has("gravity")) root.fail_at("gravity", "missing required key");

@@ -6,6 +6,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <initializer_list>
 #include <string>
 
 namespace flatland::scene_detail {
@@ -14,9 +15,16 @@ namespace flatland::scene_detail {
 /// SceneError for any other value.
 bool is_spatial(const YAML::Node& document, const std::string& origin);
 
-/// The spatial scene's sections, checked (key by key here, the physics by sim::build_spatial).
-/// `name` receives the optional `name:`.
-sim::SpatialSpec read_spatial_scene(const YAML::Node& document, const std::string& origin,
-                                    std::string& name);
+class MapReader;
+
+/// The keys of a spatial scene's document: its own sections, and the camera, effects and render
+/// sections it shares with planar scenes (for `flatland render`).
+inline constexpr std::initializer_list<const char*> kSpatialSceneKeys = {
+    "name",     "space",      "gravity", "hand",   "object",  "motion", "initial",
+    "duration", "integrator", "contact", "camera", "effects", "render"};
+
+/// The spatial scene's own sections, checked (key by key here, the physics by
+/// sim::build_spatial). `name` receives the optional `name:`.
+sim::SpatialSpec read_spatial_scene(const MapReader& root, std::string& name);
 
 }  // namespace flatland::scene_detail

@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -91,11 +92,34 @@ TEST_F(CliSpatial, BadInputIsRefusedWithNothingWritten) {
        {std::string("solve --scene ") + bowl(), "simulate --scene " + bowl() + " --k -1",
         "simulate --scene " + bowl() + " --formulation reduced",
         "simulate --scene " + bowl() + " --model hybrid", "simulate --scene " + bowl() + " --mu -1",
-        "simulate --scene " + bowl() + " --sample-dt 0", "render --scene " + bowl()}) {
+        "simulate --scene " + bowl() + " --sample-dt 0", "locus --scene " + bowl()}) {
     r = run(args + " --out x");
     EXPECT_EQ(r.code, 2) << args << ": " << r.err;
     EXPECT_EQ(lines_of(r.err).size(), 1u) << args << ": " << r.err;
     EXPECT_FALSE(fs::exists(dir_ / "x")) << args;
+  }
+}
+
+TEST_F(CliSpatial, RenderFilmsTheRunThroughTheScenesCamera) {
+  const Result r = run("render --scene " + bowl() + " --duration 0.2 --out frames --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const json j = json::parse(r.out);
+  EXPECT_EQ(j["space"], "3d");
+  EXPECT_EQ(j["frames"], 7);  // t = 0, 1/30, ..., 0.2 s
+  for (int i = 0; i < 7; ++i) {
+    char name[32];
+    std::snprintf(name, sizeof name, "frame_%06d.png", i);
+    EXPECT_TRUE(fs::exists(dir_ / "frames" / name)) << name;
+  }
+  const std::vector<std::string> truth = lines_of(read_text(dir_ / "frames" / "truth.csv"));
+  ASSERT_EQ(truth.size(), 8u);
+  EXPECT_EQ(truth[0], "frame,t,x,y,z,u,v");
+  EXPECT_TRUE(fs::exists(dir_ / "frames" / "camera.yaml"));
+  // Planar-only options and effects are refused, with nothing written.
+  for (const std::string& extra : {std::string(" --overlay"), std::string(" --view side")}) {
+    const Result bad = run("render --scene " + bowl() + " --duration 0.2 --out more" + extra);
+    EXPECT_EQ(bad.code, 2) << extra << ": " << bad.err;
+    EXPECT_FALSE(fs::exists(dir_ / "more")) << extra;
   }
 }
 

@@ -160,7 +160,7 @@ TEST(SpatialScene, BadInputNamesTheField) {
                      "list of 3 numbers");
   expect_field_error(with(kBowl, "mass: 0.1", "mass: 0.1\n  inertia: [1, 1, 3]"), "object.inertia",
                      "no rigid body");
-  expect_field_error(with(kBowl, "duration: 2", "duration: 2\ncamera: {}"), "camera",
+  expect_field_error(with(kBowl, "duration: 2", "duration: 2\njoint: {}"), "joint",
                      "unknown key");
   expect_field_error(with(kBowl, "type: ball", "type: disk"), "object.type", "allowed: ball");
   expect_field_error(with(kBowl, "duration: 2", "duration: 2\nintegrator: {rtol: -1}"),

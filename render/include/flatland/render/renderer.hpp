@@ -10,6 +10,7 @@
 #include "flatland/scene/scene.hpp"
 #include "flatland/sim/curve.hpp"
 #include "flatland/sim/simulate.hpp"
+#include "flatland/sim/spatial_run.hpp"
 
 #include <opencv2/core.hpp>
 
@@ -20,6 +21,13 @@
 
 namespace flatland::render {
 
+/// A spatial scene's poses at one instant (world frame, SI): the hand frame's and the object
+/// body's, x_world = R x + p.
+struct SpatialPose {
+  cv::Matx33d hand_rotation = cv::Matx33d::eye(), object_rotation = cv::Matx33d::eye();
+  cv::Vec3d hand_position{0, 0, 0}, object_position{0, 0, 0};
+};
+
 /// What the renderer draws at one instant (all table frame, SI).
 struct SceneState {
   double t = 0;
@@ -28,8 +36,12 @@ struct SceneState {
   double disk_angle = 0;                                      ///< rad
   double s_h = 0;                                             ///< for truth and overlays
   double force_normal_ratio = 0, force_tangential_ratio = 0;  ///< overlays
-  sim::ContactMode mode = sim::ContactMode::kRolling;          ///< overlays
+  sim::ContactMode mode = sim::ContactMode::kRolling;         ///< overlays
+  /// A spatial scene's bodies (space: 3d), drawn instead of the table, hand and disk.
+  std::optional<SpatialPose> spatial;
   static SceneState from_sample(const sim::Sample& s);
+  /// A spatial run's sample with the hand's pose at its time.
+  static SceneState from_spatial_sample(const sim::SpatialSample& s, const sim::HandPose3& hand);
 };
 
 /// Ground truth of one frame.
@@ -46,6 +58,14 @@ struct Frame {
   FrameTruth truth;
 };
 
+/// A spatial scene's bodies: the hand's surface over `hand_extent` of its chart (an infinite side
+/// cut at the chart's patch; the drawing is one-sided: seen from behind, a surface is not drawn) and
+/// the object's whole surface, its chart's cells in two colours so that its turning shows.
+struct SpatialBodies {
+  sim::SurfacePtr hand, object;
+  sim::SurfacePatch hand_extent;
+};
+
 /// What a Renderer draws, and how: a compiled scene's part (model::render_setup), or put together
 /// by hand.
 struct RenderSetup {
@@ -55,6 +75,9 @@ struct RenderSetup {
   sim::ObjectSpec object;                           ///< a disk: its radius
   RenderSpec render;                                ///< backend, thicknesses, table extent
   EffectsSpec effects;
+  /// A spatial scene: these bodies instead of the hand and the disk (no table); `hand` and
+  /// `object` are then unused. Frames come from render_linear / render_8u with SceneState::spatial.
+  std::optional<SpatialBodies> spatial;
 };
 
 class Renderer {
