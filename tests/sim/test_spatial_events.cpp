@@ -6,6 +6,7 @@
 // integrals and a ball on an accelerating plate at 2/7 of its acceleration; the paper's
 // butterfly about the z axis carries a ball on the extruded hand as the planar run carries a disk.
 #include "flatland/sim/rolling.hpp"
+#include "flatland/sim/search.hpp"
 #include "flatland/sim/simulate.hpp"
 #include "flatland/sim/spatial_run.hpp"
 #include "flatland/sim/spec.hpp"
@@ -270,12 +271,16 @@ TEST(SpatialEvents, TheButterflyCarriesABallOnTheExtrudedHandAsThePlanarRunADisk
   // The paper's butterfly about z, a ball (I = 2/5 m r^2) on the extruded hand in the plane z =
   // 0, against the planar general model's run of a disk of that inertia (dense output at the
   // same times): s_h(t), the forces and the object's path agree while the contact stays on the
-  // palm's piece of the outline.
+  // palm's piece of the outline, and the k* that puts the disk on the tip at T puts the ball
+  // there too.
   SimulationSpec spec;
   spec.object.inertia = 0.4 * spec.object.mass * spec.object.radius * spec.object.radius;
   spec.run.formulation = Formulation::kGeneral;
   spec.run.integrator.rtol = 1e-12;
   spec.run.integrator.atol = 1e-14;
+  // k* of the planar disk with the ball's inertia: s_h(T) = 0 at the half period.
+  spec.motion.k = solve_k(spec, spec.motion.period).k;
+  const double T = 0.5 * spec.motion.period;
   const auto planar = build_problem(spec);
   const RunResult reference = run_spec(spec);
   ASSERT_FALSE(reference.trajectory.empty());
@@ -320,6 +325,13 @@ TEST(SpatialEvents, TheButterflyCarriesABallOnTheExtrudedHandAsThePlanarRunADisk
     ++compared;
   }
   EXPECT_GT(compared, 30);
+  // The spatial run at the planar k* reaches the tip at T as well: the same k* solves both.
+  o.t_end = T;
+  o.sample_dt = 0;
+  const SpatialRunResult to_T = simulate_spatial(pb, motion, st, t0, o);
+  ASSERT_EQ(to_T.stop, SpatialStop::kEndTime);
+  EXPECT_NEAR(reference.trajectory.sample(T).s_h, 0.0, 1e-9);
+  EXPECT_NEAR(to_T.final.state.s_h.x(), 0.0, 1e-9);
 }
 
 }  // namespace
