@@ -202,13 +202,18 @@ void SpatialRhs(benchmark::State& state) {
   }
 }
 
-// 10 s of Weltner's turntable (2.9 of the ball's circles) at rtol 1e-10, steps not kept.
+// 10 s of Weltner's turntable (2.9 of the ball's circles), steps not kept: method 0 DOPRI5 and 1
+// DOP853 at rtol 1e-10, 2 RK4 at a 1 ms step.
 void SpatialWeltner10s(benchmark::State& state) {
   const Turntable t;
   sim::SpatialRunOptions o;
   o.t_end = 10.0;
   o.integrator.rtol = 1e-10;
   o.integrator.atol = 1e-12;
+  o.integrator.method = state.range(0) == 1   ? sim::Method::kDormandPrince853
+                        : state.range(0) == 2 ? sim::Method::kRungeKutta4
+                                              : sim::Method::kDormandPrince54;
+  o.integrator.fixed_step = 1e-3;
   o.record = false;
   sim::SpatialRunResult run;
   for (auto _ : state) {
@@ -253,6 +258,10 @@ void register_all() {
       ->Unit(benchmark::kMillisecond);
   benchmark::RegisterBenchmark("BM_SpatialRhs", SpatialRhs)->Unit(benchmark::kMicrosecond);
   benchmark::RegisterBenchmark("BM_SpatialWeltner10s", SpatialWeltner10s)
+      ->ArgName("method")
+      ->Arg(0)
+      ->Arg(1)
+      ->Arg(2)
       ->Unit(benchmark::kMillisecond);
   benchmark::RegisterBenchmark("BM_Surface100", Surface100)
       ->Iterations(1)

@@ -1,8 +1,7 @@
-// Spatial rolling (issue 16, in progress): a rigid object rolling on a rigid hand surface in 3-D,
-// the paper's equations (1)-(4) in their spatial form assembled as A x = b, 11 x 10, with the
-// hand's linear and angular acceleration as input. This header has the instantaneous dynamics
-// (assemble and solve at one state); the integration in time, the events and the CLI's spatial
-// scenes are not built yet.
+// Spatial rolling: a rigid object rolling on a rigid hand surface in 3-D, the paper's equations
+// (1)-(4) in their spatial form assembled as A x = b, 11 x 10, with the hand's linear and angular
+// acceleration as input. This header has the instantaneous dynamics (assemble and solve at one
+// state); spatial_run.hpp integrates them in time, spatial_spec.hpp builds them from a scene.
 //
 // Unknowns x = (a_o, alpha_o, sddot_o, sddot_h): the object's linear and angular acceleration
 // (world frame) and the accelerations of the contact coordinates on the object and on the hand.

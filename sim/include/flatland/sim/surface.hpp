@@ -6,8 +6,7 @@
 //
 // Each surface gives only its position and partial derivatives up to third order (a SurfaceJet);
 // everything else is derived from them once, in geometry_from_jet, as CurveGeometry is for the
-// planar curves. This is the first piece of the spatial path (issue 16): the dynamics that use it
-// are not built yet.
+// planar curves. The spatial dynamics (spatial.hpp) take it.
 #pragma once
 
 #include "flatland/sim/curve.hpp"
