@@ -626,7 +626,7 @@ SpatialRunResult SpatialIntegration::run(const SpatialState& initial, double t0)
         ++stats.rejected;
         last_rejected = true;
         h = shrink(h_try, err);
-        if (h < 1e-14 * std::max(1.0, std::abs(t)))
+        if (!(h >= 1e-14 * std::max(1.0, std::abs(t))))  // NaN too
           throw std::runtime_error(
               "spatial run: step size underflow at t=" + format_significant(t, 10) + " s");
         continue;

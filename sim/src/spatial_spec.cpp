@@ -168,6 +168,10 @@ SpatialSetup build_spatial(const SpatialSpec& spec) {
   setup.options.stop_on_contact_loss = spec.stop_on_contact_loss;
   try {
     setup.initial = place_in_contact(setup.problem, setup.motion->at(setup.t0), spec.initial);
+    const SpatialState& s = setup.initial;
+    if (!s.position.allFinite() || !s.velocity.allFinite() || !s.angular_velocity.allFinite() ||
+        !s.sdot_o.allFinite() || !s.sdot_h.allFinite() || !s.orientation.coeffs().allFinite())
+      bad("initial", "the start is not finite (a length, speed or rate too large to compute with)");
     // The start's physics (the fit of the curvatures, the rank of A, the patches) is checked by
     // the run itself: one short step, nothing recorded.
     SpatialRunOptions probe = setup.options;
@@ -175,7 +179,11 @@ SpatialSetup build_spatial(const SpatialSpec& spec) {
     probe.record = false;
     simulate_spatial(setup.problem, *setup.motion, setup.initial, setup.t0, probe);
   } catch (const std::invalid_argument& e) {
-    bad("initial", e.what());
+    const std::string what = e.what();
+    if (what.rfind("initial: ", 0) == 0) throw;
+    bad("initial", what);
+  } catch (const std::runtime_error& e) {  // the first step failed: the start cannot be run
+    bad("initial", std::string("the run cannot start: ") + e.what());
   }
   return setup;
 }
