@@ -22,8 +22,8 @@
 #include <cmath>
 #include <cstdio>
 #include <iostream>
-#include <memory>
 #include <limits>
+#include <memory>
 #include <numbers>
 #include <optional>
 #include <sstream>
@@ -192,6 +192,27 @@ Json camera_json(const camera::CameraModel& m, const CameraSpec& spec) {
 constexpr long kMaxRenderFrames = 200000;
 constexpr double kMaxRenderFps = 1000;
 
+/// --duration and --fps into the scene (UsageError for a bad value, or a frame interval shorter
+/// than the camera's exposure).
+void apply_duration_and_fps(const RenderOptions& o, std::optional<double>& duration,
+                            CameraSpec& camera) {
+  if (o.duration_opt->count()) {
+    require_positive("--duration", o.duration, "s");
+    duration = o.duration;
+  }
+  if (o.fps_opt->count()) {
+    require_positive("--fps", o.fps, "frames per s");
+    if (o.fps > kMaxRenderFps)
+      throw UsageError("--fps: at most " + format_number(kMaxRenderFps) + " frames per s, got " +
+                       format_number(o.fps));
+    if (camera.exposure > 1.0 / o.fps)
+      throw UsageError("--fps: the frame interval 1/" + format_number(o.fps) +
+                       " s is shorter than camera.exposure (" + format_number(camera.exposure) +
+                       " s)");
+    camera.fps = o.fps;
+  }
+}
+
 /// The part of a spatial hand's chart drawn: a sphere or ellipsoid whole, a plane or an extruded
 /// hand's piece out to render.table_extent.
 sim::SurfacePatch spatial_hand_extent(const sim::SpatialSpec& spec, double extent) {
@@ -230,18 +251,8 @@ void run_render_spatial(const RenderOptions& o, Scene scene) {
   sim::SpatialSpec spec = *scene.spatial;
   api::apply_integrator_overrides(integrator_overrides(o.common), spec.integrator,
                                   api::Spelling::kCommandLine);
-  if (o.duration_opt->count()) {
-    require_positive("--duration", o.duration, "s");
-    spec.duration = o.duration;
-  }
   CameraSpec& camera = *scene.camera;
-  if (o.fps_opt->count()) {
-    require_positive("--fps", o.fps, "frames per s");
-    if (o.fps > kMaxRenderFps)
-      throw UsageError("--fps: at most " + format_number(kMaxRenderFps) + " frames per s, got " +
-                       format_number(o.fps));
-    camera.fps = o.fps;
-  }
+  apply_duration_and_fps(o, spec.duration, camera);
   if (o.gl_opt->count()) scene.render.backend = o.gl;
   const render::GlBackend backend = render::parse_backend(scene.render.backend);
   sim::SpatialSetup setup;
@@ -406,22 +417,8 @@ void run_render(const RenderOptions& o) {
   const bool butterfly = spec.motion.kind == sim::MotionSpec::Kind::kButterfly;
   if (o.solve && !butterfly)
     throw UsageError("--solve: the scene's motion is not the butterfly (motion.type)");
-  if (o.duration_opt->count()) {
-    require_positive("--duration", o.duration, "s");
-    spec.duration = o.duration;
-  }
   CameraSpec& camera = *scene.camera;
-  if (o.fps_opt->count()) {
-    require_positive("--fps", o.fps, "frames per s");
-    if (o.fps > kMaxRenderFps)
-      throw UsageError("--fps: at most " + format_number(kMaxRenderFps) + " frames per s, got " +
-                       format_number(o.fps));
-    if (camera.exposure > 1.0 / o.fps)
-      throw UsageError("--fps: the frame interval 1/" + format_number(o.fps) +
-                       " s is shorter than camera.exposure (" + format_number(camera.exposure) +
-                       " s)");
-    camera.fps = o.fps;
-  }
+  apply_duration_and_fps(o, spec.duration, camera);
   if (o.view_opt->count()) scene.render.view = o.view;
   if (scene.render.view == "side") camera = side_camera(camera);
   if (o.gl_opt->count()) scene.render.backend = o.gl;

@@ -3,6 +3,7 @@
 #pragma once
 
 #include "flatland/scene/scene.hpp"
+#include "flatland/sim/simulate.hpp"
 
 #include <yaml-cpp/yaml.h>
 
@@ -277,5 +278,17 @@ class MapReader {
   std::string path_;
   const std::string& origin_;
 };
+
+/// The `integrator` section's method and tolerances (planar and spatial scenes alike).
+inline void read_integrator_settings(const MapReader& it, sim::IntegratorSettings& s) {
+  const std::string m = it.choice_or("method", {"dopri5", "dop853", "rk4"}, "dopri5");
+  s.method = m == "rk4"      ? sim::Method::kRungeKutta4
+             : m == "dop853" ? sim::Method::kDormandPrince853
+                             : sim::Method::kDormandPrince54;
+  s.rtol = it.positive_or("rtol", s.rtol);
+  s.atol = it.positive_or("atol", s.atol);
+  s.fixed_step = it.positive_or("step", s.fixed_step);
+  s.max_step = it.positive_or("max_step", s.max_step);
+}
 
 }  // namespace flatland::scene_detail

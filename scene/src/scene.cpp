@@ -125,15 +125,7 @@ void read_integrator(const MapReader& root, sim::SimulationSpec& spec) {
   const auto it = root.optional_section(
       "integrator", {"method", "rtol", "atol", "step", "max_step", "formulation"});
   if (!it) return;
-  auto& s = spec.run.integrator;
-  const std::string m = it->choice_or("method", {"dopri5", "dop853", "rk4"}, "dopri5");
-  s.method = m == "rk4"      ? sim::Method::kRungeKutta4
-             : m == "dop853" ? sim::Method::kDormandPrince853
-                             : sim::Method::kDormandPrince54;
-  s.rtol = it->positive_or("rtol", s.rtol);
-  s.atol = it->positive_or("atol", s.atol);
-  s.fixed_step = it->positive_or("step", s.fixed_step);
-  s.max_step = it->positive_or("max_step", s.max_step);
+  read_integrator_settings(*it, spec.run.integrator);
   const std::string f = it->choice_or("formulation", {"auto", "general", "reduced"}, "auto");
   spec.run.formulation = f == "general"   ? sim::Formulation::kGeneral
                          : f == "reduced" ? sim::Formulation::kReduced

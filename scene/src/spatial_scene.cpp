@@ -156,16 +156,7 @@ void read_initial(const MapReader& root, sim::SpatialSpec& spec) {
 void read_integrator(const MapReader& root, sim::SpatialSpec& spec) {
   const auto it =
       root.optional_section("integrator", {"method", "rtol", "atol", "step", "max_step"});
-  if (!it) return;
-  sim::IntegratorSettings& s = spec.integrator;
-  const std::string m = it->choice_or("method", {"dopri5", "dop853", "rk4"}, "dopri5");
-  s.method = m == "rk4"      ? sim::Method::kRungeKutta4
-             : m == "dop853" ? sim::Method::kDormandPrince853
-                             : sim::Method::kDormandPrince54;
-  s.rtol = it->positive_or("rtol", s.rtol);
-  s.atol = it->positive_or("atol", s.atol);
-  s.fixed_step = it->positive_or("step", s.fixed_step);
-  s.max_step = it->positive_or("max_step", s.max_step);
+  if (it) read_integrator_settings(*it, spec.integrator);
 }
 
 void read_contact(const MapReader& root, sim::SpatialSpec& spec) {
