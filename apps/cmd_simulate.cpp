@@ -177,7 +177,15 @@ void run_simulate_spatial(const SimulateOptions& o, const Scene& scene) {
 
   std::cerr << "flatland: simulating " << scene.origin << " (spatial) for "
             << format_number(spec.end_time()) << " s\n";
-  const sim::SpatialRunResult r = sim::run_spatial(setup);
+  sim::SpatialRunResult r;
+  {
+    ProgressBar bar("simulate");
+    const double t0 = setup.t0, span = setup.options.t_end - setup.t0;
+    setup.options.progress = [&bar, t0, span](double t) {
+      bar.update(std::lround(1000 * (t - t0) / span), 1000);
+    };
+    r = sim::run_spatial(setup);
+  }
 
   if (!out.empty()) {
     const fs::path dir = out.parent_path().empty() ? fs::path(".") : out.parent_path();

@@ -677,6 +677,7 @@ SpatialRunResult SpatialIntegration::run(const SpatialState& initial, double t0)
         if (o_.record && o_.sample_dt == 0) res.samples.push_back(s);
         last = s;
         g_start = guards(y, x);
+        if (o_.progress) o_.progress(t);
       }
       if (!rk4 && event < 0) h = next_step(h_try, err, last_rejected);
       last_rejected = false;

@@ -13,6 +13,7 @@
 #include "flatland/sim/simulate.hpp"
 #include "flatland/sim/spatial.hpp"
 
+#include <functional>
 #include <limits>
 #include <memory>
 #include <string>
@@ -133,6 +134,8 @@ struct SpatialRunOptions {
   /// s: > 0 samples at multiples of it from the dense output (and at the end); 0 every step.
   double sample_dt = 0;
   bool record = true;  ///< keep the samples (else only the final one)
+  /// Called after every accepted step with the time reached (for a progress bar); may be empty.
+  std::function<void(double t)> progress;
 };
 
 /// Everything known at one instant of a spatial run.
