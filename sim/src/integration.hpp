@@ -202,7 +202,7 @@ SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y
         h = h_try * (!std::isfinite(err) ? 0.1
                      : dop853            ? std::max(1.0 / 3.0, 0.9 * std::pow(err, -1.0 / 8.0))
                                          : std::max(0.2, 0.9 * std::pow(err, -0.2)));
-        if (h < 1e-14 * std::max(1.0, std::abs(t)))
+        if (!(h >= 1e-14 * std::max(1.0, std::abs(t))))  // NaN too
           throw std::runtime_error("integrator: step size underflow " + at_text(t, model_.s_h(y)) +
                                    " (singular or non-finite dynamics)");
         continue;
