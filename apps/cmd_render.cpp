@@ -192,6 +192,20 @@ Json camera_json(const camera::CameraModel& m, const CameraSpec& spec) {
 constexpr long kMaxRenderFrames = 200000;
 constexpr double kMaxRenderFps = 1000;
 
+/// One frame into the MP4 (when `video` is given) or as DIR/frame_NNNNNN.png, staged.
+void write_frame(const cv::Mat& bgr, long index, cv::VideoWriter* video, OutputSet& outputs,
+                 const fs::path& dir, std::vector<unsigned char>& png) {
+  if (video) {
+    video->write(bgr);
+    return;
+  }
+  if (!cv::imencode(".png", bgr, png))
+    throw std::runtime_error("cannot encode frame " + std::to_string(index) + " as PNG");
+  char name[32];
+  std::snprintf(name, sizeof name, "frame_%06ld.png", index);
+  outputs.stage(dir / name, std::string(png.begin(), png.end()));
+}
+
 /// --duration and --fps into the scene (UsageError for a bad value, or a frame interval shorter
 /// than the camera's exposure).
 void apply_duration_and_fps(const RenderOptions& o, std::optional<double>& duration,
@@ -327,15 +341,7 @@ void run_render_spatial(const RenderOptions& o, Scene scene) {
       const render::SceneState st =
           render::SceneState::from_spatial_sample(sample, setup.motion->at(sample.t));
       const cv::Mat bgr = renderer.render_8u(st);
-      if (mp4) {
-        writer.write(bgr);
-      } else {
-        if (!cv::imencode(".png", bgr, png))
-          throw std::runtime_error("cannot encode frame " + std::to_string(written) + " as PNG");
-        char name[32];
-        std::snprintf(name, sizeof name, "frame_%06ld.png", written);
-        outputs.stage(out / name, std::string(png.begin(), png.end()));
-      }
+      write_frame(bgr, written, mp4 ? &writer : nullptr, outputs, out, png);
       const render::FrameTruth truth = renderer.truth(st);
       std::string row = std::to_string(written);
       for (double v : {sample.t, truth.disk_center_table.x, truth.disk_center_table.y,
@@ -406,11 +412,10 @@ void run_render_spatial(const RenderOptions& o, Scene scene) {
 
 void run_render(const RenderOptions& o) {
   // ---- everything that can be bad input, before anything is computed or written
-  {
-    Scene any = load_scene_option(o.common, SceneSpaces::kPlanarOrSpatial);
-    if (any.spatial) return run_render_spatial(o, std::move(any));
-  }
-  Scene scene = load_scene_with_overrides(o.common);
+  Scene scene = load_scene_option(o.common, SceneSpaces::kPlanarOrSpatial);
+  if (scene.spatial) return run_render_spatial(o, std::move(scene));
+  api::apply_integrator_overrides(integrator_overrides(o.common), scene,
+                                  api::Spelling::kCommandLine);
   if (!scene.camera)
     throw UsageError(scene.origin + ": camera: the scene has no camera section (needed by render)");
   sim::SimulationSpec& spec = scene.sim;
@@ -539,15 +544,7 @@ void run_render(const RenderOptions& o) {
         if (bgr.data == frame.image.data) bgr = bgr.clone();
         draw_overlay(bgr, model, hand, run.trajectory.sample(frame.truth.t), frame.truth);
       }
-      if (mp4) {
-        writer.write(bgr);
-      } else {
-        if (!cv::imencode(".png", bgr, png))
-          throw std::runtime_error("cannot encode frame " + std::to_string(written) + " as PNG");
-        char name[32];
-        std::snprintf(name, sizeof name, "frame_%06ld.png", written);
-        outputs.stage(out / name, std::string(png.begin(), png.end()));
-      }
+      write_frame(bgr, written, mp4 ? &writer : nullptr, outputs, out, png);
       truth_csv += truth_row(written, frame.truth);
       ++written;
       bar.update(i + 1, n);

@@ -100,11 +100,7 @@ sim::SpatialSpec spatial_spec_with_overrides(const SimulateOptions& o, const Sce
     require_positive("--duration", o.duration, "s");
     spec.duration = o.duration;
   }
-  if (o.mu.opt->count()) {
-    if (!(o.mu.value >= 0) || !std::isfinite(o.mu.value))
-      throw UsageError("--mu: must be >= 0 and finite, got " + format_number(o.mu.value));
-    spec.mu = o.mu.value;
-  }
+  if (o.mu.opt->count()) api::apply_mu(o.mu.value, spec, api::Spelling::kCommandLine);
   if (o.no_stop_on_contact_loss) spec.stop_on_contact_loss = false;
   api::apply_integrator_overrides(integrator_overrides(o.common), spec.integrator,
                                   api::Spelling::kCommandLine);

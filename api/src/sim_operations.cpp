@@ -119,10 +119,23 @@ void apply_integrator_overrides(const IntegratorOverrides& o, Scene& scene, Spel
   }
 }
 
-void apply_mu(double mu, sim::SimulationSpec& spec, Spelling spelling) {
-  const std::string option = option_name("mu", spelling);
+namespace {
+/// A friction coefficient: finite and >= 0. Returns the option's name, for further messages.
+std::string require_friction_coefficient(double mu, Spelling spelling) {
+  std::string option = option_name("mu", spelling);
   if (!std::isfinite(mu) || mu < 0)
     throw UsageError(option + ": must be a finite number >= 0, got " + format_number(mu));
+  return option;
+}
+}  // namespace
+
+void apply_mu(double mu, sim::SpatialSpec& spec, Spelling spelling) {
+  require_friction_coefficient(mu, spelling);
+  spec.mu = mu;
+}
+
+void apply_mu(double mu, sim::SimulationSpec& spec, Spelling spelling) {
+  const std::string option = require_friction_coefficient(mu, spelling);
   if (spec.contact.mu_kinetic && *spec.contact.mu_kinetic > mu)
     throw UsageError(option + ": must not be below the scene's contact.mu_kinetic (" +
                      format_number(*spec.contact.mu_kinetic) + "), got " + format_number(mu));

@@ -549,7 +549,6 @@ SceneState SceneState::from_spatial_sample(const sim::SpatialSample& s,
     pose.object_position[r] = s.state.position[r];
   }
   st.spatial = pose;
-  st.force_normal_ratio = s.force_normal;
   return st;
 }
 
@@ -620,10 +619,9 @@ struct Renderer::Impl {
       if (!s.spatial->hand || !s.spatial->object)
         throw std::invalid_argument("render: a spatial scene needs its hand and object surfaces");
       constexpr int kHandQuads = 96, kBodyQuads = 48;
-      spatial_hand = upload(surface_mesh(*s.spatial->hand,
-                                         drawn_range(*s.spatial->hand, s.spatial->hand_extent),
-                                         kHandQuads, kHandQuads, kAluminium, 12,
-                                         kAluminium * 0.8f));
+      spatial_hand = upload(
+          surface_mesh(*s.spatial->hand, drawn_range(*s.spatial->hand, s.spatial->hand_extent),
+                       kHandQuads, kHandQuads, kAluminium, 12, kAluminium * 0.8f));
       // The whole object: every longitude, the latitudes up to its poles.
       const double half_pi = std::numbers::pi / 2;
       spatial_object = upload(surface_mesh(

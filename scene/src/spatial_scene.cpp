@@ -15,11 +15,6 @@ constexpr double kDegToRad = std::numbers::pi / 180.0;
 // file from building a huge table before anything else is checked.
 constexpr std::size_t kMaxTableRows = 100000;
 
-std::array<double, 2> pair_or(const MapReader& m, const char* key, const char* shape,
-                              const std::array<double, 2>& fallback) {
-  return m.numbers_or<2>(key, shape, fallback);
-}
-
 void read_hand(const MapReader& root, sim::SpatialSpec& spec) {
   const MapReader h =
       root.section("hand", {"surface", "side", "radius", "semi_axes", "pole_margin_deg", "a", "b",
@@ -143,8 +138,8 @@ void read_initial(const MapReader& root, sim::SpatialSpec& spec) {
   const auto in = root.optional_section("initial", {"s_h", "s_o", "twist_deg", "velocity", "spin"});
   if (!in) return;
   sim::ContactPlacement& at = spec.initial;
-  const auto sh = pair_or(*in, "s_h", "[u, v]", {at.s_h.x(), at.s_h.y()});
-  const auto so = pair_or(*in, "s_o", "[u, v]", {at.s_o.x(), at.s_o.y()});
+  const auto sh = in->numbers_or<2>("s_h", "[u, v]", {at.s_h.x(), at.s_h.y()});
+  const auto so = in->numbers_or<2>("s_o", "[u, v]", {at.s_o.x(), at.s_o.y()});
   at.s_h = sim::SurfaceParam(sh[0], sh[1]);
   at.s_o = sim::SurfaceParam(so[0], so[1]);
   at.twist = in->number_or("twist_deg", 0.0) * kDegToRad;

@@ -368,7 +368,10 @@ class SpatialIntegration {
   double constraint_residual(double t, const Y& y) const {
     const HandPose3 hand = motion_.at(t, segment_);
     const SpatialState s = unpack(y);
-    const ContactWorld w = world(hand, s.orientation.toRotationMatrix(), s);
+    return constraint_residual(hand, s, world(hand, s.orientation.toRotationMatrix(), s));
+  }
+  static double constraint_residual(const HandPose3& hand, const SpatialState& s,
+                                    const ContactWorld& w) {
     const Vec3 Vo = s.velocity + s.angular_velocity.cross(w.ro);
     const Vec3 Vh = hand.velocity + hand.angular_velocity.cross(w.rh);
     return std::max({(w.ph - w.po).norm(), (w.No + w.Nh).norm(), (Vo - Vh).norm(),
@@ -409,12 +412,13 @@ class SpatialIntegration {
     out.state.orientation =
         Eigen::Quaterniond(s.orientation.toRotationMatrix() * chart_.transpose()).normalized();
     const HandPose3 hand = motion_.at(t, segment_);
-    out.contact = hand.position + hand.rotation * pb_.hand->geometry(s.s_h).point;
+    const ContactWorld w = world(hand, s.orientation.toRotationMatrix(), s);
+    out.contact = w.ph;
     out.force = x.force;
     out.force_normal = x.force_normal;
     out.mu_required = x.mu_required;
     out.energy = spatial_energy(chart_pb_, s);
-    out.constraint_residual = constraint_residual(t, y);
+    out.constraint_residual = constraint_residual(hand, s, w);
     out.redundant_residual = x.residual;
     return out;
   }
@@ -603,15 +607,11 @@ SpatialRunResult SpatialIntegration::run(const SpatialState& initial, double t0)
   long next_grid = 1;  // the sample_dt grid's next index (t0 is sampled)
   const auto grid_time = [&](long i) { return t0 + static_cast<double>(i) * o_.sample_dt; };
   double h = rk4 ? is.fixed_step : 0.0;
-  bool need_k1 = false, last_rejected = false;
+  bool last_rejected = false;
   DenseCoefficients<Y> rc;
 
   for (double t_stop : stops) {
     while (t < t_stop && !stopped) {
-      if (need_k1) {
-        x = rhs(t, y, k1);
-        need_k1 = false;
-      }
       if (h == 0.0)
         h = starting_step([this](double tt, const Y& yy, Y& dy) { rhs(tt, yy, dy); }, t, y, k1,
                           t_stop, is.rtol, is.atol, is.max_step,
@@ -687,9 +687,7 @@ SpatialRunResult SpatialIntegration::run(const SpatialState& initial, double t0)
     if (t_stop < o_.t_end) {  // the acceleration jumps here: restart on the motion's next segment
       ++stats.restarts;
       ++segment_;
-      need_k1 = true;
       x = rhs(t, y, k1);
-      need_k1 = false;
       g_start = guards(y, x);  // the forces jump with the acceleration
       stopped = stop_at_start();
     }

@@ -8,6 +8,7 @@
 #include "flatland/scene/scene.hpp"
 #include "flatland/sim/search.hpp"
 #include "flatland/sim/simulate.hpp"
+#include "flatland/sim/spatial_spec.hpp"
 
 #include <memory>
 #include <optional>
@@ -56,6 +57,8 @@ void apply_integrator_overrides(const IntegratorOverrides& o, sim::IntegratorSet
 /// Set spec.contact.mu (UsageError for a negative value or one below the scene's
 /// contact.mu_kinetic).
 void apply_mu(double mu, sim::SimulationSpec& spec, Spelling spelling);
+/// Set a spatial scene's contact mu (UsageError for a negative or non-finite value).
+void apply_mu(double mu, sim::SpatialSpec& spec, Spelling spelling);
 
 /// sim::build_problem, with " (set by OPTION)" added to its message when the field it names was
 /// given as an option: `given` pairs a scene field ("motion.k") with its option (spelled).
