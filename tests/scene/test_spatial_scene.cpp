@@ -142,11 +142,12 @@ TEST(SpatialScene, BadInputNamesTheField) {
   expect_field_error(with(kBowl, "radius: 0.05", "radius: 0.4"), "initial",
                      "does not fit the hand's curvature");
   // A conforming contact (the ball as large as its bowl): the curvatures match, A loses rank.
-  expect_field_error(with(kBowl, "radius: 0.05", "radius: 0.3"), "initial",
-                     "curvatures match");
+  expect_field_error(with(kBowl, "radius: 0.05", "radius: 0.3"), "initial", "curvatures match");
   expect_field_error(with(kBowl, "s_h: [0.0, -1.0]", "s_h: [0.0, -1.5]"), "initial",
                      "outside the patch");
   expect_field_error(with(kBowl, "side: inside", "side: under"), "hand.side", "allowed");
+  expect_field_error(with(kBowl, "side: inside", "side: inside\n  pole_margin_deg: 90"),
+                     "hand.pole_margin_deg", "must be in (0, 86]");
   expect_field_error(with(kBowl, "type: fixed", "type: fixed\n  rate: 3"), "motion.rate",
                      "only for type: spin");
   expect_field_error(with(kBowl, "type: fixed", "type: tabulated\n  rows: [[0, 0, 0, 0, 0]]"),
@@ -160,8 +161,7 @@ TEST(SpatialScene, BadInputNamesTheField) {
                      "list of 3 numbers");
   expect_field_error(with(kBowl, "mass: 0.1", "mass: 0.1\n  inertia: [1, 1, 3]"), "object.inertia",
                      "no rigid body");
-  expect_field_error(with(kBowl, "duration: 2", "duration: 2\njoint: {}"), "joint",
-                     "unknown key");
+  expect_field_error(with(kBowl, "duration: 2", "duration: 2\njoint: {}"), "joint", "unknown key");
   expect_field_error(with(kBowl, "type: ball", "type: disk"), "object.type", "allowed: ball");
   expect_field_error(with(kBowl, "duration: 2", "duration: 2\nintegrator: {rtol: -1}"),
                      "integrator.rtol", "must be positive");
