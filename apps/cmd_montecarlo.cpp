@@ -29,33 +29,6 @@ std::string default_experiment_scene() {
   return (fs::path(default_scene_path()).parent_path() / "airtable-feedback.yaml").string();
 }
 
-/// A CSV field: quoted (with doubled quotes) when it holds a comma, quote or line break.
-std::string csv_field(const std::string& s) {
-  if (s.find_first_of(",\"\n\r") == std::string::npos) return s;
-  std::string q = "\"";
-  for (char c : s) q += c == '"' ? std::string("\"\"") : std::string(1, c);
-  return q + "\"";
-}
-
-std::string runs_csv(const drivers::MonteCarloResult& r) {
-  std::string s =
-      "run,controller,success,failure,duration_s,s_end,fn_min_ratio,mu_max,safe_stop,frames,"
-      "frames_lost,s_h0,tilt_deg,radius_m,friction_scale,effects_seed,outcome,slide_s,flight_s,"
-      "impacts,mu_scale,loss_scale\n";
-  for (const drivers::RunRecord& x : r.records)
-    s += std::to_string(x.run) + "," + x.controller + "," + (x.success ? "1" : "0") + "," +
-         csv_field(x.failure) + "," + format_number(x.duration_s) + "," + format_number(x.s_end) +
-         "," + format_number(x.fn_min_ratio) + "," + format_number(x.mu_max) + "," +
-         (x.safe_stop ? "1" : "0") + "," + std::to_string(x.frames) + "," +
-         std::to_string(x.frames_lost) + "," + format_number(x.drawn.s_h0) + "," +
-         format_number(x.drawn.tilt_deg) + "," + format_number(x.drawn.radius) + "," +
-         format_number(x.drawn.friction_scale) + "," + std::to_string(x.drawn.effects_seed) + "," +
-         drivers::to_string(x.outcome) + "," + format_number(x.slide_s) + "," +
-         format_number(x.flight_s) + "," + std::to_string(x.impacts) + "," +
-         format_number(x.drawn.mu_scale) + "," + format_number(x.drawn.loss_scale) + "\n";
-  return s;
-}
-
 Json perturbations_json(const drivers::Perturbations& p) {
   Json j;
   j["s_h"] = p.s_h;
@@ -143,6 +116,16 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
   j["success_feedback"] = count(r.success_feedback);
   j["ci95"] = {{"open_loop", ci(r.success_open_loop, r.ci_open_loop)},
                {"feedback", ci(r.success_feedback, r.ci_feedback)}};
+  // Worlds whose simulation failed: no physical outcome, left out of the rates.
+  j["numerical_failures"] = {
+      {"open_loop", r.success_open_loop < 0 ? Json(nullptr) : Json(r.numerical_failures_open_loop)},
+      {"feedback", r.success_feedback < 0 ? Json(nullptr) : Json(r.numerical_failures_feedback)}};
+  Json failed = Json::array();
+  for (const drivers::RunRecord& x : r.records)
+    if (x.outcome == drivers::Outcome::kNumericalFailure)
+      failed.push_back(
+          {{"run", x.run}, {"seed", x.seed}, {"controller", x.controller}, {"failure", x.failure}});
+  j["numerical_failure_runs"] = failed;
   // How the runs ended, per controller (drivers::Outcome).
   Json outcomes;
   for (const std::string& c : o.controllers) {
@@ -150,7 +133,7 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
     for (const drivers::Outcome k :
          {drivers::Outcome::kSuccess, drivers::Outcome::kDropped, drivers::Outcome::kSlidOff,
           drivers::Outcome::kWrongWell, drivers::Outcome::kNotSettled, drivers::Outcome::kSafeStop,
-          drivers::Outcome::kNotFinished}) {
+          drivers::Outcome::kNotFinished, drivers::Outcome::kNumericalFailure}) {
       int n = 0;
       for (const drivers::RunRecord& x : r.records) n += x.controller == c && x.outcome == k;
       counts[drivers::to_string(k)] = n;
@@ -170,7 +153,7 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
   OutputSet outputs(o.common.force);
   if (!dir.empty()) {
     outputs.begin_directory(dir);
-    outputs.stage(dir / "runs.csv", runs_csv(r));
+    outputs.stage(dir / "runs.csv", drivers::runs_csv(r));
     outputs.stage(dir / "result.json", j.dump(2) + "\n");
     outputs.commit();
   }
@@ -182,15 +165,20 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
   std::ostringstream os;
   os << "flatland montecarlo: " << scene.origin << ", " << r.runs << " runs, seed " << o.seed
      << "\n";
-  const auto line = [&](const char* name, int k, const drivers::Interval& i) {
+  const auto line = [&](const char* name, int k, int failed, const drivers::Interval& i) {
     if (k < 0) return;
-    const double pct = 100.0 * k / r.runs;
-    os << "  " << name << k << " / " << r.runs << " succeeded (" << std::lround(pct)
+    const int counted = r.runs - failed;
+    const double pct = counted > 0 ? 100.0 * k / counted : 0.0;
+    os << "  " << name << k << " / " << counted << " succeeded (" << std::lround(pct)
        << " %; 95 % interval " << std::lround(100 * i.lo) << " .. " << std::lround(100 * i.hi)
-       << " %)\n";
+       << " %)";
+    if (failed > 0)
+      os << "; " << failed << " world" << (failed == 1 ? "" : "s")
+         << " failed numerically, not counted";
+    os << "\n";
   };
-  line("open loop          ", r.success_open_loop, r.ci_open_loop);
-  line("feedback           ", r.success_feedback, r.ci_feedback);
+  line("open loop          ", r.success_open_loop, r.numerical_failures_open_loop, r.ci_open_loop);
+  line("feedback           ", r.success_feedback, r.numerical_failures_feedback, r.ci_feedback);
   for (const std::string& c : o.controllers) {
     std::string failures;
     for (const auto& [kind, n] : j["outcomes"][c].items())

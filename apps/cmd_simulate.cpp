@@ -78,6 +78,21 @@ std::string hybrid_text(const sim::SimulationSpec& spec, const sim::RunResult& r
   return os.str();
 }
 
+/// The energy audit's line of the summary (docs/DYNAMICS.md, "Energy audit").
+std::string energy_text(const sim::EnergyAudit& a) {
+  const auto f3 = [](double v) { return sim::format_significant(v, 3); };
+  return "  energy balance     " + f3(a.balance) + " J (bound " + f3(a.bound()) + " J): E " +
+         f3(a.initial) + " -> " + f3(a.final) + " J, hand " + f3(a.work_hand) + " J, losses " +
+         f3(a.work_losses) + " J, impacts " + f3(a.impact_losses) + " J" +
+         (a.broken ? "  (BROKEN: numerical failure)" : "") + "\n";
+}
+
+/// A run whose energy balance broke is a runtime failure (exit 1) once its report is printed:
+/// its numbers are wrong from the breach on.
+void fail_if_broken(const sim::EnergyAudit& a) {
+  if (a.broken) throw std::runtime_error(api::energy_failure_text(a));
+}
+
 /// The spatial scene with the command line's overrides, checked (UsageError naming the option).
 sim::SpatialSpec spatial_spec_with_overrides(const SimulateOptions& o, const Scene& scene) {
   sim::SpatialSpec spec = *scene.spatial;
@@ -145,7 +160,8 @@ std::string spatial_plot(const std::string& title) {
 void run_simulate_spatial(const SimulateOptions& o, const Scene& scene) {
   // Everything that can be bad input is checked before anything is computed or written.
   const sim::SpatialSpec spec = spatial_spec_with_overrides(o, scene);
-  if (o.sample_dt_opt->count()) require_positive("--sample-dt", o.sample_dt, "s");
+  if (o.sample_dt_opt->count())
+    api::require_sample_spacing("--sample-dt", o.sample_dt, spec.end_time());
   sim::SpatialSetup setup;
   try {
     setup = sim::build_spatial(spec);
@@ -249,7 +265,8 @@ void run_simulate(const SimulateOptions& o) {
       api::prepare_simulate(scene, request, api::Spelling::kCommandLine);
   const sim::SimulationSpec& spec = prepared.spec;
   const bool butterfly = spec.motion.kind == sim::MotionSpec::Kind::kButterfly;
-  if (o.sample_dt_opt->count()) require_positive("--sample-dt", o.sample_dt, "s");
+  if (o.sample_dt_opt->count())
+    api::require_sample_spacing("--sample-dt", o.sample_dt, spec.end_time() - spec.initial.t0);
 
   OutputSet outputs(o.common.force);
   const fs::path out = o.common.out;
@@ -277,6 +294,7 @@ void run_simulate(const SimulateOptions& o) {
     Json j = api::simulate_json(spec, r);
     j["csv"] = out.empty() ? Json(nullptr) : Json(out.string());
     emit_json(j);
+    fail_if_broken(r.audit);
     return;
   }
   std::ostringstream os;
@@ -299,10 +317,12 @@ void run_simulate(const SimulateOptions& o) {
      << (contact_lost ? "  (contact lost)" : "") << "\n"
      << "  required mu        " << format_number(r.mu_required) << "\n"
      << "  steps              " << r.stats.steps << " accepted, " << r.stats.rejected
-     << " rejected, " << r.stats.rhs_evals << " rhs evaluations\n";
+     << " rejected, " << r.stats.rhs_evals << " rhs evaluations\n"
+     << energy_text(r.audit);
   if (spec.run.model == sim::ContactModel::kHybrid) os << hybrid_text(spec, r);
   if (!out.empty()) os << "  wrote              " << out.string() << "\n";
   std::cout << os.str();
+  fail_if_broken(r.audit);
 }
 
 }  // namespace

@@ -137,6 +137,7 @@ void run_sim_study(const StudyOptions& o) {
       q["cpu_s_T"] = number(r.cpu_s_T);
       q["err_k"] = number(r.err_k);
       q["cpu_k"] = number(r.cpu_k);
+      q["energy_error"] = number(r.energy_error);
       q["failure"] = r.failure.empty() ? Json(nullptr) : Json(r.failure);
       arr.push_back(q);
     }
@@ -318,16 +319,18 @@ Command add_study_command(CLI::App& app) {
       ->type_name("FILE");
   cmd->add_flag("--json", o->json,
                 "Print exactly one JSON object on stdout (errors, CPU seconds, the references)");
-  cmd->add_option("--out", o->out,
-                  "Directory for the study's files, created if missing. sim: sim.csv (one row "
-                  "per setting: method, formulation, rtol, atol, step in s, steps, rhs_evals, "
-                  "s_T, err_s_T, cpu_s_T in s, k, err_k, cpu_k in s, simulations) and sim_s_h.png, "
-                  "sim_k.png (log-log) with their gnuplot scripts; calibration: calibration.csv, "
-                  "calibration.png, calibration.json; render: render.csv (one row per "
-                  "supersampling and resolution), render_error.png, render_fps.png, render.json; "
-                  "tracker: tracker.csv (one row per method, exposure and noise level), "
-                  "tracker_error.png, tracker_latency.png, tracker.json; closed-loop: "
-                  "closed_loop.csv, closed_loop.png, closed_loop.json. Default: no files")
+  cmd->add_option(
+         "--out", o->out,
+         "Directory for the study's files, created if missing. sim: sim.csv (one row "
+         "per setting: method, formulation, rtol, atol, step in s, steps, rhs_evals, "
+         "s_T, err_s_T, cpu_s_T in s, k, err_k, cpu_k in s, simulations, energy_error: the "
+         "run's energy balance relative to the energy it moved) and sim_s_h.png, "
+         "sim_k.png (log-log) with their gnuplot scripts; calibration: calibration.csv, "
+         "calibration.png, calibration.json; render: render.csv (one row per "
+         "supersampling and resolution), render_error.png, render_fps.png, render.json; "
+         "tracker: tracker.csv (one row per method, exposure and noise level), "
+         "tracker_error.png, tracker_latency.png, tracker.json; closed-loop: "
+         "closed_loop.csv, closed_loop.png, closed_loop.json. Default: no files")
       ->type_name("PATH");
   cmd->add_flag("--no-plot", o->no_plot, "Write the CSV but no plots (no gnuplot needed)");
   add_force_option(*cmd, o->force);

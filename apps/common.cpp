@@ -49,15 +49,20 @@ void add_common_options(CLI::App& cmd, CommonOptions& o, const std::string& out_
                      ->group(group);
   o.rtol_opt =
       cmd.add_option("--rtol", o.rtol,
-                     "Relative tolerance of dopri5/dop853 (dimensionless, > 0). Default: scene, "
-                     "else 1e-10")
+                     "Relative tolerance of dopri5/dop853 (dimensionless, in [1e-14, 0.1]). "
+                     "Default: scene, else 1e-10")
           ->group(group);
   o.atol_opt = cmd.add_option("--atol", o.atol,
                               "Absolute tolerance of dopri5/dop853 (in the state's units: m, rad, "
-                              "s_h and their rates "
-                              "per s; > 0). "
-                              "Default: scene, else 1e-12")
+                              "s_h and their rates per s; in [1e-18, 1]). Default: scene, else "
+                              "1e-12")
                    ->group(group);
+  o.energy_tolerance_opt =
+      cmd.add_option("--energy-tolerance", o.energy_tolerance,
+                     "Relative bound of the run's energy balance (in [1e-12, 1]; a run beyond it "
+                     "ends as numerical_failure). Default: scene, else 1000 x rtol (1e-6 for "
+                     "rk4)")
+          ->group(group);
   o.step_opt =
       cmd.add_option("--step", o.step, "Fixed step of rk4, s (> 0). Default: scene, else 0.001 s")
           ->group(group);
@@ -76,6 +81,7 @@ api::IntegratorOverrides integrator_overrides(const CommonOptions& o) {
   if (given(o.rtol_opt)) v.rtol = o.rtol;
   if (given(o.atol_opt)) v.atol = o.atol;
   if (given(o.step_opt)) v.step = o.step;
+  if (given(o.energy_tolerance_opt)) v.energy_tolerance = o.energy_tolerance;
   if (given(o.formulation_opt)) v.formulation = o.formulation;
   return v;
 }

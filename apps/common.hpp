@@ -42,9 +42,10 @@ struct CommonOptions {
   std::string out;  ///< empty: no files
   bool no_plot = false;
   bool force = false;  ///< --force: replace an existing --out
-  double rtol = 0, atol = 0, step = 0;
+  double rtol = 0, atol = 0, step = 0, energy_tolerance = 0;
   std::string method, formulation;
   // Set by add_common_options; count() tells whether the user gave the option.
+  CLI::Option* energy_tolerance_opt = nullptr;
   CLI::Option* rtol_opt = nullptr;
   CLI::Option* atol_opt = nullptr;
   CLI::Option* step_opt = nullptr;

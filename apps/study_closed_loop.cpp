@@ -23,11 +23,13 @@ Json cell_json(const studies::ClosedLoopCellResult& c, int n) {
   j["controller"] = c.cell.controller;
   j["runs"] = n;
   j["successes"] = c.successes;
-  j["success_rate"] = static_cast<double>(c.successes) / n;
+  const int counted = n - c.numerical_failures;  // worlds with a physical outcome
+  j["success_rate"] = counted > 0 ? Json(static_cast<double>(c.successes) / counted) : Json();
   j["ci95"] = Json::array({c.ci.lo, c.ci.hi});
   Json f = Json::object();
   for (const auto& [cls, count] : c.failures) f[cls] = count;
   j["failures"] = f;
+  j["numerical_failures"] = c.numerical_failures;
   j["fn_min_ratio_mean"] = number(c.fn_min_mean);
   j["fn_min_ratio_min"] = number(c.fn_min_min);
   j["duration_mean_s"] = number(c.duration_mean);
@@ -188,6 +190,8 @@ void run_closed_loop_study(const StudyOptions& o) {
                   percent(c.ci.lo).c_str(), percent(c.ci.hi).c_str());
     os << line << "  fn_min " << format_number(std::round(c.fn_min_mean * 1000) / 1000);
     for (const auto& [cls, count] : c.failures) os << "; " << cls << " " << count;
+    if (c.numerical_failures > 0)
+      os << "; " << c.numerical_failures << " failed numerically (not counted)";
     os << "\n";
   }
   for (const std::string& p : written) os << "  wrote " << p << "\n";

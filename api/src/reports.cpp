@@ -1,5 +1,6 @@
 #include "flatland/api/reports.hpp"
 
+#include "flatland/sim/format.hpp"
 #include "flatland/sim/hybrid.hpp"
 
 #include <algorithm>
@@ -85,6 +86,33 @@ Json contact_summary_json(const std::array<double, 4>& mode_time, int mode_chang
   return j;
 }
 
+Json energy_json(const sim::EnergyAudit& a) {
+  Json j;
+  j["initial"] = number(a.initial);
+  j["final"] = number(a.final);
+  j["work_hand"] = number(a.work_hand);
+  j["work_losses"] = number(a.work_losses);
+  j["impact_losses"] = number(a.impact_losses);
+  j["balance"] = number(a.balance);
+  j["worst"] = number(a.worst);
+  j["t_worst"] = number(a.t_worst);
+  j["bound"] = number(a.bound());
+  j["tolerance"] = number(a.tolerance);
+  j["scale"] = number(a.scale);
+  j["checks"] = a.checks;
+  j["holds"] = !a.broken;
+  j["t_broken"] = number(a.t_broken);
+  return j;
+}
+
+std::string energy_failure_text(const sim::EnergyAudit& a) {
+  return "numerical failure: the energy balance broke at t = " +
+         sim::format_significant(a.t_broken, 10) +
+         " s (E - E0 - work = " + sim::format_significant(a.balance, 3) + " J, bound " +
+         sim::format_significant(a.bound(), 3) +
+         " J); the results from there on are wrong (docs/DYNAMICS.md, \"Energy audit\")";
+}
+
 Json solve_report_json(const sim::SolveReport& r) {
   Json j;
   j["period"] = number(r.period);
@@ -99,6 +127,7 @@ Json solve_report_json(const sim::SolveReport& r) {
   j["contact_lost"] = r.fn_min_ratio < 0;
   j["simulations"] = r.simulations;
   j["rhs_evals"] = r.rhs_evals;
+  j["energy"] = energy_json(r.run.audit);
   return j;
 }
 
@@ -170,6 +199,7 @@ Json simulate_json(const sim::SimulationSpec& spec, const sim::RunResult& r) {
   j["mode_time"] = modes;
   j["flights"] = flights_json(sim::flight_reports(r));
   j["events"] = contact_events_json(r.events);
+  j["energy"] = energy_json(r.audit);
   return j;
 }
 

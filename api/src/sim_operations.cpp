@@ -28,6 +28,16 @@ void require_positive(const std::string& option, double v, const std::string& un
                      (unit.empty() ? "" : " (" + unit + ")") + ", got " + format_number(v));
 }
 
+void require_sample_spacing(const std::string& option, double dt, double span) {
+  require_positive(option, dt, "s");
+  const double rows = std::floor(span / dt) + 1;
+  if (rows > kMaxSamples)
+    throw UsageError(option + ": " + format_number(dt) + " s over " + format_number(span) +
+                     " s is " + sim::format_significant(rows, 3) + " rows, more than " +
+                     sim::format_significant(kMaxSamples) +
+                     " (a wider spacing, or a shorter duration)");
+}
+
 void require_increasing(const std::string& from_option, double from, const std::string& to_option,
                         double to) {
   require_finite(from_option, from);
@@ -83,18 +93,16 @@ void apply_method_and_tolerances(const IntegratorOverrides& o, sim::IntegratorSe
                 : m == "dop853" ? sim::Method::kDormandPrince853
                                 : sim::Method::kDormandPrince54;
   }
-  if (o.rtol) {
-    require_positive(name("rtol"), *o.rtol, "");
-    in.rtol = *o.rtol;
-  }
-  if (o.atol) {
-    require_positive(name("atol"), *o.atol, "");
-    in.atol = *o.atol;
-  }
-  if (o.step) {
-    require_positive(name("step"), *o.step, "s");
-    in.fixed_step = *o.step;
-  }
+  // The bounds sim sets for every input of these settings (integrator_setting_problem).
+  const auto checked = [&name](const char* key, double v) {
+    const std::string problem = sim::integrator_setting_problem(key, v);
+    if (!problem.empty()) throw UsageError(name(key) + ": " + problem);
+    return v;
+  };
+  if (o.rtol) in.rtol = checked("rtol", *o.rtol);
+  if (o.atol) in.atol = checked("atol", *o.atol);
+  if (o.step) in.fixed_step = checked("step", *o.step);
+  if (o.energy_tolerance) in.energy_tolerance = checked("energy_tolerance", *o.energy_tolerance);
 }
 }  // namespace
 

@@ -1,5 +1,6 @@
 #include "flatland/drivers/montecarlo.hpp"
 
+#include "flatland/sim/format.hpp"
 #include "flatland/sim/parallel.hpp"
 
 #include "flatland/drivers/experiment.hpp"
@@ -110,7 +111,8 @@ Interval wilson_interval(long k, long n, double z) {
 
 MonteCarloResult run_montecarlo(const model::Model& nominal_model, const Perturbations& p, int n,
                                 std::uint64_t seed, const std::vector<std::string>& controllers,
-                                unsigned threads, const MonteCarloProgress& progress) {
+                                unsigned threads, const MonteCarloProgress& progress,
+                                const WorldEdit& edit) {
   const Scene& nominal = nominal_model.spec;
   validate(p);
   if (n < 1) throw std::invalid_argument("run_montecarlo: n must be >= 1");
@@ -150,10 +152,22 @@ MonteCarloResult run_montecarlo(const model::Model& nominal_model, const Perturb
         const std::size_t ci = static_cast<std::size_t>(job % static_cast<long>(nc));
         RunRecord rec;
         rec.run = run;
+        rec.seed = seed;
         rec.controller = controllers[ci];
         // Each world is its perturbed scene compiled anew (as MuJoCo edits a spec and recompiles).
-        const SyntheticResult r =
-            run_synthetic(*setups[ci], model::compile(perturb(nominal, p, seed, run, &rec.drawn)));
+        Scene world = perturb(nominal, p, seed, run, &rec.drawn);
+        if (edit) edit(world, run);
+        SyntheticResult r;
+        try {
+          r = run_synthetic(*setups[ci], model::compile(std::move(world)));
+        } catch (const std::runtime_error& e) {
+          // One world whose simulation fails does not end the study: it is recorded, with the
+          // (seed, run) that rebuilds it, and counted apart from the physical outcomes.
+          rec.outcome = Outcome::kNumericalFailure;
+          rec.failure = e.what();
+          out.records[static_cast<std::size_t>(job)] = std::move(rec);
+          return;
+        }
         rec.success = r.success;
         rec.outcome = r.outcome;
         rec.failure = r.failure;
@@ -174,21 +188,55 @@ MonteCarloResult run_montecarlo(const model::Model& nominal_model, const Perturb
       });
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
-  int ok_open = 0, ok_feedback = 0;
+  int ok_open = 0, ok_feedback = 0, failed_open = 0, failed_feedback = 0;
   for (const RunRecord& r : out.records) {
-    if (!r.success) continue;
-    (r.controller == "open-loop" ? ok_open : ok_feedback)++;
+    const bool open = r.controller == "open-loop";
+    if (r.outcome == Outcome::kNumericalFailure) (open ? failed_open : failed_feedback)++;
+    if (r.success) (open ? ok_open : ok_feedback)++;
   }
+  // A world that failed numerically has no physical outcome: the rates are over the others.
   for (const std::string& c : controllers) {
     if (c == "open-loop") {
       out.success_open_loop = ok_open;
-      out.ci_open_loop = wilson_interval(ok_open, n);
+      out.numerical_failures_open_loop = failed_open;
+      out.ci_open_loop = wilson_interval(ok_open, n - failed_open);
     } else {
       out.success_feedback = ok_feedback;
-      out.ci_feedback = wilson_interval(ok_feedback, n);
+      out.numerical_failures_feedback = failed_feedback;
+      out.ci_feedback = wilson_interval(ok_feedback, n - failed_feedback);
     }
   }
   return out;
+}
+
+namespace {
+/// A CSV field: quoted (with doubled quotes) when it holds a comma, quote or line break.
+std::string csv_field(const std::string& s) {
+  if (s.find_first_of(",\"\n\r") == std::string::npos) return s;
+  std::string q = "\"";
+  for (char c : s) q += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return q + "\"";
+}
+}  // namespace
+
+std::string runs_csv(const MonteCarloResult& r) {
+  using sim::format_number;
+  std::string s =
+      "run,controller,success,failure,duration_s,s_end,fn_min_ratio,mu_max,safe_stop,frames,"
+      "frames_lost,s_h0,tilt_deg,radius_m,friction_scale,effects_seed,outcome,slide_s,flight_s,"
+      "impacts,mu_scale,loss_scale,seed\n";
+  for (const RunRecord& x : r.records)
+    s += std::to_string(x.run) + "," + x.controller + "," + (x.success ? "1" : "0") + "," +
+         csv_field(x.failure) + "," + format_number(x.duration_s) + "," + format_number(x.s_end) +
+         "," + format_number(x.fn_min_ratio) + "," + format_number(x.mu_max) + "," +
+         (x.safe_stop ? "1" : "0") + "," + std::to_string(x.frames) + "," +
+         std::to_string(x.frames_lost) + "," + format_number(x.drawn.s_h0) + "," +
+         format_number(x.drawn.tilt_deg) + "," + format_number(x.drawn.radius) + "," +
+         format_number(x.drawn.friction_scale) + "," + std::to_string(x.drawn.effects_seed) + "," +
+         to_string(x.outcome) + "," + format_number(x.slide_s) + "," + format_number(x.flight_s) +
+         "," + std::to_string(x.impacts) + "," + format_number(x.drawn.mu_scale) + "," +
+         format_number(x.drawn.loss_scale) + "," + std::to_string(x.seed) + "\n";
+  return s;
 }
 
 }  // namespace flatland::drivers

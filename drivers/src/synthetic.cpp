@@ -53,6 +53,8 @@ std::string to_string(Outcome o) {
       return "safe_stop";
     case Outcome::kNotFinished:
       return "not_finished";
+    case Outcome::kNumericalFailure:
+      return "numerical_failure";
   }
   return "?";
 }
@@ -138,6 +140,10 @@ double SimWorld::joint_acceleration(double t, double t_end, double tau, bool& st
 }
 
 double SimWorld::step_disk(double t, double t_end, double alpha) {
+  if (failure_ == Outcome::kNumericalFailure) {
+    disk_.t = t_end;  // the numbers stopped meaning anything: the disk stands where it was
+    return t_end;
+  }
   if (failure_) {
     // Out of the hand's reach for good: it flies on (and out of the camera's view).
     disk_ = sim::fly(*problem_, disk_, t_end);
@@ -148,7 +154,31 @@ double SimWorld::step_disk(double t, double t_end, double alpha) {
   opt.t_end = t_end;
   disk_.t = t;
   if (disk_.mode != sim::ContactMode::kFlight) last_contact_mode_ = disk_.mode;
-  const sim::RunResult r = sim::simulate_hybrid(held(t, alpha), disk_, opt);
+  sim::RunResult r;
+  try {
+    r = sim::simulate_hybrid(held(t, alpha), disk_, opt);
+  } catch (const std::runtime_error& e) {
+    // The integrator gave up (step budget, step underflow, a contact that keeps switching):
+    // the world's numerical failure, which the experiment reports as its outcome.
+    failure_ = Outcome::kNumericalFailure;
+    failure_detail_ = std::string("the world's simulation failed at t = ") +
+                      sim::format_significant(t, 8) + " s: " + e.what();
+    return t_end;
+  }
+  if (std::abs(r.audit.balance) >= energy_worst_) {
+    energy_worst_ = std::abs(r.audit.balance);
+    energy_worst_bound_ = r.audit.bound();
+  }
+  if (r.reason == sim::StopReason::kNumericalFailure) {
+    failure_ = Outcome::kNumericalFailure;
+    failure_detail_ =
+        "the world's simulation failed numerically: its energy balance broke at t = " +
+        sim::format_significant(r.audit.t_broken, 8) + " s (" +
+        sim::format_significant(r.audit.balance, 3) + " J, bound " +
+        sim::format_significant(r.audit.bound(), 3) + " J)";
+    disk_.t = t_end;
+    return t_end;
+  }
   for (int m = 0; m < 4; ++m) mode_time_[m] += r.stats.mode_time[m];
   impacts_ += r.stats.impacts;
   mode_changes_ += r.stats.mode_changes;

@@ -63,7 +63,8 @@ def default_scene_path() -> str:
 def solve(period: Optional[float] = None, scene: SceneLike = None, *, k: Optional[float] = None,
           solve_for: str = "k", tolerance: float = 1e-9, method: Optional[str] = None,
           rtol: Optional[float] = None, atol: Optional[float] = None,
-          step: Optional[float] = None, formulation: Optional[str] = None) -> Dict[str, Any]:
+          step: Optional[float] = None, energy_tolerance: Optional[float] = None,
+          formulation: Optional[str] = None) -> Dict[str, Any]:
     """The butterfly solution for one duration 2T = ``period`` s (paper section 4.3).
 
     Finds the dip k (or, with ``solve_for="d"``, the hand's cubic coefficient d) that brings
@@ -77,7 +78,7 @@ def solve(period: Optional[float] = None, scene: SceneLike = None, *, k: Optiona
     ``step`` (rk4, s) and ``formulation`` (auto, general, reduced) override its simulator.
     """
     return _flatland.solve(period, scene, k, solve_for, tolerance, method, rtol, atol, step,
-                           formulation)
+                           energy_tolerance, formulation)
 
 
 @dataclass(frozen=True)
@@ -99,6 +100,7 @@ def simulate(scene: SceneLike = None, *, period: Optional[float] = None,
              stop_on_contact_loss: bool = True, sample_dt: Optional[float] = None,
              method: Optional[str] = None, rtol: Optional[float] = None,
              atol: Optional[float] = None, step: Optional[float] = None,
+             energy_tolerance: Optional[float] = None,
              formulation: Optional[str] = None) -> Simulation:
     """One run of the scene, with the overrides ``flatland simulate`` has.
 
@@ -110,7 +112,7 @@ def simulate(scene: SceneLike = None, *, period: Optional[float] = None,
     """
     report, trajectory = _flatland.simulate(scene, period, k, duration, mu, model,
                                             stop_on_contact_loss, sample_dt, method, rtol, atol,
-                                            step, formulation)
+                                            step, energy_tolerance, formulation)
     return Simulation(report, trajectory)
 
 
@@ -118,33 +120,36 @@ def time_optimal(scene: SceneLike = None, *, mu: Optional[float] = None, from_: 
                  to: float = 1.5, period_tolerance: float = 1e-7, tolerance: float = 1e-9,
                  method: Optional[str] = None, rtol: Optional[float] = None,
                  atol: Optional[float] = None, step: Optional[float] = None,
+                 energy_tolerance: Optional[float] = None,
                  formulation: Optional[str] = None) -> Dict[str, Any]:
     """The fastest butterfly in 2T in [from_, to] s that keeps contact (and, with ``mu``, does
     not slip). The keys of ``flatland time-optimal --json`` (period, k, limit, solution, ...)."""
     return _flatland.time_optimal(scene, mu, from_, to, period_tolerance, tolerance, method, rtol,
-                                  atol, step, formulation)
+                                  atol, step, energy_tolerance, formulation)
 
 
 def locus(scene: SceneLike = None, *, from_: float = 1.1, to: float = 3.0, n: int = 20,
           mu: Optional[float] = None, tolerance: float = 1e-9, method: Optional[str] = None,
           rtol: Optional[float] = None, atol: Optional[float] = None,
-          step: Optional[float] = None, formulation: Optional[str] = None) -> Dict[str, Any]:
+          step: Optional[float] = None, energy_tolerance: Optional[float] = None,
+          formulation: Optional[str] = None) -> Dict[str, Any]:
     """The butterfly solutions k(2T) at ``n`` durations evenly spaced over [from_, to] s (paper
     Fig. 7). ``points`` and ``mu`` as ``flatland locus --json``; also one numpy array per field
     (period, k, fn_min_ratio, fn_apex_ratio, mu_required, friction_margin)."""
     return _flatland.locus(scene, from_, to, n, mu, tolerance, method, rtol, atol, step,
-                           formulation)
+                           energy_tolerance, formulation)
 
 
 def surface(scene: SceneLike = None, *, k_from: float = -1.6, k_to: float = -0.8, nk: int = 50,
             period_from: float = 0.8, period_to: float = 2.0, np: int = 50, threads: int = 0,
             method: Optional[str] = None, rtol: Optional[float] = None,
             atol: Optional[float] = None, step: Optional[float] = None,
+            energy_tolerance: Optional[float] = None,
             formulation: Optional[str] = None) -> Dict[str, Any]:
     """s_h(T) on a k x 2T grid (paper Fig. 6): ``k`` (nk), ``period`` (np) and ``s_T``
     (nk x np) as numpy arrays; its zero level is the locus. ``threads``: 0 uses every core."""
     return _flatland.surface(scene, k_from, k_to, nk, period_from, period_to, np, threads, method,
-                             rtol, atol, step, formulation)
+                             rtol, atol, step, energy_tolerance, formulation)
 
 
 class Renderer:

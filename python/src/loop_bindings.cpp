@@ -154,10 +154,18 @@ py::dict montecarlo_binding(const py::object& scene, int runs, std::uint64_t see
       r.success_feedback >= 0 ? py::object(py::int_(r.success_feedback)) : py::object(py::none());
   out["ci_open_loop"] = py::make_tuple(r.ci_open_loop.lo, r.ci_open_loop.hi);
   out["ci_feedback"] = py::make_tuple(r.ci_feedback.lo, r.ci_feedback.hi);
+  // Worlds whose simulation failed: no physical outcome, left out of the rates.
+  out["numerical_failures_open_loop"] = r.success_open_loop >= 0
+                                            ? py::object(py::int_(r.numerical_failures_open_loop))
+                                            : py::object(py::none());
+  out["numerical_failures_feedback"] = r.success_feedback >= 0
+                                           ? py::object(py::int_(r.numerical_failures_feedback))
+                                           : py::object(py::none());
   py::list records;
   for (const drivers::RunRecord& rec : r.records) {
     py::dict d;
     d["run"] = rec.run;
+    d["seed"] = rec.seed;
     d["controller"] = rec.controller;
     d["success"] = rec.success;
     d["outcome"] = drivers::to_string(rec.outcome);

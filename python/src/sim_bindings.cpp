@@ -17,8 +17,9 @@ constexpr api::Spelling kPy = api::Spelling::kPython;
 api::IntegratorOverrides integrator(const std::optional<std::string>& method,
                                     std::optional<double> rtol, std::optional<double> atol,
                                     std::optional<double> step,
+                                    std::optional<double> energy_tolerance,
                                     const std::optional<std::string>& formulation) {
-  return {method, rtol, atol, step, formulation};
+  return {method, rtol, atol, step, energy_tolerance, formulation};
 }
 
 /// Samples as one numpy array per trajectory column (the CSV's columns; `mode` as str objects).
@@ -49,9 +50,10 @@ py::dict solve_binding(std::optional<double> period, const py::object& scene,
                        std::optional<double> k, const std::string& solve_for, double tolerance,
                        const std::optional<std::string>& method, std::optional<double> rtol,
                        std::optional<double> atol, std::optional<double> step,
+                       std::optional<double> energy_tolerance,
                        const std::optional<std::string>& formulation) {
   api::SolveRequest request;
-  request.integrator = integrator(method, rtol, atol, step, formulation);
+  request.integrator = integrator(method, rtol, atol, step, energy_tolerance, formulation);
   request.period = period;
   request.k = k;
   request.solve_for = solve_for;
@@ -69,9 +71,10 @@ py::tuple simulate_binding(const py::object& scene, std::optional<double> period
                            bool stop_on_contact_loss, std::optional<double> sample_dt,
                            const std::optional<std::string>& method, std::optional<double> rtol,
                            std::optional<double> atol, std::optional<double> step,
+                           std::optional<double> energy_tolerance,
                            const std::optional<std::string>& formulation) {
   api::SimulateRequest request;
-  request.integrator = integrator(method, rtol, atol, step, formulation);
+  request.integrator = integrator(method, rtol, atol, step, energy_tolerance, formulation);
   request.period = period;
   request.k = k;
   request.duration = duration;
@@ -80,7 +83,9 @@ py::tuple simulate_binding(const py::object& scene, std::optional<double> period
   request.stop_on_contact_loss = stop_on_contact_loss;
   const api::PreparedSimulation prepared =
       api::prepare_simulate(scene_argument(scene), request, kPy);
-  if (sample_dt) api::require_positive("sample_dt", *sample_dt, "s");
+  if (sample_dt)
+    api::require_sample_spacing("sample_dt", *sample_dt,
+                                prepared.spec.end_time() - prepared.spec.initial.t0);
   std::vector<sim::Sample> rows;
   const sim::RunResult r = run_interruptible([&] {
     sim::RunResult run = api::simulate(prepared);
@@ -95,9 +100,10 @@ py::dict time_optimal_binding(const py::object& scene, std::optional<double> mu,
                               double to, double period_tolerance, double tolerance,
                               const std::optional<std::string>& method, std::optional<double> rtol,
                               std::optional<double> atol, std::optional<double> step,
+                              std::optional<double> energy_tolerance,
                               const std::optional<std::string>& formulation) {
   api::TimeOptimalRequest request;
-  request.integrator = integrator(method, rtol, atol, step, formulation);
+  request.integrator = integrator(method, rtol, atol, step, energy_tolerance, formulation);
   request.mu = mu;
   request.from = from;
   request.to = to;
@@ -113,9 +119,10 @@ py::dict locus_binding(const py::object& scene, double from, double to, int n,
                        std::optional<double> mu, double tolerance,
                        const std::optional<std::string>& method, std::optional<double> rtol,
                        std::optional<double> atol, std::optional<double> step,
+                       std::optional<double> energy_tolerance,
                        const std::optional<std::string>& formulation) {
   api::LocusRequest request;
-  request.integrator = integrator(method, rtol, atol, step, formulation);
+  request.integrator = integrator(method, rtol, atol, step, energy_tolerance, formulation);
   request.mu = mu;
   request.from = from;
   request.to = to;
@@ -144,9 +151,10 @@ py::dict surface_binding(const py::object& scene, double k_from, double k_to, in
                          double period_from, double period_to, int np, int threads,
                          const std::optional<std::string>& method, std::optional<double> rtol,
                          std::optional<double> atol, std::optional<double> step,
+                         std::optional<double> energy_tolerance,
                          const std::optional<std::string>& formulation) {
   api::SurfaceRequest request;
-  request.integrator = integrator(method, rtol, atol, step, formulation);
+  request.integrator = integrator(method, rtol, atol, step, energy_tolerance, formulation);
   request.k_from = k_from;
   request.k_to = k_to;
   request.nk = nk;
@@ -193,18 +201,18 @@ void bind_sim(py::module_& m) {
   m.def("default_scene_path", &default_scene_path);
   m.def("data_directory", &data_directory);
   m.def("solve", &solve_binding, "period"_a, "scene"_a, "k"_a, "solve_for"_a, "tolerance"_a,
-        "method"_a, "rtol"_a, "atol"_a, "step"_a, "formulation"_a);
+        "method"_a, "rtol"_a, "atol"_a, "step"_a, "energy_tolerance"_a, "formulation"_a);
   m.def("simulate", &simulate_binding, "scene"_a, "period"_a, "k"_a, "duration"_a, "mu"_a,
         "model"_a, "stop_on_contact_loss"_a, "sample_dt"_a, "method"_a, "rtol"_a, "atol"_a,
-        "step"_a, "formulation"_a);
+        "step"_a, "energy_tolerance"_a, "formulation"_a);
   m.def("time_optimal", &time_optimal_binding, "scene"_a, "mu"_a, "from_"_a, "to"_a,
         "period_tolerance"_a, "tolerance"_a, "method"_a, "rtol"_a, "atol"_a, "step"_a,
-        "formulation"_a);
+        "energy_tolerance"_a, "formulation"_a);
   m.def("locus", &locus_binding, "scene"_a, "from_"_a, "to"_a, "n"_a, "mu"_a, "tolerance"_a,
-        "method"_a, "rtol"_a, "atol"_a, "step"_a, "formulation"_a);
+        "method"_a, "rtol"_a, "atol"_a, "step"_a, "energy_tolerance"_a, "formulation"_a);
   m.def("surface", &surface_binding, "scene"_a, "k_from"_a, "k_to"_a, "nk"_a, "period_from"_a,
         "period_to"_a, "np"_a, "threads"_a, "method"_a, "rtol"_a, "atol"_a, "step"_a,
-        "formulation"_a);
+        "energy_tolerance"_a, "formulation"_a);
 }
 
 }  // namespace flatland::python

@@ -285,10 +285,22 @@ inline void read_integrator_settings(const MapReader& it, sim::IntegratorSetting
   s.method = m == "rk4"      ? sim::Method::kRungeKutta4
              : m == "dop853" ? sim::Method::kDormandPrince853
                              : sim::Method::kDormandPrince54;
-  s.rtol = it.positive_or("rtol", s.rtol);
-  s.atol = it.positive_or("atol", s.atol);
-  s.fixed_step = it.positive_or("step", s.fixed_step);
-  s.max_step = it.positive_or("max_step", s.max_step);
+  // Each value within the bounds sim sets for inputs (integrator_setting_problem).
+  const auto checked = [&it](const char* key, double fallback) {
+    if (!it.has(key)) return fallback;
+    const double v = it.number(key);
+    const std::string problem = sim::integrator_setting_problem(key, v);
+    if (!problem.empty()) it.fail_at(key, problem);
+    return v;
+  };
+  s.rtol = checked("rtol", s.rtol);
+  s.atol = checked("atol", s.atol);
+  s.fixed_step = checked("step", s.fixed_step);
+  s.max_step = checked("max_step", s.max_step);
+  if (it.has("energy_tolerance")) s.energy_tolerance = checked("energy_tolerance", 0.0);
+  // The step budget: a run that would need more stops (or is refused at once when its rate says
+  // so). Recorded runs keep ~0.4 kB per step, so a billion steps is the most that can be asked.
+  s.max_steps = static_cast<long>(it.integer_or("max_steps", 1, 1'000'000'000, s.max_steps));
 }
 
 }  // namespace flatland::scene_detail

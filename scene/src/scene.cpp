@@ -122,8 +122,9 @@ void read_initial(const MapReader& root, sim::SimulationSpec& spec) {
 }
 
 void read_integrator(const MapReader& root, sim::SimulationSpec& spec) {
-  const auto it = root.optional_section(
-      "integrator", {"method", "rtol", "atol", "step", "max_step", "formulation"});
+  const auto it =
+      root.optional_section("integrator", {"method", "rtol", "atol", "step", "max_step",
+                                           "max_steps", "energy_tolerance", "formulation"});
   if (!it) return;
   read_integrator_settings(*it, spec.run.integrator);
   const std::string f = it->choice_or("formulation", {"auto", "general", "reduced"}, "auto");

@@ -149,8 +149,8 @@ void read_initial(const MapReader& root, sim::SpatialSpec& spec) {
 }
 
 void read_integrator(const MapReader& root, sim::SpatialSpec& spec) {
-  const auto it =
-      root.optional_section("integrator", {"method", "rtol", "atol", "step", "max_step"});
+  const auto it = root.optional_section("integrator", {"method", "rtol", "atol", "step", "max_step",
+                                                       "max_steps", "energy_tolerance"});
   if (it) read_integrator_settings(*it, spec.integrator);
 }
 

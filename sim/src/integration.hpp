@@ -7,8 +7,15 @@
 // keeps the active hand piece fixed over a segment and restarts at located junction crossings and
 // at the motion's breakpoints (where the hand's acceleration jumps: the guards are evaluated there
 // at once, so a violation caused by the jump is an event at that instant).
+//
+// Beside the model's state it integrates the work done on the object (the hand's and the
+// losses', two more components left out of the error norm) for the run's energy audit, and
+// compares the balance with its bound wherever a sample exists (every step when recording or
+// when guards need the forces, else at the segment's end): a breach ends the segment with
+// EventKind::kNumericalFailure.
 #pragma once
 
+#include "energy_ledger.hpp"
 #include "flatland/sim/roots.hpp"
 #include "flatland/sim/simulate.hpp"
 #include "runge_kutta.hpp"
@@ -31,6 +38,35 @@ inline std::string at_text(double t, double s_h) {
   os.precision(10);
   os << "at t=" << t << " s (s_h=" << s_h << ")";
   return os.str();
+}
+
+/// A run that has used a hundredth of its step budget and, at the rate so far, would need more
+/// than four times the budget to reach its end is refused now (std::invalid_argument naming the
+/// duration: an input too long for the budget) instead of after minutes and gigabytes. Checked
+/// every 1024 steps.
+inline void forecast_step_budget(long used, long budget, double t_start, double t, double t_end) {
+  if (used < std::max(1000L, budget / 100) || used % 1024 != 0 || !(t > t_start)) return;
+  const double forecast = static_cast<double>(used) * (t_end - t_start) / (t - t_start);
+  if (!(forecast > 4.0 * static_cast<double>(budget))) return;
+  std::ostringstream os;
+  os.precision(3);
+  os << "duration: " << (t_end - t_start) << " s would take about " << forecast
+     << " integrator steps at the rate of its first " << (t - t_start)
+     << " s, beyond the step budget of " << budget
+     << " (integrator.max_steps; or a shorter duration, or a looser rtol)";
+  throw std::invalid_argument(os.str());
+}
+
+/// The energy ledger of a planar run (its audit in `audit`): the tolerance from the options, the
+/// floor of the energy scale m g times the object's size.
+inline EnergyLedger planar_ledger(EnergyAudit& audit, const RollingProblem& pb,
+                                  const RunOptions& o) {
+  const IntegratorSettings& is = o.integrator;
+  const double size =
+      pb.object.boundary ? pb.object.boundary->reach() : pb.object.disk_radius.value_or(0.0);
+  return EnergyLedger(
+      audit, energy_tolerance(is.energy_tolerance, is.method == Method::kRungeKutta4, is.rtol),
+      pb.object.mass * pb.gravity * size);
 }
 
 /// A condition that must hold over a segment: it fires where `value` goes from >= 0 to < 0. At
@@ -58,10 +94,21 @@ class Integration {
  public:
   using State = typename Model::State;
   static constexpr int N = Model::N;
-  using Dense = DenseCoefficients<State>;  // 5 used unless dop853
+  /// The state and, at N and N + 1, the work done on the object since the segment began by the
+  /// hand and by the losses, J.
+  using Y = Eigen::Matrix<double, N + 2, 1>;
+  using Dense = DenseCoefficients<Y>;  // 5 used unless dop853
 
-  Integration(const Model& model, const RunOptions& opt, RunResult& res, std::vector<Guard> guards)
-      : model_(model), opt_(opt), res_(res), st_(res.stats), guards_(std::move(guards)) {}
+  /// `run_start`: where the whole run (all its segments) began, for the step budget's forecast.
+  Integration(const Model& model, const RunOptions& opt, RunResult& res, std::vector<Guard> guards,
+              EnergyLedger& ledger, double run_start)
+      : model_(model),
+        opt_(opt),
+        res_(res),
+        st_(res.stats),
+        guards_(std::move(guards)),
+        ledger_(ledger),
+        run_start_(run_start) {}
 
   /// Integrate from (t, y) on `pieces` (y on the contact manifold) to opt.t_end, or to the first
   /// guard event, junction crossings and motion breakpoints included. When recording, the start
@@ -76,18 +123,41 @@ class Integration {
   void set_pieces(const Pieces& p) { pieces_ = p; }
 
  private:
-  void rhs(double t, const State& y, State& dy) {
-    model_.derivative(t, y, pieces_, dy);
+  static State head(const Y& y) { return y.template head<N>(); }
+  Sample sample(double t, const Y& y) { return sample(t, State(head(y))); }
+  double s_h(const Y& y) const { return Model::s_h(head(y)); }
+  /// The model's projection of the state part (the works are not constrained).
+  double project(double t, Y& y) const {
+    State s = head(y);
+    const double drift = model_.project(t, s, pieces_);
+    y.template head<N>() = s;
+    return drift;
+  }
+  void rhs(double t, const Y& y, Y& dy) {
+    State d;
+    Power power;
+    model_.derivative(t, head(y), pieces_, d, &power);
+    dy.template head<N>() = d;
+    dy[N] = power.hand;
+    dy[N + 1] = power.losses;
     ++st_.rhs_evals;
   }
   /// One step of size h from (t, y) with k1 = f(t, y): y1, k7 = f(t + h, y1) and the scaled
   /// error norm (0 for RK4), and the dense output in `rc` except for DOP853, whose three extra
   /// stages are paid only for accepted recorded steps (dop853_dense on k853_). `trial` steps
   /// (event location on the step map) keep DOP853's stages out of the step's own (k853_).
-  double attempt(double t, const State& y, const State& k1, double h, State& y1, State& k7,
-                 Dense& rc, bool trial = false);
-  double initial_step(double t, const State& y, const State& f0, double t_stop);
+  double attempt(double t, const Y& y, const Y& k1, double h, Y& y1, Y& k7, Dense& rc,
+                 bool trial = false);
+  double initial_step(double t, const Y& y, const Y& f0, double t_stop);
   void record(double t, const State& y, const Sample* s);
+  /// The energy balance at a sample; false when it broke.
+  bool audit(const Sample& s) {
+    const double kinetic = kinetic_energy(model_.problem(), s);
+    return ledger_.check(s.t,
+                         kinetic - model_.problem().object.mass *
+                                       model_.problem().gravity_vector().dot(s.object_position),
+                         kinetic);
+  }
   /// The first guard violated at a segment's start (beyond its tolerance).
   std::optional<EventKind> violated(const Sample& s) const {
     for (const Guard& g : guards_)
@@ -100,32 +170,34 @@ class Integration {
   RunResult& res_;
   RunStats& st_;
   std::vector<Guard> guards_;
+  EnergyLedger& ledger_;
+  double run_start_;
   Pieces pieces_;
-  Stages853<State> k853_;
+  Stages853<Y> k853_;
 };
 
 template <class Model>
-double Integration<Model>::attempt(double t, const State& y, const State& k1, double h, State& y1,
-                                   State& k7, Dense& rc, bool trial) {
-  const auto f = [this](double tt, const State& yy, State& dy) { rhs(tt, yy, dy); };
+double Integration<Model>::attempt(double t, const Y& y, const Y& k1, double h, Y& y1, Y& k7,
+                                   Dense& rc, bool trial) {
+  const auto f = [this](double tt, const Y& yy, Y& dy) { rhs(tt, yy, dy); };
   const double rtol = opt_.integrator.rtol, atol = opt_.integrator.atol;
   if (opt_.integrator.method == Method::kDormandPrince853) {
-    if (!trial) return dop853_step(f, t, y, k1, h, rtol, atol, y1, k7, k853_);
-    Stages853<State> scratch;
-    return dop853_step(f, t, y, k1, h, rtol, atol, y1, k7, scratch);
+    if (!trial) return dop853_step(f, t, y, k1, h, rtol, atol, y1, k7, k853_, N);
+    Stages853<Y> scratch;
+    return dop853_step(f, t, y, k1, h, rtol, atol, y1, k7, scratch, N);
   }
   if (opt_.integrator.method == Method::kRungeKutta4) {
     rk4_step(f, t, y, k1, h, y1, k7, rc);  // k7 is reused as the next step's k1
     return 0.0;
   }
-  return dopri5_step(f, t, y, k1, h, rtol, atol, y1, k7, rc);
+  return dopri5_step(f, t, y, k1, h, rtol, atol, y1, k7, rc, N);
 }
 
 template <class Model>
-double Integration<Model>::initial_step(double t, const State& y, const State& f0, double t_stop) {
-  return starting_step([this](double tt, const State& yy, State& dy) { rhs(tt, yy, dy); }, t, y, f0,
-                       t_stop, opt_.integrator.rtol, opt_.integrator.atol, opt_.integrator.max_step,
-                       opt_.integrator.method == Method::kDormandPrince853 ? 8.0 : 5.0);
+double Integration<Model>::initial_step(double t, const Y& y, const Y& f0, double t_stop) {
+  return starting_step([this](double tt, const Y& yy, Y& dy) { rhs(tt, yy, dy); }, t, y, f0, t_stop,
+                       opt_.integrator.rtol, opt_.integrator.atol, opt_.integrator.max_step,
+                       opt_.integrator.method == Method::kDormandPrince853 ? 8.0 : 5.0, N);
 }
 
 template <class Model>
@@ -135,7 +207,8 @@ void Integration<Model>::record(double t, const State& y, const Sample* s) {
 }
 
 template <class Model>
-SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y, Pieces pieces) {
+SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y_start,
+                                                               Pieces pieces) {
   const IntegratorSettings& is = opt_.integrator;
   const EventSettings& ev = opt_.events;
   const bool rk4 = is.method == Method::kRungeKutta4;
@@ -143,6 +216,8 @@ SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y
   const int terms = dop853 ? 8 : 5;
   pieces_ = pieces;
   SegmentEnd<State> end;
+  Y y;
+  y << y_start, 0.0, 0.0;  // the works start from zero in every segment
 
   if (opt_.record) {
     res_.trajectory.begin_part(
@@ -156,15 +231,20 @@ SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y
   }
   Sample s_start = sample(t, y);
   end.first = s_start;
-  record(t, y, &s_start);
+  record(t, head(y), &s_start);
+  ledger_.start(mechanical_energy(model_.problem(), s_start),
+                kinetic_energy(model_.problem(), s_start));
   const auto stop_now = [&](EventKind kind, const Sample& s) {
     end.t = t;
-    end.y = y;
+    end.y = head(y);
     end.pieces = pieces_;
     end.fired = kind;
     end.last = s;
     return end;
   };
+  // The balance at the segment's start: a jump between segments (a change of mode, an impact)
+  // shows here.
+  if (!audit(s_start)) return stop_now(EventKind::kNumericalFailure, s_start);
   if (auto kind = violated(s_start)) return stop_now(*kind, s_start);
 
   std::vector<double> stops;
@@ -173,7 +253,7 @@ SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y
   std::sort(stops.begin(), stops.end());
   stops.push_back(opt_.t_end);
 
-  State k1, y1, k7;
+  Y k1, y1, k7;
   Dense rc;
   bool need_k1 = true;
   double h = rk4 ? is.fixed_step : 0.0;
@@ -194,7 +274,8 @@ SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y
       if (t + 1.01 * h_try >= t_stop) h_try = t_stop - t;  // land exactly on the stop
       if (st_.steps + st_.rejected >= is.max_steps)
         throw std::runtime_error("integrator: step budget (" + std::to_string(is.max_steps) +
-                                 ") exhausted " + at_text(t, model_.s_h(y)));
+                                 ") exhausted " + at_text(t, s_h(y)));
+      forecast_step_budget(st_.steps + st_.rejected, is.max_steps, run_start_, t, opt_.t_end);
       const double err = attempt(t, y, k1, h_try, y1, k7, rc);
       if (!rk4 && err > 1.0) {
         ++st_.rejected;
@@ -203,20 +284,20 @@ SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y
                      : dop853            ? std::max(1.0 / 3.0, 0.9 * std::pow(err, -1.0 / 8.0))
                                          : std::max(0.2, 0.9 * std::pow(err, -0.2)));
         if (!(h >= 1e-14 * std::max(1.0, std::abs(t))))  // NaN too
-          throw std::runtime_error("integrator: step size underflow " + at_text(t, model_.s_h(y)) +
+          throw std::runtime_error("integrator: step size underflow " + at_text(t, s_h(y)) +
                                    " (singular or non-finite dynamics)");
         continue;
       }
       if (!y1.allFinite())
-        throw std::runtime_error("integrator: non-finite state " + at_text(t, model_.s_h(y)) +
+        throw std::runtime_error("integrator: non-finite state " + at_text(t, s_h(y)) +
                                  " (reduce integrator.step)");
       double t1 = (h_try == t_stop - t) ? t_stop : t + h_try;
-      State y1p = y1;
-      double drift = model_.project(t1, y1p, pieces_);
+      Y y1p = y1;
+      double drift = project(t1, y1p);
 
       // ---- events on (t, t1] ----
       const PieceInterval iv = model_.problem().hand->piece_interval(pieces_.hand);
-      const double s1 = model_.s_h(y1p);
+      const double s1 = s_h(y1p);
       enum Kind { kNone, kJunction, kGuard, kBounds } kind = kNone;
       EventKind guard_kind = EventKind::kLeftBounds;
       double t_event = t1, junction = 0;
@@ -225,37 +306,35 @@ SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y
       // fixed step's Hermite interpolant can be far off), and g(h_try) is exactly g1.
       const double h_full = h_try;
       auto step_state = [&](double hh) {
-        State out, k7_unused;
+        Y out, k7_unused;
         Dense rc_unused;
         attempt(t, y, k1, hh, out, k7_unused, rc_unused, true);
-        model_.project(t + hh, out, pieces_);
+        project(t + hh, out);
         return out;
       };
-      auto locate = [&](const std::function<double(const State&, double)>& g, double g0,
-                        double g1) {
+      auto locate = [&](const std::function<double(const Y&, double)>& g, double g0, double g1) {
         return t + brent_root([&](double hh) { return g(step_state(hh), t + hh); }, 0.0, h_full, g0,
                               g1, ev.time_tolerance)
                        .x;
       };
       if (s1 > iv.hi || s1 < iv.lo) {
         junction = s1 > iv.hi ? iv.hi : iv.lo;
-        const double g0 = model_.s_h(y) - junction, g1 = s1 - junction;
+        const double g0 = s_h(y) - junction, g1 = s1 - junction;
         // A previous crossing may have landed a rounding error short of its junction; if the
         // disk turns back right there, it is already across at the start of this step.
         const double tj =
             (g0 > 0) == (g1 > 0) || g0 == 0
                 ? t
-                : locate([&](const State& s, double) { return model_.s_h(s) - junction; }, g0, g1);
+                : locate([&](const Y& s, double) { return s_h(s) - junction; }, g0, g1);
         if (tj < t_event || kind == kNone) t_event = tj, kind = kJunction;
       }
       if (ev.s_h_bounds && (s1 < ev.s_h_bounds->first || s1 > ev.s_h_bounds->second)) {
         const double bound =
             s1 < ev.s_h_bounds->first ? ev.s_h_bounds->first : ev.s_h_bounds->second;
-        const double g0 = model_.s_h(y) - bound, g1 = s1 - bound;
-        const double tb =
-            (g0 > 0) == (g1 > 0) || g0 == 0
-                ? t
-                : locate([&](const State& s, double) { return model_.s_h(s) - bound; }, g0, g1);
+        const double g0 = s_h(y) - bound, g1 = s1 - bound;
+        const double tb = (g0 > 0) == (g1 > 0) || g0 == 0
+                              ? t
+                              : locate([&](const Y& s, double) { return s_h(s) - bound; }, g0, g1);
         if (tb < t_event || kind == kNone) t_event = tb, kind = kBounds;
       }
       Sample s_end;
@@ -271,8 +350,8 @@ SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y
           // longer: it fires at the start.
           const double tg =
               g0 < 0 ? t
-                     : locate([&](const State& s, double tau) { return gd.value(sample(tau, s)); },
-                              g0, g1);
+                     : locate([&](const Y& s, double tau) { return gd.value(sample(tau, s)); }, g0,
+                              g1);
           if (tg < t_event || kind == kNone) t_event = tg, kind = kGuard, guard_kind = gd.kind;
         }
       }
@@ -281,7 +360,7 @@ SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y
         zero_progress = t_event <= t ? zero_progress + 1 : 0;
         if (zero_progress > 8)
           throw std::runtime_error("integrator: events repeat without progress " +
-                                   at_text(t, model_.s_h(y)) + " (chattering at a junction)");
+                                   at_text(t, s_h(y)) + " (chattering at a junction)");
       }
       if (kind != kNone && t_event < t1) {
         // Stop exactly at the event: redo the step up to it, so no step straddles it.
@@ -290,7 +369,7 @@ SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y
           attempt(t, y, k1, h_try, y1, k7, rc);
           t1 = t_event;
           y1p = y1;
-          drift = model_.project(t1, y1p, pieces_);
+          drift = project(t1, y1p);
         } else {
           y1p = y;
           t1 = t;
@@ -305,12 +384,13 @@ SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y
         st_.max_drift = std::max(st_.max_drift, drift);
         if (opt_.record) {
           if (dop853)
-            dop853_dense([this](double tt, const State& yy, State& dy) { rhs(tt, yy, dy); }, t, y,
-                         y1, h_try, k853_, rc);
+            dop853_dense([this](double tt, const Y& yy, Y& dy) { rhs(tt, yy, dy); }, t, y, y1,
+                         h_try, k853_, rc);
           std::array<double, 8 * N> c;
-          for (int j = 0; j < terms; ++j) Eigen::Map<State>(c.data() + j * N) = rc[j];
+          for (int j = 0; j < terms; ++j) Eigen::Map<State>(c.data() + j * N) = head(rc[j]);
           res_.trajectory.append(t, h_try, pieces_, c.data());
         }
+        ledger_.add_work(y1p[N] - y[N], y1p[N + 1] - y[N + 1]);
         const bool moved = drift > 0 && N == 10;
         t = t1;
         y = y1p;
@@ -324,8 +404,12 @@ SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y
               std::max(st_.max_constraint_residual, s_new.constraint_residual);
           st_.max_redundant_residual =
               std::max(st_.max_redundant_residual, s_new.redundant_residual);
-          record(t, y, &s_new);
+          record(t, head(y), &s_new);
           s_start = s_new;
+          if (!audit(s_new)) {
+            stopped = EventKind::kNumericalFailure;
+            break;
+          }
         }
       }
       if (!rk4 && kind == kNone && dop853) {
@@ -352,13 +436,13 @@ SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y
           RecordedEvent junction_event;
           junction_event.kind = EventKind::kJunction;
           junction_event.t = t;
-          junction_event.s_h = model_.s_h(y);
+          junction_event.s_h = s_h(y);
           res_.events.push_back(junction_event);
           // The landing point may sit a rounding error short of the junction: pick the next
           // piece from the junction itself and the direction of crossing.
           const int d = junction == iv.hi ? +1 : -1;
           const int motion = pieces_.motion;
-          pieces_ = model_.pieces_for(y, d);
+          pieces_ = model_.pieces_for(head(y), d);
           pieces_.hand = model_.problem().hand->piece_at(junction, d);
           pieces_.motion = motion;
           need_k1 = true;
@@ -382,18 +466,20 @@ SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y
         // The forces jump with the acceleration: a guard the jump violates fires here and now.
         s_start = sample(t, y);
         if (auto kind = violated(s_start)) {
-          record(t, y, &s_start);
+          record(t, head(y), &s_start);
           return stop_now(*kind, s_start);
         }
       }
     }
   }
   end.t = t;
-  end.y = y;
+  end.y = head(y);
   end.pieces = pieces_;
   end.fired = stopped;
   end.last = (opt_.record && !res_.steps.empty() && res_.steps.back().t == t) ? res_.steps.back()
                                                                               : sample(t, y);
+  // Runs that sample no step (searches) are audited here, at their end.
+  if (!ledger_.audit().broken && !audit(end.last)) end.fired = EventKind::kNumericalFailure;
   return end;
 }
 

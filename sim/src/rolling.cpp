@@ -45,6 +45,23 @@ void fill_hand(Sample& s, double t, const HandKinematics& h) {
   s.theta_ddot = h.angular_acceleration;
 }
 
+// The power of the hand's contact force `force` (on the object, at the contact) and couple
+// `couple` (on the object), split into what the hand's motion puts in (through the velocity of
+// its own material point at the contact and its rate) and what the contact and the table take
+// out: friction on the slip of the object's point over the hand's, the couple on the rotation
+// relative to the hand, drag on the centre and its couple. hand + losses = dE/dt exactly.
+Power contact_power(const RollingProblem& pb, const Vec2& force, double couple,
+                    const Vec2& hand_point_velocity, double hand_rate,
+                    const Vec2& object_point_velocity, const Vec2& centre_velocity,
+                    double object_rate) {
+  Power p;
+  p.hand = force.dot(hand_point_velocity) + couple * hand_rate;
+  p.losses = force.dot(object_point_velocity - hand_point_velocity) +
+             couple * (object_rate - hand_rate) - pb.contact.drag * centre_velocity.squaredNorm() -
+             pb.contact.drag_angular * object_rate * object_rate;
+  return p;
+}
+
 // Hand and object geometry in world axes at one state of the general formulation.
 struct WorldContact {
   HandKinematics hand;
@@ -78,6 +95,15 @@ WorldContact world_contact(const RollingProblem& pb, double t, double theta_o, d
 }
 
 }  // namespace
+
+double kinetic_energy(const RollingProblem& pb, const Sample& s) {
+  return 0.5 * pb.object.mass * s.object_velocity.squaredNorm() +
+         0.5 * pb.object.inertia * s.object_angular_velocity * s.object_angular_velocity;
+}
+
+double mechanical_energy(const RollingProblem& pb, const Sample& s) {
+  return kinetic_energy(pb, s) - pb.object.mass * pb.gravity_vector().dot(s.object_position);
+}
 
 // =============================================================================================
 // General formulation
@@ -172,14 +198,16 @@ void GeneralRolling::snap(double t, State& y, const Pieces& p) const {
   y[9] = sdot_h;
 }
 
-GeneralRolling::Assembled GeneralRolling::assemble_and_solve(double t, const State& y,
-                                                             const Pieces& p) const {
-  const RollingProblem& pb = *problem_;
-  const WorldContact w = world_contact(pb, t, y[2], y[3], y[4], p);
+namespace {
+
+/// A x = b at a state whose world geometry is `w`, solved (GeneralRolling::assemble_and_solve).
+GeneralRolling::Assembled assemble_general(const RollingProblem& pb, const ContactPhase& phase,
+                                           double t, const GeneralRolling::State& y,
+                                           const Pieces& p, const WorldContact& w) {
   const double wh = w.hand.angular_velocity, ah = w.hand.angular_acceleration;
   const double wo = y[7], sdo = y[8], sdh = y[9];
   const Vec2 a_h = w.hand.acceleration;
-  Assembled s;
+  GeneralRolling::Assembled s;
   auto& A = s.A;
   auto& b = s.b;
   A.setZero();
@@ -204,9 +232,9 @@ GeneralRolling::Assembled GeneralRolling::assemble_and_solve(double t, const Sta
   // f is when a_o = 0, divided by m.
   const Vec2 v_o = y.segment<2>(5);
   const Vec2 g_d = -pb.gravity_vector() + pb.contact.drag / m * v_o;
-  if (phase_.mode == ContactMode::kSliding) {
+  if (phase.mode == ContactMode::kSliding) {
     // (3') Coulomb: f . t_h = -mu_k sign f . n_h, i.e. f . (t_h + mu_k sign n_h) = 0.
-    const Vec2 dir = th + pb.contact.kinetic() * phase_.sign * w.nh;
+    const Vec2 dir = th + pb.contact.kinetic() * phase.sign * w.nh;
     A.block<1, 2>(4, 0) = dir.transpose();
     b(4) = -g_d.dot(dir);
   } else {
@@ -216,7 +244,7 @@ GeneralRolling::Assembled GeneralRolling::assemble_and_solve(double t, const Sta
     A(4, 2) = -th.dot(perp(w.ro));
     b(4) = -th.dot(a_h + ah * perp(w.rh) - wh * wh * w.rh + wo * wo * w.ro);
   }
-  if (phase_.mode == ContactMode::kRest) {
+  if (phase.mode == ContactMode::kRest) {
     // At rest the object does not roll (sddot_h = 0); the couple that holds it is what row (4)
     // would leave over (sample()).
     A(5, 4) = 1.0;
@@ -227,9 +255,9 @@ GeneralRolling::Assembled GeneralRolling::assemble_and_solve(double t, const Sta
     //     couple eps delta sign(sdot_h) f_n. (Gravity and drag act at the centre: no moment.)
     //     While sliding, the couple is -delta f_n turn (it opposes the relative rotation).
     const double rho2 = pb.object.inertia / m;
-    const double rr = phase_.mode == ContactMode::kRolling
-                          ? pb.hand->normal_side() * pb.contact.rolling_resistance * phase_.sign
-                          : -pb.contact.rolling_resistance * phase_.turn;
+    const double rr = phase.mode == ContactMode::kRolling
+                          ? pb.hand->normal_side() * pb.contact.rolling_resistance * phase.sign
+                          : -pb.contact.rolling_resistance * phase.turn;
     A(5, 0) = w.ro.y() - rr * w.nh.x();
     A(5, 1) = -w.ro.x() - rr * w.nh.y();
     A(5, 2) = rho2;
@@ -258,21 +286,51 @@ GeneralRolling::Assembled GeneralRolling::assemble_and_solve(double t, const Sta
   return s;
 }
 
-void GeneralRolling::derivative(double t, const State& y, const Pieces& p, State& dy) const {
+/// The contact force on the object (m (a_o - g) + c v_o) and the couple besides its moment.
+std::pair<Vec2, double> general_force_and_couple(const RollingProblem& pb,
+                                                 const GeneralRolling::State& y,
+                                                 const GeneralRolling::Assembled& s,
+                                                 const WorldContact& w) {
+  const Vec2 force = pb.object.mass * (s.x.segment<2>(0) - pb.gravity_vector()) +
+                     pb.contact.drag * y.segment<2>(5);
+  const double couple =
+      pb.object.inertia * s.x[2] - cross2(w.ro, force) + pb.contact.drag_angular * y[7];
+  return {force, couple};
+}
+
+}  // namespace
+
+GeneralRolling::Assembled GeneralRolling::assemble_and_solve(double t, const State& y,
+                                                             const Pieces& p) const {
+  return assemble_general(*problem_, phase_, t, y, p,
+                          world_contact(*problem_, t, y[2], y[3], y[4], p));
+}
+
+void GeneralRolling::derivative(double t, const State& y, const Pieces& p, State& dy,
+                                Power* power) const {
   // Runge-Kutta stage states lie slightly off the contact manifold; the equations are evaluated
   // at the snapped state so that A x = b is consistent at every stage (otherwise the least-squares
   // solve splits the inconsistency, which costs two orders of magnitude in accuracy).
   State ys = y;
   snap(t, ys, p);
-  const Assembled s = assemble_and_solve(t, ys, p);
+  const RollingProblem& pb = *problem_;
+  const WorldContact w = world_contact(pb, t, ys[2], ys[3], ys[4], p);
+  const Assembled s = assemble_general(pb, phase_, t, ys, p, w);
   dy.segment<5>(0) = ys.segment<5>(5);  // positions' rates: v_o, omega_o, sdot_o, sdot_h
   dy.segment<5>(5) = s.x;
+  if (power) {
+    const auto [force, couple] = general_force_and_couple(pb, ys, s, w);
+    const Vec2 v_o = ys.segment<2>(5);
+    const double omega_h = w.hand.angular_velocity;
+    *power = contact_power(pb, force, couple, w.hand.velocity + omega_h * perp(w.rh), omega_h,
+                           v_o + ys[7] * perp(w.ro), v_o, ys[7]);
+  }
 }
 
 Sample GeneralRolling::sample(double t, const State& y, const Pieces& p) const {
   const RollingProblem& pb = *problem_;
-  const Assembled s = assemble_and_solve(t, y, p);
   const WorldContact w = world_contact(pb, t, y[2], y[3], y[4], p);
+  const Assembled s = assemble_general(pb, phase_, t, y, p, w);
   Sample out;
   fill_hand(out, t, w.hand);
   out.s_h = y[4];
@@ -295,11 +353,8 @@ Sample GeneralRolling::sample(double t, const State& y, const Pieces& p) const {
   const Vec2 v_rel = y.segment<2>(5) + y[7] * perp(w.ro) - w.hand.velocity -
                      w.hand.angular_velocity * perp(w.rh);
   out.slip_velocity = phase_.mode == ContactMode::kSliding ? v_rel.dot(th) : 0.0;
-  const Vec2 force = pb.object.mass * (s.x.segment<2>(0) - pb.gravity_vector()) +
-                     pb.contact.drag * y.segment<2>(5);
   // The couple on the object besides the contact force's moment and the drag couple.
-  out.rolling_couple = pb.object.inertia * s.x[2] - cross2(w.ro, force) +
-                       pb.contact.drag_angular * y[7];
+  out.rolling_couple = general_force_and_couple(pb, y, s, w).second;
   return out;
 }
 
@@ -453,7 +508,8 @@ double ReducedDiskRolling::sddot(const HandKinematics& h, const CurveGeometry& g
   return -(sigma_ds * sdot * sdot + drive / (1.0 + rho2_ / (r_ * r_))) / sigma;
 }
 
-void ReducedDiskRolling::derivative(double t, const State& y, const Pieces& p, State& dy) const {
+void ReducedDiskRolling::derivative(double t, const State& y, const Pieces& p, State& dy,
+                                    Power* power) const {
   const HandKinematics h = problem_->motion->at(t, p.motion);
   const CurveGeometry g = problem_->hand->geometry(y[0], p.hand);
   const double sigma = g.speed * (1.0 + r_ * g.curvature);
@@ -461,6 +517,25 @@ void ReducedDiskRolling::derivative(double t, const State& y, const Pieces& p, S
   dy[0] = y[2];
   dy[1] = h.angular_velocity - side_ * sigma * y[2] / r_;
   dy[2] = sddot(h, g, y[2]);
+  if (power) *power = rolling_power(h, g, y[2], dy[2], dy[1]);
+}
+
+Power ReducedDiskRolling::rolling_power(const HandKinematics& h, const CurveGeometry& g,
+                                        double sdot, double sddot_h, double omega_o) const {
+  const RollingProblem& pb = *problem_;
+  const DiskTerms d = disk_terms(pb, r_, side_, h, g, sdot);
+  const Vec2 force =
+      pb.object.mass * (centre_acceleration(h, g, d, sdot, sddot_h) - pb.gravity_vector()) +
+      pb.contact.drag * d.velocity;
+  // Rolling: the rolling-resistance couple against the rolling; at rest, the couple that holds
+  // the disk (as sample_with reports them).
+  const double couple = rest_
+                            ? pb.object.inertia * h.angular_acceleration -
+                                  side_ * r_ * force.dot(d.T) + pb.contact.drag_angular * omega_o
+                            : side_ * pb.contact.rolling_resistance * phase_.sign * force.dot(d.N);
+  // Rolling, the disk's contact point moves with the hand's.
+  const Vec2 v_hand = h.velocity + h.angular_velocity * perp(d.R * g.point);
+  return contact_power(pb, force, couple, v_hand, h.angular_velocity, v_hand, d.velocity, omega_o);
 }
 
 double ReducedDiskRolling::acceleration(const HandKinematics& h, double s_h, double sdot_h,
@@ -555,16 +630,26 @@ SlidingDynamics sliding_dynamics(const RollingProblem& pb, double r, double side
 
 }  // namespace
 
-void ReducedDiskSliding::derivative(double t, const State& y, const Pieces& p, State& dy) const {
+void ReducedDiskSliding::derivative(double t, const State& y, const Pieces& p, State& dy,
+                                    Power* power) const {
   const RollingProblem& pb = *problem_;
   const HandKinematics h = pb.motion->at(t, p.motion);
-  const SlidingDynamics a =
-      sliding_dynamics(pb, r_, side_, phase_, h, pb.hand->geometry(y[0], p.hand), y[2], y[3]);
+  const CurveGeometry g = pb.hand->geometry(y[0], p.hand);
+  const SlidingDynamics a = sliding_dynamics(pb, r_, side_, phase_, h, g, y[2], y[3]);
   if (!(a.terms.sigma > 0)) check_fits(pb, r_, t, y[0], a.terms.sigma, p, "sliding");
   dy[0] = y[2];
   dy[1] = y[3];
   dy[2] = a.sddot;
   dy[3] = a.omega_dot;
+  if (power) {
+    const DiskTerms& d = a.terms;
+    const Vec2 force = a.f_n * d.N + a.f_t * d.T;
+    // The disk's contact point lies r behind its centre along the hand's normal.
+    const Vec2 v_object = d.velocity - r_ * y[3] * perp(d.N);
+    const Vec2 v_hand = h.velocity + h.angular_velocity * perp(d.R * g.point);
+    *power =
+        contact_power(pb, force, a.couple, v_hand, h.angular_velocity, v_object, d.velocity, y[3]);
+  }
 }
 
 Sample ReducedDiskSliding::sample(double t, const State& y, const Pieces& p) const {

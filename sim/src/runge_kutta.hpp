@@ -144,11 +144,14 @@ State dense_value(const DenseCoefficients<State>& rc, int terms, double theta) {
 }
 
 /// Dormand-Prince 5(4): y1, k7 = f(t + h, y1), the dense output, and the scaled RMS error norm
-/// (infinite for a non-finite step).
+/// (infinite for a non-finite step) over the first `controlled` components (all when negative):
+/// quadratures carried beside the state (the energy audit's works) follow its steps without
+/// steering them.
 template <class State, class F>
 double dopri5_step(F&& f, double t, const State& y, const State& k1, double h, double rtol,
-                   double atol, State& y1, State& k7, DenseCoefficients<State>& rc) {
-  const int N = static_cast<int>(y.size());
+                   double atol, State& y1, State& k7, DenseCoefficients<State>& rc,
+                   int controlled = -1) {
+  const int N = controlled < 0 ? static_cast<int>(y.size()) : controlled;
   State k2, k3, k4, k5, k6;
   f(t + c2 * h, y + h * (a21 * k1), k2);
   f(t + c3 * h, y + h * (a31 * k1 + a32 * k2), k3);
@@ -190,12 +193,12 @@ void rk4_step(F&& f, double t, const State& y, const State& k1, double h, State&
 }
 
 /// Dormand-Prince 8(5,3): y1, k13 = f(t + h, y1), the stages in `k` (for dop853_dense) and
-/// Hairer's error norm.
+/// Hairer's error norm over the first `controlled` components (all when negative).
 template <class State, class F>
 double dop853_step(F&& f, double t, const State& y, const State& k1, double h, double rtol,
-                   double atol, State& y1, State& k13, Stages853<State>& k) {
+                   double atol, State& y1, State& k13, Stages853<State>& k, int controlled = -1) {
   using namespace dop853;
-  const int N = static_cast<int>(y.size());
+  const int N = controlled < 0 ? static_cast<int>(y.size()) : controlled;
   k[0] = k1;
   for (int i = 1; i < kStages; ++i) {
     State yi = y;
@@ -251,11 +254,12 @@ void dop853_dense(F&& f, double t, const State& y, const State& y1, double h, St
   }
 }
 
-/// Hairer's starting step size heuristic for a method of the given order, f0 = f(t, y).
+/// Hairer's starting step size heuristic for a method of the given order, f0 = f(t, y), from
+/// the first `controlled` components (all when negative).
 template <class State, class F>
 double starting_step(F&& f, double t, const State& y, const State& f0, double t_stop, double rtol,
-                     double atol, double max_step, double order) {
-  const int N = static_cast<int>(y.size());
+                     double atol, double max_step, double order, int controlled = -1) {
+  const int N = controlled < 0 ? static_cast<int>(y.size()) : controlled;
   double dnf = 0, dny = 0;
   for (int i = 0; i < N; ++i) {
     const double sk = atol + rtol * std::abs(y[i]);

@@ -41,12 +41,39 @@ RunOptions search_options(const SimulationSpec& spec, double t_end) {
   return o;
 }
 
+/// What a numerical failure (a broken energy balance) of the run at (period, k) says.
+std::string numerical_failure_text(double period, double k, const EnergyAudit& a) {
+  return "the run at 2T = " + format_significant(period, 8) +
+         " s, k = " + format_significant(k, 8) +
+         " failed numerically: its energy balance broke at t = " +
+         format_significant(a.t_broken, 8) + " s (" + format_significant(a.balance, 3) +
+         " J, bound " + format_significant(a.bound(), 3) + " J)";
+}
+
+/// s_h(T) of one unrecorded run; NaN where the run failed numerically (its energy balance broke),
+/// with `failure` (if given) saying where.
 double s_at_half_period(const std::shared_ptr<const RollingProblem>& base,
-                        const SimulationSpec& spec, double period, double k, long* rhs_evals) {
+                        const SimulationSpec& spec, double period, double k, long* rhs_evals,
+                        std::string* failure = nullptr) {
   const RunResult r = simulate(with_motion(base, period, k), spec.initial,
                                search_options(spec, spec.initial.t0 + 0.5 * period));
   if (rhs_evals) *rhs_evals += r.stats.rhs_evals;
+  if (r.reason == StopReason::kNumericalFailure) {
+    if (failure) *failure = numerical_failure_text(period, k, r.audit);
+    return kNaN;
+  }
   return r.final.s_h;
+}
+
+/// s_at_half_period for a search: a numerical failure ends the search (std::runtime_error): a
+/// root cannot be bracketed through numbers known to be wrong.
+double searched_s_at_half_period(const std::shared_ptr<const RollingProblem>& base,
+                                 const SimulationSpec& spec, double period, double k,
+                                 long* rhs_evals) {
+  std::string failure;
+  const double s = s_at_half_period(base, spec, period, k, rhs_evals, &failure);
+  if (!failure.empty()) throw std::runtime_error("solve: " + failure);
+  return s;
 }
 
 void check_period(double period) {
@@ -143,7 +170,7 @@ double half_period_s_h(const SimulationSpec& spec, double period, double k, long
   s.motion.kind = MotionSpec::Kind::kButterfly;
   s.motion.period = period;
   s.motion.k = k;
-  return s_at_half_period(build_problem(s), s, period, k, rhs_evals);
+  return searched_s_at_half_period(build_problem(s), s, period, k, rhs_evals);
 }
 
 namespace {
@@ -162,6 +189,8 @@ SolveReport evaluate_on(const std::shared_ptr<const RollingProblem>& base,
   rep.d = s.hand.d;
   rep.run = simulate(with_motion(base, period, k), s.initial, o);
   const RunResult& r = rep.run;
+  if (r.reason == StopReason::kNumericalFailure)
+    throw std::runtime_error("solve: " + numerical_failure_text(period, k, r.audit));
   const double T = s.initial.t0 + 0.5 * period;
   rep.s_T = r.trajectory.s_h(T);
   rep.s_end = r.final.s_h;
@@ -199,7 +228,7 @@ SolveReport solve_k_from(const SimulationSpec& spec,
   long rhs = 0;
   auto f = [&](double k) {
     ++sims;
-    return s_at_half_period(base, spec, period, k, &rhs);
+    return searched_s_at_half_period(base, spec, period, k, &rhs);
   };
   // k = -2 is singular (P(1) = 0); beyond k = 2 the hand no longer dips at all.
   const double lo = -2.0 + 1e-6, hi = 2.0;
@@ -244,7 +273,7 @@ SolveReport solve_d(const SimulationSpec& spec, double period, double k,
     SimulationSpec sd = s;
     sd.hand.d = d;
     ++sims;
-    return s_at_half_period(build_problem(sd), sd, period, k, &rhs);  // validates the shape
+    return searched_s_at_half_period(build_problem(sd), sd, period, k, &rhs);  // validates
   };
   const double scale = std::max(std::abs(s.hand.a), std::abs(s.hand.b));
   const auto br = find_bracket(f, s.hand.d, f(s.hand.d), 0.01 * scale, s.hand.d - 10 * scale,
@@ -306,13 +335,16 @@ SurfaceResult surface(const SimulationSpec& spec, double k_lo, double k_hi, int 
   res.s_T.assign(static_cast<std::size_t>(nk) * np, kNaN);
   const long total = static_cast<long>(nk) * np;
   std::atomic<long> rhs{0};
+  std::vector<std::string> failures(static_cast<std::size_t>(total));
   try {
     parallel_for(
         total, threads > 0 ? static_cast<unsigned>(threads) : 0u,
         [&](long idx) {
           const int i = static_cast<int>(idx / np), j = static_cast<int>(idx % np);
           long evals = 0;
-          res.s_T[idx] = s_at_half_period(base, s, res.period[j], res.k[i], &evals);
+          // A point whose run fails numerically stays NaN and is reported; the grid goes on.
+          res.s_T[idx] = s_at_half_period(base, s, res.period[j], res.k[i], &evals,
+                                          &failures[static_cast<std::size_t>(idx)]);
           rhs += evals;
         },
         [&](long finished) {
@@ -322,6 +354,10 @@ SurfaceResult surface(const SimulationSpec& spec, double k_lo, double k_hi, int 
     throw std::runtime_error(std::string("surface: ") + e.what());
   }
   res.rhs_evals = rhs;
+  for (long idx = 0; idx < total; ++idx)
+    if (!failures[static_cast<std::size_t>(idx)].empty())
+      res.numerical_failures.push_back({static_cast<int>(idx / np), static_cast<int>(idx % np),
+                                        failures[static_cast<std::size_t>(idx)]});
   return res;
 }
 

@@ -1,5 +1,6 @@
 #include "flatland/sim/simulate.hpp"
 
+#include "flatland/sim/format.hpp"
 #include "flatland/sim/hybrid.hpp"
 #include "flatland/sim/roots.hpp"
 
@@ -49,6 +50,8 @@ std::string to_string(StopReason r) {
       return "dropped";
     case StopReason::kTransition:
       return "transition";
+    case StopReason::kNumericalFailure:
+      return "numerical_failure";
   }
   return "?";
 }
@@ -82,6 +85,8 @@ std::string to_string(EventKind k) {
       return "dropped";
     case EventKind::kTurn:
       return "turn";
+    case EventKind::kNumericalFailure:
+      return "numerical_failure";
   }
   return "?";
 }
@@ -213,9 +218,66 @@ void validate_run_options(const RunOptions& o, double t0) {
   if (!rk4 &&
       (!(is.rtol > 0) || !(is.atol > 0) || !std::isfinite(is.rtol) || !std::isfinite(is.atol)))
     throw std::invalid_argument("integrator.rtol/atol: must be positive and finite");
+  if (is.energy_tolerance && !(*is.energy_tolerance > 0 && std::isfinite(*is.energy_tolerance)))
+    throw std::invalid_argument("integrator.energy_tolerance: must be positive and finite");
   if (!std::isfinite(t0)) throw std::invalid_argument("initial: t0 must be finite");
   if (!(o.t_end > t0) || !std::isfinite(o.t_end))
     throw std::invalid_argument("duration: the end time must be finite and after the start");
+  check_fixed_step_budget(is, o.t_end - t0);
+}
+
+void check_drag_stiffness(const RollingProblem& pb, const IntegratorSettings& is, double span) {
+  // Drag relaxes the velocities at c / m (and the spin at c_w / I): an explicit Runge-Kutta step
+  // is stable only below about 3 / rate (the methods' stability intervals on the negative real
+  // axis: 2.8 for RK4, 3.3 for DOPRI5, 6 for DOP853), so a run needs at least rate x span / 3
+  // steps, however loose its tolerance.
+  const auto check = [&](const char* key, double c, double inertia, const char* unit,
+                         const char* what) {
+    if (!(c > 0)) return;
+    const double rate = c / inertia;
+    const double steps = rate * span / 3.0;
+    if (steps > static_cast<double>(is.max_steps))
+      throw std::invalid_argument(
+          std::string("contact.") + key + ": " + format_significant(c) + " " + unit + " on " +
+          format_significant(inertia) + " " + what + " relaxes in " +
+          format_significant(1.0 / rate) + " s: an explicit integrator needs at least " +
+          format_significant(steps, 3) + " steps over " + format_significant(span) +
+          " s, beyond the step budget of " + std::to_string(is.max_steps) +
+          " (an air table's film is ~0.015 N s/m per kg)");
+  };
+  check("drag", pb.contact.drag, pb.object.mass, "N s/m", "kg");
+  check("drag_angular", pb.contact.drag_angular, pb.object.inertia, "N m s/rad", "kg m^2");
+}
+
+void check_fixed_step_budget(const IntegratorSettings& is, double span) {
+  if (is.method != Method::kRungeKutta4) return;
+  const double steps = std::ceil(span / is.fixed_step);
+  if (steps > static_cast<double>(is.max_steps))
+    throw std::invalid_argument(
+        "integrator.step: " + format_significant(is.fixed_step) + " s over " +
+        format_significant(span) + " s is " + format_significant(steps, 3) +
+        " steps, beyond the step budget of " + std::to_string(is.max_steps) +
+        " (a longer step, or a shorter duration)");
+}
+
+std::string integrator_setting_problem(const std::string& key, double v) {
+  const auto range = [v](double lo, double hi, const std::string& why) -> std::string {
+    if (v >= lo && v <= hi) return "";
+    return "must be in [" + format_significant(lo) + ", " + format_significant(hi) + "] (" + why +
+           "), got " + format_significant(v);
+  };
+  if (key == "rtol")
+    return range(1e-14, 0.1,
+                 "tighter, the error estimate is rounding noise; looser, nothing is resolved");
+  if (key == "atol")
+    return range(1e-18, 1.0, "absolute error of lengths in m and rates; 1e-18 is rounding");
+  if (key == "energy_tolerance")
+    return range(1e-12, 1.0, "relative to the energy the run moves; 1e-12 is rounding");
+  if (key == "step" || key == "max_step")
+    return v > 0 && std::isfinite(v)
+               ? ""
+               : "must be positive and finite (s), got " + format_significant(v);
+  throw std::logic_error("integrator_setting_problem: unknown key " + key);
 }
 
 namespace {
@@ -368,7 +430,8 @@ RunResult run_rolling(std::shared_ptr<const RollingProblem> problem, const Initi
                       [mu](const Sample& s) { return mu * s.force_normal - std::abs(s.force_tangential); },
                       1e-12 * weight});
   }
-  detail::Integration<Model> integration(model, options, res, std::move(guards));
+  detail::EnergyLedger ledger = detail::planar_ledger(res.audit, *problem, options);
+  detail::Integration<Model> integration(model, options, res, std::move(guards), ledger, init.t0);
 
   double t = init.t0;
   typename Model::State y = model.initial_state(init);
@@ -391,9 +454,10 @@ RunResult run_rolling(std::shared_ptr<const RollingProblem> problem, const Initi
   res.initial = end.first;
   res.final = end.last;
   if (end.fired) {
-    res.reason = *end.fired == EventKind::kContactLost ? StopReason::kContactLost
-                 : *end.fired == EventKind::kSlip      ? StopReason::kSlip
-                                                       : StopReason::kLeftBounds;
+    res.reason = *end.fired == EventKind::kContactLost        ? StopReason::kContactLost
+                 : *end.fired == EventKind::kSlip             ? StopReason::kSlip
+                 : *end.fired == EventKind::kNumericalFailure ? StopReason::kNumericalFailure
+                                                              : StopReason::kLeftBounds;
     RecordedEvent e;
     e.kind = *end.fired;
     e.t = end.t;

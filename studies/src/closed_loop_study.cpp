@@ -128,8 +128,17 @@ CellResult run_cell(const Scene& nominal, const Cell& cell, int n, unsigned thre
       n, std::max(1u, threads),
       [&](long index) {
         const int run = static_cast<int>(index);
-        const drivers::SyntheticResult r =
-            drivers::run_synthetic(setup, model::compile(drivers::perturb(assumed, p, kSeed, run)));
+        drivers::SyntheticResult r;
+        try {
+          r = drivers::run_synthetic(setup,
+                                     model::compile(drivers::perturb(assumed, p, kSeed, run)));
+        } catch (const std::runtime_error&) {
+          // A world whose simulation fails is recorded and the study goes on (counted apart).
+          RunSummary failed;
+          failed.outcome = drivers::Outcome::kNumericalFailure;
+          out.runs[static_cast<std::size_t>(run)] = std::move(failed);
+          return;
+        }
         RunSummary s;
         s.success = r.success;
         s.outcome = r.outcome;
@@ -151,6 +160,8 @@ CellResult run_cell(const Scene& nominal, const Cell& cell, int n, unsigned thre
   for (const RunSummary& r : out.runs) {
     if (r.success)
       ++out.successes;
+    else if (r.outcome == drivers::Outcome::kNumericalFailure)
+      ++out.numerical_failures;
     else
       ++out.failures[failure_class(r)];
     frames += r.frames;
@@ -158,7 +169,8 @@ CellResult run_cell(const Scene& nominal, const Cell& cell, int n, unsigned thre
     if (r.success && std::isfinite(r.fn_min))
       out.fn_min_min = std::isnan(out.fn_min_min) ? r.fn_min : std::min(out.fn_min_min, r.fn_min);
   }
-  out.ci = drivers::wilson_interval(out.successes, n);
+  // A world that failed numerically has no physical outcome: the rate is over the others.
+  out.ci = drivers::wilson_interval(out.successes, n - out.numerical_failures);
   out.fn_min_mean = mean_finite(out.runs, &RunSummary::fn_min, true);
   out.duration_mean = mean_finite(out.runs, &RunSummary::duration, true);
   out.est_rms = mean_finite(out.runs, &RunSummary::est_rms);
@@ -174,7 +186,7 @@ std::string csv_header() {
   for (const char* c : kFailureColumns) h += std::string(",") + c;
   return h +
          ",fn_min_ratio_mean,fn_min_ratio_min,duration_mean[s],est_err_rms,nees_mean,"
-         "frames_lost_fraction,wall[s],cpu[s]\n";
+         "frames_lost_fraction,wall[s],cpu[s],numerical_failures\n";
 }
 
 std::string csv_row(const CellResult& c, int n) {
@@ -186,7 +198,9 @@ std::string csv_row(const CellResult& c, int n) {
     s += format_number(v);
   }
   s += "," + c.cell.controller + "," + std::to_string(n) + "," + std::to_string(c.successes);
-  for (double v : {static_cast<double>(c.successes) / n, c.ci.lo, c.ci.hi}) {
+  const int counted = n - c.numerical_failures;
+  for (double v :
+       {counted > 0 ? static_cast<double>(c.successes) / counted : NAN, c.ci.lo, c.ci.hi}) {
     s += ',';
     s += format_number(v);
   }
@@ -199,6 +213,8 @@ std::string csv_row(const CellResult& c, int n) {
     s += ',';
     s += format_number(v);
   }
+  s += ',';
+  s += std::to_string(c.numerical_failures);
   return s + "\n";
 }
 

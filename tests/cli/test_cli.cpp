@@ -142,7 +142,7 @@ TEST_F(CliSimulate, JsonHasRequiredKeys) {
   const json j = parse_json(r);
   expect_keys(j,
               {"period", "k", "s_T", "s_end", "sdot_end", "fn_apex_ratio", "fn_min_ratio",
-               "mu_required", "steps", "rhs_evals", "contact_lost"},
+               "mu_required", "steps", "rhs_evals", "contact_lost", "energy"},
               {"formulation", "method", "stop_reason", "rejected", "restarts", "junction_crossings",
                "max_constraint_residual", "max_redundant_residual", "t_end", "csv", "model", "mu",
                "end_mode", "mode_changes", "impacts", "mode_time", "flights", "events"});
@@ -230,10 +230,10 @@ TEST_F(CliSolve, JsonMatchesPaper) {
   const Result r = run("solve --json");
   ASSERT_EQ(r.code, 0) << r.err;
   const json j = parse_json(r);
-  expect_keys(
-      j,
-      {"period", "k", "s_T", "s_end", "sdot_end", "fn_apex_ratio", "fn_min_ratio", "mu_required"},
-      {"simulations", "rhs_evals", "contact_lost", "files", "friction_margin"});
+  expect_keys(j,
+              {"period", "k", "s_T", "s_end", "sdot_end", "fn_apex_ratio", "fn_min_ratio",
+               "mu_required", "energy"},
+              {"simulations", "rhs_evals", "contact_lost", "files", "friction_margin"});
   // Paper section 4.3: 2T = 1.181 s is solved by k = -1.1393, with the normal force at the apex
   // 17.5 % of m g and a required friction coefficient of 0.306.
   EXPECT_NEAR(j["k"].get<double>(), -1.1393, 1e-3);

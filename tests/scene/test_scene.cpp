@@ -459,8 +459,21 @@ TEST(SceneTest, OutOfRangeValues) {
   expect_field_error(with(kBase, "mass: 1.0", "mass: 1.0\n  inertia: -1"), "object.inertia",
                      "positive");
   expect_field_error(with(kBase, "duration: 1.181", "duration: 0"), "duration", "positive");
-  expect_field_error(with(kBase, "rtol: 1.0e-10", "rtol: 0"), "integrator.rtol", "positive");
-  expect_field_error(with(kBase, "atol: 1.0e-12", "atol: -1"), "integrator.atol", "positive");
+  // The integrator's inputs within the bounds sim sets (docs/SCENE.md, "integrator").
+  expect_field_error(with(kBase, "rtol: 1.0e-10", "rtol: 0"), "integrator.rtol",
+                     "must be in [1e-14, 0.1]");
+  expect_field_error(with(kBase, "rtol: 1.0e-10", "rtol: 1.0e-300"), "integrator.rtol",
+                     "must be in [1e-14, 0.1]");
+  expect_field_error(with(kBase, "rtol: 1.0e-10", "rtol: 0.5"), "integrator.rtol",
+                     "must be in [1e-14, 0.1]");
+  expect_field_error(with(kBase, "atol: 1.0e-12", "atol: -1"), "integrator.atol",
+                     "must be in [1e-18, 1]");
+  expect_field_error(with(kBase, "atol: 1.0e-12", "atol: 1.0e-302"), "integrator.atol",
+                     "must be in [1e-18, 1]");
+  expect_field_error(with(kBase, "atol: 1.0e-12", "atol: 1.0e-12\n  energy_tolerance: 1.0e-13"),
+                     "integrator.energy_tolerance", "must be in [1e-12, 1]");
+  expect_field_error(with(kBase, "atol: 1.0e-12", "atol: 1.0e-12\n  step: .inf"), "integrator.step",
+                     "must be a finite number");
   expect_field_error(with(kBase, "formulation: auto", "formulation: auto\n  step: 0"),
                      "integrator.step", "positive");
   expect_field_error(with(kBase, "formulation: auto", "formulation: auto\n  max_step: -0.1"),

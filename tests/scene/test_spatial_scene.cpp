@@ -164,7 +164,11 @@ TEST(SpatialScene, BadInputNamesTheField) {
   expect_field_error(with(kBowl, "duration: 2", "duration: 2\njoint: {}"), "joint", "unknown key");
   expect_field_error(with(kBowl, "type: ball", "type: disk"), "object.type", "allowed: ball");
   expect_field_error(with(kBowl, "duration: 2", "duration: 2\nintegrator: {rtol: -1}"),
-                     "integrator.rtol", "must be positive");
+                     "integrator.rtol", "must be in [1e-14, 0.1]");
+  expect_field_error(with(kBowl, "duration: 2", "duration: 2\nintegrator: {rtol: 1.0e-300}"),
+                     "integrator.rtol", "must be in [1e-14, 0.1]");
+  expect_field_error(with(kBowl, "duration: 2", "duration: 2\nintegrator: {energy_tolerance: 2}"),
+                     "integrator.energy_tolerance", "must be in [1e-12, 1]");
 }
 
 TEST(SpatialScene, TheBundledSpatialScenesLoad) {

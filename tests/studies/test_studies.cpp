@@ -61,12 +61,12 @@ TEST(Studies, SimStudyErrorsFallWithTheTolerance) {
           f == sim::Formulation::kReduced ? r.reference_general : r.reference_reduced;
       EXPECT_DOUBLE_EQ(curve.front()->err_s_T, std::abs(curve.front()->s_T - other.s_T));
     }
-  // The CSV: a header and one row per setting, 14 columns each.
+  // The CSV: a header and one row per setting, 15 columns each.
   const std::string csv = studies::sim_study_csv(r);
   EXPECT_EQ(csv_lines(csv), static_cast<long>(r.rows.size()) + 1);
   std::istringstream lines(csv);
   for (std::string line; std::getline(lines, line);)
-    EXPECT_EQ(std::count(line.begin(), line.end(), ','), 13) << line;
+    EXPECT_EQ(std::count(line.begin(), line.end(), ','), 14) << line;
 }
 
 TEST(Studies, SimStudyRefusesAMotionThatIsNotTheButterfly) {

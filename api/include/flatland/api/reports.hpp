@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include <array>
+#include <string>
 #include <vector>
 
 namespace flatland::api {
@@ -32,6 +33,10 @@ Json contact_summary_json(const std::array<double, 4>& mode_time, int mode_chang
                           const sim::Sample& initial);
 
 /// Keys shared by the solve and time-optimal reports.
+/// A run's energy audit (flatland/sim/energy.hpp): its terms, balance, bound and whether it held.
+Json energy_json(const sim::EnergyAudit& audit);
+/// The one line that says where and by how much a broken energy balance broke.
+std::string energy_failure_text(const sim::EnergyAudit& audit);
 Json solve_report_json(const sim::SolveReport& r);
 /// `time-optimal --json` without its files.
 Json time_optimal_json(const sim::TimeOptimalReport& r, const sim::SimulationSpec& spec);

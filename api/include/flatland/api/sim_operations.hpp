@@ -37,6 +37,12 @@ std::string option_name(std::string_view name, Spelling spelling);
 /// UsageError unless v is finite (and, with require_positive, > 0). `option` is spelled already.
 void require_finite(const std::string& option, double v);
 void require_positive(const std::string& option, double v, const std::string& unit);
+/// The most rows a trajectory resampled every --sample-dt may have: a million rows is ~0.5 GB of
+/// CSV and ~0.2 GB in memory (and 1 kHz over 1000 s).
+inline constexpr double kMaxSamples = 1e6;
+/// UsageError (naming `option`) unless dt is positive and finite and a span of `span` s at that
+/// spacing stays within kMaxSamples rows.
+void require_sample_spacing(const std::string& option, double dt, double span);
 /// UsageError unless from < to.
 void require_increasing(const std::string& from_option, double from, const std::string& to_option,
                         double to);
@@ -45,6 +51,7 @@ void require_increasing(const std::string& from_option, double from, const std::
 struct IntegratorOverrides {
   std::optional<std::string> method;       ///< dopri5, dop853 or rk4
   std::optional<double> rtol, atol, step;  ///< step: rk4's fixed step, s
+  std::optional<double> energy_tolerance;  ///< the energy balance's relative tolerance
   std::optional<std::string> formulation;  ///< auto, general or reduced
 };
 /// Check the overrides and set them in scene.sim.run.

@@ -63,6 +63,7 @@ Interval wilson_interval(long k, long n, double z = 1.959963984540054);
 /// One experiment: one run (one perturbed world) under one controller.
 struct RunRecord {
   int run = 0;
+  std::uint64_t seed = 0;  ///< the Monte Carlo seed: (seed, run) rebuild this world (perturb)
   std::string controller;  ///< "open-loop" or "feedback"
   bool success = false;
   Outcome outcome = Outcome::kNotFinished;
@@ -79,7 +80,10 @@ struct MonteCarloResult {
   int runs = 0;
   /// -1 when that controller was not run.
   int success_open_loop = -1, success_feedback = -1;
-  Interval ci_open_loop, ci_feedback;  ///< Wilson 95 %
+  /// Worlds whose simulation failed (Outcome::kNumericalFailure), per controller: they have no
+  /// physical outcome and are left out of the rates' denominators.
+  int numerical_failures_open_loop = 0, numerical_failures_feedback = 0;
+  Interval ci_open_loop, ci_feedback;  ///< Wilson 95 %, over the runs that did not fail
   /// Ordered by run, then by the order of `controllers`: independent of the thread count.
   std::vector<RunRecord> records;
   double seconds = 0;  ///< wall clock
@@ -88,17 +92,26 @@ struct MonteCarloResult {
 /// Called after each experiment with (experiments done, experiments in all); from the worker
 /// threads, one call at a time.
 using MonteCarloProgress = std::function<void(long done, long total)>;
+/// Edits world `run`'s scene after its perturbation and before it is compiled (a study of one
+/// more parameter, or a fault to inject); called from the worker threads.
+using WorldEdit = std::function<void(Scene& world, int run)>;
 
 /// `n` runs of each of `controllers` ("open-loop", "feedback"; each at most once) on `threads`
 /// std::threads (0: std::thread::hardware_concurrency()). Run i's world obeys
 /// perturb(nominal.spec, p, seed, i), compiled; the loop assumes `nominal` with
 /// controller.mode set to the controller. Experiments are handed out by index, and each result is
-/// stored at its index, so the records do not depend on the thread count. An exception in any
-/// experiment stops the others and is rethrown (a run that fails — contact lost, safe stop — is a
-/// result, not an exception). std::invalid_argument for n < 1, an unknown or repeated controller,
-/// invalid perturbations.
+/// stored at its index, so the records do not depend on the thread count. A run that fails —
+/// contact lost, safe stop — is a result; so is a world whose simulation fails (a
+/// std::runtime_error in it: Outcome::kNumericalFailure with its message, and the study goes
+/// on). Any other exception stops the others and is rethrown. std::invalid_argument for n < 1,
+/// an unknown or repeated controller, invalid perturbations.
 MonteCarloResult run_montecarlo(const model::Model& nominal_model, const Perturbations& p, int n,
                                 std::uint64_t seed, const std::vector<std::string>& controllers,
-                                unsigned threads = 0, const MonteCarloProgress& progress = {});
+                                unsigned threads = 0, const MonteCarloProgress& progress = {},
+                                const WorldEdit& edit = {});
+
+/// runs.csv: one row per experiment (run, controller, outcome, what it drew, ...; the columns
+/// are documented in docs/CLOSED_LOOP.md), in the records' order.
+std::string runs_csv(const MonteCarloResult& result);
 
 }  // namespace flatland::drivers

@@ -59,6 +59,9 @@ enum class Outcome {
   kNotSettled,   ///< the disk can still leave the back well, or is still in flight
   kSafeStop,     ///< the controller stopped the hand (lost vision, implausible innovations, ...)
   kNotFinished,  ///< the motion did not finish
+  /// The world's simulation failed (its energy balance broke, or its integrator gave up): not a
+  /// physical outcome; what the disk would have done is unknown.
+  kNumericalFailure,
 };
 std::string to_string(Outcome o);
 
@@ -93,8 +96,13 @@ class SimWorld {
   render::SceneState scene_state_at(double t) const;
 
   /// Set when the disk left the hand's reach for good (it flew off or slid off and was not
-  /// caught); the joint keeps moving, unloaded, and the disk flies on.
+  /// caught; the joint keeps moving, unloaded, and the disk flies on), or when the world's
+  /// simulation failed numerically (kNumericalFailure; the disk then stands still).
   std::optional<Outcome> failure() const { return failure_; }
+  /// The largest |energy balance| of the world's simulation over its servo periods, J, and the
+  /// bound of that period (each period's run is audited: sim/energy.hpp).
+  double energy_worst() const { return energy_worst_; }
+  double energy_worst_bound() const { return energy_worst_bound_; }
   /// The failure in words (time and place).
   const std::string& failure_detail() const { return failure_detail_; }
   double fn_min_ratio() const { return fn_min_; }   ///< smallest f_n / (m g sin tilt) in contact
@@ -142,6 +150,7 @@ class SimWorld {
   std::string failure_detail_;
   double fn_min_ = 1e300, mu_max_ = 0;
   double theta_dot_kick_ = 0;  ///< the hand's rate change by an impact within a step
+  double energy_worst_ = 0, energy_worst_bound_ = 0;
   std::array<double, 4> mode_time_{0, 0, 0, 0};
   int impacts_ = 0, mode_changes_ = 0;
   std::vector<sim::RecordedEvent> events_;

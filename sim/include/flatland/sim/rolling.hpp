@@ -14,6 +14,7 @@
 
 #include "flatland/sim/contact.hpp"
 #include "flatland/sim/curve.hpp"
+#include "flatland/sim/energy.hpp"
 #include "flatland/sim/motion.hpp"
 #include "flatland/sim/object.hpp"
 
@@ -112,6 +113,12 @@ struct HybridState {
   double angle = 0, angular_velocity = 0;
 };
 
+/// The object's kinetic energy at a sample, J (translation and rotation in the table plane).
+double kinetic_energy(const RollingProblem& problem, const Sample& s);
+/// Kinetic plus potential energy (-m g . x, g in the table plane), J: what the energy audit
+/// balances against the work done on the object (flatland/sim/energy.hpp).
+double mechanical_energy(const RollingProblem& problem, const Sample& s);
+
 /// The paper's A x = b formulation. State (10): object position (2), object angle, s_o, s_h,
 /// object velocity (2), object angular velocity, sdot_o, sdot_h. The right-hand side is evaluated
 /// at the state snapped onto the contact manifold, and accepted steps are snapped too.
@@ -125,7 +132,10 @@ class GeneralRolling {
   explicit GeneralRolling(std::shared_ptr<const RollingProblem> problem, ContactPhase phase = {});
 
   State initial_state(const InitialContact& init) const;
-  void derivative(double t, const State& y, const Pieces& p, State& dy) const;
+  /// dy = f(t, y); with `power`, also the power of the forces on the object besides gravity
+  /// (the energy audit's integrands; every model below does the same).
+  void derivative(double t, const State& y, const Pieces& p, State& dy,
+                  Power* power = nullptr) const;
   /// Rebuild the object pose and velocities from (s_h, s_o, sdot_h). Returns the constraint
   /// residual the state had before (the drift this projection removed).
   double project(double t, State& y, const Pieces& p) const;
@@ -166,7 +176,8 @@ class ReducedDiskRolling {
                               ContactPhase phase = {});
 
   State initial_state(const InitialContact& init) const;
-  void derivative(double t, const State& y, const Pieces& p, State& dy) const;
+  void derivative(double t, const State& y, const Pieces& p, State& dy,
+                  Power* power = nullptr) const;
   double project(double, State&, const Pieces&) const { return 0.0; }
   Sample sample(double t, const State& y, const Pieces& p) const;
   Pieces pieces_for(const State& y, int direction) const;
@@ -183,6 +194,8 @@ class ReducedDiskRolling {
 
  private:
   double sddot(const HandKinematics& h, const CurveGeometry& g, double sdot) const;
+  Power rolling_power(const HandKinematics& h, const CurveGeometry& g, double sdot, double sddot,
+                      double omega_o) const;
   std::shared_ptr<const RollingProblem> problem_;
   ContactPhase phase_;
   double r_, rho2_, side_;
@@ -200,7 +213,8 @@ class ReducedDiskSliding {
   using State = Eigen::Matrix<double, N, 1>;
   ReducedDiskSliding(std::shared_ptr<const RollingProblem> problem, int slip_sign, int turn = 0);
 
-  void derivative(double t, const State& y, const Pieces& p, State& dy) const;
+  void derivative(double t, const State& y, const Pieces& p, State& dy,
+                  Power* power = nullptr) const;
   double project(double, State&, const Pieces&) const { return 0.0; }
   Sample sample(double t, const State& y, const Pieces& p) const;
   Sample sample_with(const HandKinematics& h, double t, const State& y, int hand_piece) const;

@@ -44,6 +44,7 @@ struct SolveReport {
 };
 
 /// s_h at the half period T for the spec with (period, k) set; one unrecorded run.
+/// std::runtime_error where that run fails numerically (its energy balance breaks).
 double half_period_s_h(const SimulationSpec& spec, double period, double k,
                        long* rhs_evals = nullptr);
 
@@ -64,6 +65,12 @@ struct SurfaceResult {
   std::vector<double> k, period;
   std::vector<double> s_T;  ///< s_T[i * period.size() + j] at (k[i], period[j])
   long rhs_evals = 0;
+  /// Grid points whose run failed numerically (its energy balance broke): s_T is NaN there.
+  struct Failure {
+    int i = 0, j = 0;  ///< k[i], period[j]
+    std::string what;
+  };
+  std::vector<Failure> numerical_failures;
 };
 /// s_h(T) on a k x 2T grid (paper Fig. 6), in parallel over `threads` (0 = all cores).
 SurfaceResult surface(const SimulationSpec& spec, double k_lo, double k_hi, int nk, double p_lo,

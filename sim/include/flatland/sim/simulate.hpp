@@ -1,6 +1,7 @@
 // Running the rolling dynamics in time: integrators, events, dense output, run reports.
 #pragma once
 
+#include "flatland/sim/energy.hpp"
 #include "flatland/sim/rolling.hpp"
 
 #include <array>
@@ -37,6 +38,9 @@ struct IntegratorSettings {
   double fixed_step = 1e-3;  ///< s (RK4)
   double max_step = std::numeric_limits<double>::infinity();  ///< s (Dormand-Prince)
   long max_steps = 5'000'000;                                 ///< runtime error beyond this
+  /// The energy balance's relative tolerance (flatland/sim/energy.hpp); absent: the default
+  /// energy_tolerance() derives from rtol (or 1e-6 for RK4).
+  std::optional<double> energy_tolerance;
 };
 
 struct EventSettings {
@@ -65,6 +69,10 @@ struct RunOptions {
   std::optional<double> hand_inertia;
   bool record =
       true;  ///< keep every step (dense output, per-step samples, extrema); off for search
+  /// For the energy audit's own tests only: a factor on every impact's impulse where it changes
+  /// the object's velocities (the audit books the law's impulse). 1 in every real run; anything
+  /// else is a deliberately wrong term that the audit must catch.
+  double testing_impulse_factor = 1.0;
 };
 
 enum class StopReason {
@@ -72,8 +80,11 @@ enum class StopReason {
   kContactLost,  ///< rolling model: the normal force reached 0
   kSlip,         ///< rolling model: |f_t| reached mu f_n
   kLeftBounds,
-  kDropped,      ///< hybrid model: the object flew out of the hand's reach and cannot come back
-  kTransition,   ///< hybrid model with stop_at_transition: the first mode change or impact
+  kDropped,     ///< hybrid model: the object flew out of the hand's reach and cannot come back
+  kTransition,  ///< hybrid model with stop_at_transition: the first mode change or impact
+  /// The energy balance broke its bound (RunResult::audit): the numbers are wrong from there on.
+  /// Never a success.
+  kNumericalFailure,
 };
 std::string to_string(StopReason r);
 
@@ -94,6 +105,7 @@ enum class EventKind {
   /// While sliding, the object's rotation relative to the hand reversed (the rolling-resistance
   /// couple turns with it). Changes the load only: not recorded.
   kTurn,
+  kNumericalFailure,  ///< the energy balance broke its bound (RunResult::audit)
 };
 std::string to_string(EventKind k);
 
@@ -200,6 +212,8 @@ struct RunResult {
   bool contact_lost = false;
   /// Hybrid model: where the run ended, to continue it (the closed loop steps the world so).
   std::optional<HybridState> final_state;
+  /// The energy balance (flatland/sim/energy.hpp): broken only with reason kNumericalFailure.
+  EnergyAudit audit;
 };
 
 struct Extrema {
@@ -221,8 +235,25 @@ Extrema find_extrema(const RunResult& run, double t_from, double t_to, double ti
 /// The formulation a problem will use under `requested`; throws if kReduced is impossible.
 Formulation resolve_formulation(const RollingProblem& problem, Formulation requested);
 
-/// Settings that every model checks: integrator tolerances, step and the time span from t0.
+/// Settings that every model checks: integrator tolerances, step and the time span from t0; a
+/// fixed step (RK4) that would take more than max_steps over the span is refused here, before
+/// any work (std::invalid_argument naming integrator.step).
 void validate_run_options(const RunOptions& options, double t0);
+
+/// Why an integrator setting given as input (a scene key, a command-line option, a Python
+/// argument) is refused, or "" when it is fine: `key` is the scene's name. rtol in [1e-14, 0.1]
+/// (tighter than ~100 rounding units the error estimate is rounding noise; looser than 10 % is
+/// no solution), atol in [1e-18, 1] (the state's values are lengths of millimetres to metres and
+/// rates of them: 1e-18 is rounding of a millimetre), energy_tolerance in [1e-12, 1], step and
+/// max_step positive and finite (s).
+std::string integrator_setting_problem(const std::string& key, double value);
+/// std::invalid_argument naming contact.drag (or drag_angular) when the drag relaxes the
+/// object's velocity so fast that an explicit integrator, stable only for steps below about
+/// 3 m / c, would need more than is.max_steps steps over `span` s.
+void check_drag_stiffness(const RollingProblem& problem, const IntegratorSettings& is, double span);
+/// std::invalid_argument naming integrator.step when a fixed step (RK4) would take more than
+/// is.max_steps over `span` s (the spatial run checks the same).
+void check_fixed_step_budget(const IntegratorSettings& is, double span);
 /// Extrema, apex and contact_lost of a finished recorded run.
 void finish_run(RunResult& run, const RunOptions& options);
 

@@ -56,7 +56,10 @@ struct ClosedLoopCellResult {
   std::vector<ClosedLoopRun> runs;  ///< by world
   int successes = 0;
   drivers::Interval ci;                 ///< Wilson 95 %
-  std::map<std::string, int> failures;  ///< failure_class -> count
+  std::map<std::string, int> failures;  ///< failure_class -> count (physical outcomes)
+  /// Worlds whose simulation failed (drivers::Outcome::kNumericalFailure): counted apart, and
+  /// left out of the success rate's denominator.
+  int numerical_failures = 0;
   /// Over the successes: the smallest normal force ratio's mean and minimum, the mean duration;
   /// over every run that servoed: the estimate's RMS error and mean NEES in the servo stage.
   double fn_min_mean = NAN, fn_min_min = NAN, duration_mean = NAN, est_rms = NAN, nees = NAN;

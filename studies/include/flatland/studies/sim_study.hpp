@@ -26,6 +26,9 @@ struct SimStudyRow {
   double s_T = NAN, err_s_T = NAN, cpu_s_T = NAN;  ///< s_h(T), its error, CPU s per run
   double k = NAN, err_k = NAN, cpu_k = NAN;        ///< k*, its error, CPU s per solve
   int simulations = 0;                             ///< runs of one solve
+  /// The run to T's energy balance relative to the energy it moved, |balance| / scale (its
+  /// audit: sim/energy.hpp); the study measures it rather than stopping runs on it.
+  double energy_error = NAN;
   std::string failure;  ///< the integrator's or the search's error, if any
 };
 
