@@ -219,7 +219,9 @@ class Hybrid {
   }
   Sample sample(const HybridState& x) const;
   /// The instant's checks: a state whose mode its forces do not allow changes mode now.
-  HybridState settle(HybridState x);
+  /// `crossed`: the guard whose located crossing x has just taken (transition()); the check that
+  /// would take x back across that boundary is not made (see the definition).
+  HybridState settle(HybridState x, std::optional<EventKind> crossed = std::nullopt);
   /// The mode after the guard `fired` ended a segment at x.
   void transition(HybridState& x, EventKind fired, const Sample& at);
   /// One segment in a contact mode; false when the run ends.
@@ -300,7 +302,24 @@ int Hybrid::turn_of(const HybridState& x, bool at_zero) const {
   return accel > 0 ? 1 : -1;
 }
 
-HybridState Hybrid::settle(HybridState x) {
+// A located crossing is trusted. Brent locates a guard's zero to the event tolerance in time and
+// returns the better end of its last bracket, which may lie on either side: the state a segment
+// ends in sits on the boundary only up to about time_tolerance x |d guard / dt| (1e-11 N at a slip
+// onset where the friction margin changes at ~10 N/s), more than this function's tolerances
+// (1e-12 m g). Checked again here, a state a little short of the boundary read as strictly inside
+// the mode it was leaving: a slip start on the near side of the cone re-stuck at once ("rolling
+// strictly inside the cone"), the rolling segment then found the same crossing at the same
+// instant, and the run stopped on the stall check ("keeps changing mode without time advancing",
+// ~3 % of random worlds at event_tolerance 1e-12). A state at a located crossing is on the
+// boundary by definition, and a boundary case goes to the mode the event entered: after a slip
+// start the disk slides on (no stick test), after a release it rolls on (no rest test), after a
+// reversal of the slip (a located stick whose rolling needs more than mu) or of the relative
+// rotation (kTurn), the sign the transition chose stands (the slip velocity or the relative
+// rotation left at the crossing is the location's residual, its sign is noise). The other
+// transitions are already checked at the same state with complementary bounds (a stick or a rest
+// decided with <= the bound is undone only beyond bound + tolerance); a lift-off leaves for the
+// flight. The checks that concern another boundary still run.
+HybridState Hybrid::settle(HybridState x, std::optional<EventKind> crossed) {
   const double mu = pb().contact.mu_static();
   const double delta = pb().contact.rolling_resistance;
   const double tol_f = 1e-12 * weight_;
@@ -317,6 +336,8 @@ HybridState Hybrid::settle(HybridState x) {
   if (x.mode == ContactMode::kSliding && x.sign == 0) x.sign = 1;
   for (int i = 0; i < 8; ++i) {
     if (x.mode == ContactMode::kFlight) return x;
+    // Once the mode changed here, the crossing is no longer what the state sits on.
+    const auto on = [&](EventKind kind) { return i == 0 && crossed && *crossed == kind; };
     const Sample s = sample(x);
     if (s.force_normal < -tol_f) {
       if (!pb().object.disk_radius) return x;  // run() stops it
@@ -330,7 +351,7 @@ HybridState Hybrid::settle(HybridState x) {
         if (delta > 0) {
           if (x.sdot_h != 0) {
             x.sign = x.sdot_h > 0 ? +1 : -1;
-          } else {
+          } else if (!on(EventKind::kRelease)) {
             HybridState rest = x;
             rest.mode = ContactMode::kRest;
             const Sample r = sample(rest);
@@ -352,9 +373,11 @@ HybridState Hybrid::settle(HybridState x) {
         }
         return x;
       case ContactMode::kSliding: {
-        if (std::abs(s.slip_velocity) > 1e-12) {
+        // At a located reversal of the slip or of the relative rotation, what is left of it is
+        // the location's residual: the transition's sign stands.
+        if (!on(EventKind::kStick) && std::abs(s.slip_velocity) > 1e-12) {
           x.sign = s.slip_velocity > 0 ? +1 : -1;
-          if (x.turn == 0) x.turn = turn_of(x);
+          if (x.turn == 0) x.turn = turn_of(x, on(EventKind::kTurn));
           return x;
         }
         // No slip: rolling if the friction it needs is strictly inside the cone (on the cone,
@@ -363,7 +386,8 @@ HybridState Hybrid::settle(HybridState x) {
         roll.mode = ContactMode::kRolling;
         roll.sign = x.sdot_h > 0 ? 1 : x.sdot_h < 0 ? -1 : 0;
         const Sample r = sample(roll);
-        if (std::abs(r.force_tangential) < mu * r.force_normal - tol_f) {
+        if (!on(EventKind::kSlipStart) &&
+            std::abs(r.force_tangential) < mu * r.force_normal - tol_f) {
           x = from_sample(r, ContactMode::kSliding, x.sign, x.hand_piece);
           change_mode(x, ContactMode::kRolling, roll.sign, EventKind::kStick);
           continue;
@@ -371,7 +395,7 @@ HybridState Hybrid::settle(HybridState x) {
         const int sign = r.force_tangential > 0 ? -1 : +1;
         if (sign != x.sign) event(EventKind::kSlipReverse, x);
         x.sign = sign;
-        x.turn = turn_of(x);
+        x.turn = turn_of(x, on(EventKind::kTurn));
         return x;
       }
       case ContactMode::kFlight:
@@ -501,10 +525,15 @@ bool Hybrid::run_segment(const Model& model, typename Model::State y, HybridStat
     event(EventKind::kContactLost, x);
     return false;
   }
+  // Located (the guard within its tolerance of 0 where the segment ended), or violated at once
+  // (beyond it: at the segment's start or at a jump of the hand's acceleration).
+  bool located = false;
+  for (const detail::Guard& g : guards(x))
+    if (g.kind == *end.fired) located = g.value(end.last) >= -g.tolerance;
   transition(x, *end.fired, end.last);
   final_ = x;
   if (stop_here()) return false;
-  x = settle(x);
+  x = located ? settle(x, *end.fired) : settle(x);
   final_ = x;
   return true;
 }
