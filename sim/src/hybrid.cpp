@@ -222,6 +222,12 @@ class Hybrid {
   /// `crossed`: the guard whose located crossing x has just taken (transition()); the check that
   /// would take x back across that boundary is not made (see the definition).
   HybridState settle(HybridState x, std::optional<EventKind> crossed = std::nullopt);
+  /// The state x sticks into where its slip stops: rolling the way s_h moves; where s_h stands
+  /// still with rolling resistance, at rest if the couple can hold it, else rolling the way the
+  /// couple turns it (as settle() resolves a rolling state with sdot_h = 0).
+  HybridState no_slip(const HybridState& x) const;
+  /// Sliding to the no-slip state `stuck` (no_slip(x), sampled as `r`): kStick, then kRest.
+  void stick(HybridState& x, const HybridState& stuck, const Sample& r);
   /// The mode after the guard `fired` ended a segment at x.
   void transition(HybridState& x, EventKind fired, const Sample& at);
   /// One segment in a contact mode; false when the run ends.
@@ -300,6 +306,30 @@ int Hybrid::turn_of(const HybridState& x, bool at_zero) const {
   const double accel = s.object_angular_acceleration - s.theta_ddot;
   if (std::abs(pb().object.inertia * accel) <= delta * s.force_normal) return 0;
   return accel > 0 ? 1 : -1;
+}
+
+HybridState Hybrid::no_slip(const HybridState& x) const {
+  HybridState roll = x;
+  roll.mode = ContactMode::kRolling;
+  roll.sign = x.sdot_h > 0 ? 1 : x.sdot_h < 0 ? -1 : 0;
+  const double delta = pb().contact.rolling_resistance;
+  if (roll.sign != 0 || !(delta > 0)) return roll;
+  // Without a direction the rolling-resistance couple is undetermined: checked with none (sign
+  // 0), a rolling the couple then turned one way could need more friction than the check said,
+  // and a slip started there stuck again at the same instant, over and over.
+  HybridState rest = roll;
+  rest.mode = ContactMode::kRest;
+  const Sample r = sample(rest);
+  const double radius = pb().object.disk_radius ? *pb().object.disk_radius : 1.0;
+  if (std::abs(r.rolling_couple) < delta * r.force_normal - 1e-12 * weight_ * radius) return rest;
+  roll.sign = static_cast<int>(side_ * sgn(r.rolling_couple));
+  return roll;
+}
+
+void Hybrid::stick(HybridState& x, const HybridState& stuck, const Sample& r) {
+  x = from_sample(r, ContactMode::kSliding, x.sign, x.hand_piece);
+  change_mode(x, ContactMode::kRolling, stuck.sign, EventKind::kStick);
+  if (stuck.mode == ContactMode::kRest) change_mode(x, ContactMode::kRest, 0, EventKind::kRest);
 }
 
 // A located crossing is trusted. Brent locates a guard's zero to the event tolerance in time and
@@ -382,14 +412,11 @@ HybridState Hybrid::settle(HybridState x, std::optional<EventKind> crossed) {
         }
         // No slip: rolling if the friction it needs is strictly inside the cone (on the cone,
         // as right after a slip started, it slides on).
-        HybridState roll = x;
-        roll.mode = ContactMode::kRolling;
-        roll.sign = x.sdot_h > 0 ? 1 : x.sdot_h < 0 ? -1 : 0;
-        const Sample r = sample(roll);
+        const HybridState stuck = no_slip(x);
+        const Sample r = sample(stuck);
         if (!on(EventKind::kSlipStart) &&
             std::abs(r.force_tangential) < mu * r.force_normal - tol_f) {
-          x = from_sample(r, ContactMode::kSliding, x.sign, x.hand_piece);
-          change_mode(x, ContactMode::kRolling, roll.sign, EventKind::kStick);
+          stick(x, stuck, r);
           continue;
         }
         const int sign = r.force_tangential > 0 ? -1 : +1;
@@ -435,14 +462,10 @@ void Hybrid::transition(HybridState& x, EventKind fired, const Sample& at) {
       return;
     }
     case EventKind::kStick: {
-      HybridState roll = x;
-      roll.mode = ContactMode::kRolling;
-      roll.sign = x.sdot_h > 0 ? 1 : x.sdot_h < 0 ? -1 : 0;
-      const Sample r = sample(roll);
+      const HybridState stuck = no_slip(x);
+      const Sample r = sample(stuck);
       if (std::abs(r.force_tangential) <= pb().contact.mu_static() * r.force_normal) {
-        const HybridState rolled = from_sample(r, ContactMode::kSliding, x.sign, x.hand_piece);
-        x = rolled;
-        change_mode(x, ContactMode::kRolling, roll.sign, EventKind::kStick);
+        stick(x, stuck, r);
       } else {
         x.sign = r.force_tangential > 0 ? -1 : +1;
         x.turn = turn_of(x);
