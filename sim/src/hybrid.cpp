@@ -11,6 +11,7 @@
 #include <numbers>
 #include <sstream>
 #include <stdexcept>
+#include <utility>
 
 namespace flatland::sim {
 
@@ -262,6 +263,7 @@ class Hybrid {
   double weight_, side_;
   detail::EnergyLedger ledger_;
   HybridState final_;
+  bool lifted_off_ = false;  ///< the flight about to start left the hand at a lift-off
 };
 
 Sample Hybrid::sample(const HybridState& x) const { return sample_state(pb_, x, formulation_); }
@@ -287,6 +289,7 @@ void Hybrid::event(EventKind kind, const HybridState& x, const Sample* s) {
 
 void Hybrid::change_mode(HybridState& x, ContactMode mode, int sign, EventKind kind) {
   if (mode != x.mode) ++res_.stats.mode_changes;
+  lifted_off_ = kind == EventKind::kLiftOff;
   x.mode = mode;
   x.sign = sign;
   x.turn = 0;
@@ -348,7 +351,8 @@ void Hybrid::stick(HybridState& x, const HybridState& stuck, const Sample& r) {
 // rotation left at the crossing is the location's residual, its sign is noise). The other
 // transitions are already checked at the same state with complementary bounds (a stick or a rest
 // decided with <= the bound is undone only beyond bound + tolerance); a lift-off leaves for the
-// flight. The checks that concern another boundary still run.
+// flight, whose first step looks for the disk leaving before it takes a touch for an impact
+// (flight()). The checks that concern another boundary still run.
 HybridState Hybrid::settle(HybridState x, std::optional<EventKind> crossed) {
   const double mu = pb().contact.mu_static();
   const double delta = pb().contact.rolling_resistance;
@@ -579,6 +583,7 @@ bool Hybrid::contact_segment(HybridState& x) {
 bool Hybrid::flight(HybridState& x) {
   const RollingProblem& pb = *pb_;
   const Flight f(pb, x);
+  const bool lifted_off = std::exchange(lifted_off_, false);
   const double r = *pb.object.disk_radius;
   const double reach = pb.hand->reach() + r;
   long& gap_evals = res_.stats.gap_evals;
@@ -619,11 +624,23 @@ bool Hybrid::flight(HybridState& x) {
     }
     const double gap1 = gap_of(q1);
     if (gap1 < -kGapTolerance) {
-      if (gap <= 0) {
+      // Touching at the start. After a bounce, a flight that ends within this step ends the
+      // bouncing in contact (impact(): the rule that ends a chattering sequence). After a
+      // lift-off, the disk may leave and come back within the step: then the return is the
+      // contact. Taken at the start instead, the impact found the disk still leaving (touching
+      // while separating: caught), it lifted off again at the same instant, and so on. The gap
+      // is probed at half the step, a quarter, ... down to the time tolerance.
+      double t_from = q.t, gap_from = gap;
+      for (double dt_probe = 0.5 * (q1.t - q.t);
+           lifted_off && gap_from <= 0 && dt_probe > opt_.events.time_tolerance; dt_probe *= 0.5) {
+        const double g = gap_of(probe(q.t + dt_probe));
+        if (g > 0) t_from = q.t + dt_probe, gap_from = g;
+      }
+      if (gap_from <= 0) {
         t_contact = q.t;
       } else {
-        t_contact = brent_root([&](double tt) { return gap_of(probe(tt)); }, q.t, q1.t, gap, gap1,
-                               opt_.events.time_tolerance)
+        t_contact = brent_root([&](double tt) { return gap_of(probe(tt)); }, t_from, q1.t, gap_from,
+                               gap1, opt_.events.time_tolerance)
                         .x;
       }
       break;

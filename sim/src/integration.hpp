@@ -312,9 +312,10 @@ SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y
         project(t + hh, out);
         return out;
       };
-      auto locate = [&](const std::function<double(const Y&, double)>& g, double g0, double g1) {
-        return t + brent_root([&](double hh) { return g(step_state(hh), t + hh); }, 0.0, h_full, g0,
-                              g1, ev.time_tolerance)
+      auto locate = [&](const std::function<double(const Y&, double)>& g, double g0, double g1,
+                        double from = 0.0) {
+        return t + brent_root([&](double hh) { return g(step_state(hh), t + hh); }, from, h_full,
+                              g0, g1, ev.time_tolerance)
                        .x;
       };
       if (s1 > iv.hi || s1 < iv.lo) {
@@ -345,13 +346,28 @@ SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y
         for (const Guard& gd : guards_) {
           const double g0 = gd.value(s_start), g1 = gd.value(s_end);
           if (!(g1 < 0)) continue;
-          // A segment may start a rounding error on the wrong side of a boundary it was meant
-          // to leave (within the tolerance); if the value stays below zero, the guard holds no
-          // longer: it fires at the start.
-          const double tg =
-              g0 < 0 ? t
-                     : locate([&](const Y& s, double tau) { return gd.value(sample(tau, s)); }, g0,
-                              g1);
+          const auto value = [&](const Y& s, double tau) { return gd.value(sample(tau, s)); };
+          double tg = t;
+          if (g0 > 0) {
+            tg = locate(value, g0, g1);
+          } else {
+            // The guard starts on its boundary (exactly 0: a segment starts where its mode was
+            // entered, a slip at zero slip velocity, a rolling at sdot_h = 0) or a rounding error
+            // on the wrong side of one it was meant to leave (within the tolerance). If the value
+            // stays below zero, the guard holds no longer: it fires at the start. But it may rise
+            // first and come back within the step (a slip that grows and dies out, a rolling
+            // that turns back), and then the fall is the event: fired at the start instead, the
+            // transition found the mode it left still wanted and the segment started again at
+            // the same instant, over and over. The step map is probed at h/2, h/4, ... down to
+            // the time tolerance for a value above zero.
+            for (double hh = 0.5 * h_full; hh > ev.time_tolerance; hh *= 0.5) {
+              const double gm = value(step_state(hh), t + hh);
+              if (gm > 0) {
+                tg = locate(value, gm, g1, hh);
+                break;
+              }
+            }
+          }
           if (tg < t_event || kind == kNone) t_event = tg, kind = kGuard, guard_kind = gd.kind;
         }
       }
