@@ -241,8 +241,8 @@ void check_consistent(const RunResult& r, const SimulationSpec& spec, Tally& tal
 
 }  // namespace
 
-// Random worlds, half with the hand held still, half on the butterfly: none fails, and every one
-// is consistent with its forces. With the hand held still no energy comes in: the disk's
+// Random worlds, half with the hand held still, half on the butterfly: none fails, every one is
+// consistent with its forces and keeps its energy balance. With the hand held still no energy comes in: the disk's
 // mechanical energy never increases (the hand does no work; sliding, impacts and the losses only
 // take energy away).
 TEST(HybridWorlds, RandomWorldsRunAndAgreeWithTheirForces) {
@@ -262,6 +262,14 @@ TEST(HybridWorlds, RandomWorldsRunAndAgreeWithTheirForces) {
       continue;
     }
     check_consistent(r, spec, tally);
+    // Every energy balance holds (sim/energy.hpp): no run is a numerical failure, the losses and
+    // impacts only take energy, and a hand held still does no work at all.
+    EXPECT_NE(r.reason, StopReason::kNumericalFailure);
+    EXPECT_FALSE(r.audit.broken);
+    EXPECT_LE(std::abs(r.audit.balance), r.audit.bound());
+    EXPECT_LE(r.audit.work_losses, 0.0);
+    EXPECT_LE(r.audit.impact_losses, 0.0);
+    if (spec.motion.kind == MotionSpec::Kind::kFixed) EXPECT_EQ(r.audit.work_hand, 0.0);
     if (spec.motion.kind == MotionSpec::Kind::kFixed) {
       const double scale = spec.object.mass * spec.effective_gravity() * 0.3;
       for (std::size_t k = 1; k < r.steps.size(); ++k) {
