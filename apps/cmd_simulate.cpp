@@ -259,6 +259,8 @@ void run_simulate(const SimulateOptions& o) {
   if (o.mu.opt->count()) request.mu = o.mu.value;
   if (o.model_opt->count()) request.model = o.model;
   request.stop_on_contact_loss = !o.no_stop_on_contact_loss;
+  // Without --out no trajectory is written: the run keeps a bounded window of it.
+  request.keep_trajectory = !o.common.out.empty();
   const Scene scene = load_scene_option(o.common, SceneSpaces::kPlanarOrSpatial);
   if (scene.spatial) return run_simulate_spatial(o, scene);
   const api::PreparedSimulation prepared =

@@ -14,6 +14,8 @@ double s_at_half_period(const sim::SimulationSpec& spec, const sim::RunResult& r
   if (spec.motion.kind != sim::MotionSpec::Kind::kButterfly || r.trajectory.empty())
     return std::nan("");
   const double T = spec.initial.t0 + 0.5 * spec.motion.period;  // as sim::evaluate does
+  for (const sim::Sample& s : r.probes)
+    if (s.t == T) return s.s_h;  // kept while the run's older steps were folded away
   const double eps = 1e-9 * std::max(1.0, std::abs(T));
   if (T < r.trajectory.t_begin() - eps || T > r.trajectory.t_end() + eps) return std::nan("");
   return r.trajectory.s_h(T);

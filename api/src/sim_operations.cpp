@@ -230,12 +230,28 @@ PreparedSimulation prepare_simulate(Scene scene, const SimulateRequest& r, Spell
   if (r.model) given.emplace_back("contact.model", name("model"));
   auto problem = build_problem_checked(spec, given);
   sim::resolve_formulation(*problem, spec.run.formulation);  // e.g. reduced for an ellipse
-  return {spec, std::move(problem)};
+  try {  // a fixed step the budget cannot reach the end with, named as the caller gave it
+    sim::check_fixed_step_budget(spec.run.integrator, spec.end_time() - spec.initial.t0);
+  } catch (const std::invalid_argument& e) {
+    if (!r.integrator.step && !r.duration) throw;
+    throw UsageError(std::string(e.what()) + " (set by " +
+                     name(r.integrator.step ? "step" : "duration") + ")");
+  }
+  return {spec, std::move(problem), r.keep_trajectory};
 }
+
+namespace {
+// Recent steps a run keeps when its trajectory is not wanted: about 40 MB, and runs of fewer
+// steps (the butterfly takes ~500) are never folded.
+constexpr long kWindowSteps = 20000;
+}  // namespace
 
 sim::RunResult simulate(const PreparedSimulation& p) {
   sim::RunOptions options = sim::run_options(p.spec);
   options.record = true;  // the report needs the dense output and the per-step samples
+  if (!p.keep_trajectory) options.keep_steps = kWindowSteps;
+  if (p.spec.motion.kind == sim::MotionSpec::Kind::kButterfly)
+    options.probe_times.push_back(p.spec.initial.t0 + 0.5 * p.spec.motion.period);  // s_h(T)
   return sim::simulate(p.problem, p.spec.initial, options);
 }
 

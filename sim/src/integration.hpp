@@ -40,6 +40,10 @@ inline std::string at_text(double t, double s_h) {
   return os.str();
 }
 
+/// With options.keep_steps, fold the oldest recorded steps into the run's extrema, apex and
+/// probes and drop them (simulate.cpp), so that a recorded run's memory stays bounded.
+void fold_old_steps(RunResult& res, const RunOptions& opt);
+
 /// A run that has used a hundredth of its step budget and, at the rate so far, would need more
 /// than four times the budget to reach its end is refused now (std::invalid_argument naming the
 /// duration: an input too long for the budget) instead of after minutes and gigabytes. Checked
@@ -204,6 +208,7 @@ template <class Model>
 void Integration<Model>::record(double t, const State& y, const Sample* s) {
   if (!opt_.record) return;
   res_.steps.push_back(s ? *s : sample(t, y));
+  fold_old_steps(res_, opt_);
 }
 
 template <class Model>

@@ -149,6 +149,25 @@ void Trajectory::add_closed_part(double t0, double t1, Closed f) {
   parts_.push_back(std::move(p));
 }
 
+void Trajectory::drop_before(double t) {
+  std::size_t keep_from = 0;
+  for (std::size_t i = 0; i + 1 < parts_.size(); ++i) {
+    const Part& p = parts_[i];
+    if ((p.closed || !p.steps.empty()) && p.t1 > t) break;
+    keep_from = i + 1;  // ends at or before t (or is empty): not needed any more
+  }
+  parts_.erase(parts_.begin(), parts_.begin() + static_cast<std::ptrdiff_t>(keep_from));
+  if (parts_.empty() || parts_.front().closed) return;
+  Part& p = parts_.front();
+  std::size_t n = 0;
+  while (n + 1 < p.steps.size() && p.steps[n].t0 + p.steps[n].h <= t) ++n;
+  if (n == 0) return;
+  p.steps.erase(p.steps.begin(), p.steps.begin() + static_cast<std::ptrdiff_t>(n));
+  p.coeffs.erase(p.coeffs.begin(),
+                 p.coeffs.begin() + static_cast<std::ptrdiff_t>(n * p.terms * p.n));
+  p.t0 = p.steps.front().t0;
+}
+
 const Trajectory::Part& Trajectory::part_at(double t) const {
   // The last non-empty part that starts at or before t: right-continuous at the instants
   // where one part ends and the next begins (an impact changes the velocities there).
@@ -362,6 +381,76 @@ Extrema find_extrema(const RunResult& run, double t_from, double t_to, double ti
   return x;
 }
 
+namespace {
+
+/// The apex in [from, to] of a recorded run (s_h rising through 0, the fingertip), if it is
+/// there and none was found before: t_apex, the normal force there and its event.
+void find_apex(RunResult& res, double from, double to, double time_tolerance) {
+  if (res.t_apex) return;
+  const auto& S = res.steps;
+  const Trajectory& tr = res.trajectory;
+  for (std::size_t i = 1; i < S.size() && S[i].t <= to; ++i) {
+    if (S[i - 1].t < from) continue;
+    if (S[i - 1].s_h < 0 && S[i].s_h >= 0 && S[i].t > S[i - 1].t) {
+      const RootResult r = brent_root([&](double tau) { return tr.s_h(tau); }, S[i - 1].t, S[i].t,
+                                      S[i - 1].s_h, S[i].s_h, time_tolerance);
+      res.t_apex = r.x;
+      res.fn_apex_ratio = tr.sample(r.x).fn_ratio;
+      RecordedEvent apex;
+      apex.kind = EventKind::kApex;
+      apex.t = r.x;
+      res.events.push_back(apex);
+      return;
+    }
+  }
+}
+
+/// The samples at the probe times in [from, to) (to] at the run's end) not taken yet.
+void take_probes(RunResult& res, const RunOptions& opt, double from, double to, bool last) {
+  for (double t : opt.probe_times) {
+    const bool in = t >= from && (t < to || (last && t <= to));
+    const bool taken = std::any_of(res.probes.begin(), res.probes.end(),
+                                   [t](const Sample& s) { return s.t == t; });
+    if (in && !taken) res.probes.push_back(res.trajectory.sample(t));
+  }
+}
+
+/// Fold an Extrema found over one window into the run's running ones (the smaller normal force,
+/// the larger friction needed; an infinite one stays).
+void fold_extrema(RunResult::Folded& f, const Extrema& x) {
+  if (std::isnan(f.fn_min_ratio) || x.fn_min_ratio < f.fn_min_ratio) {
+    if (!std::isnan(x.fn_min_ratio)) f.fn_min_ratio = x.fn_min_ratio, f.t_fn_min = x.t_fn_min;
+  }
+  if (std::isnan(f.mu_required) || x.mu_required > f.mu_required) {
+    if (!std::isnan(x.mu_required))
+      f.mu_required = x.mu_required, f.t_mu_required = x.t_mu_required;
+  }
+}
+
+}  // namespace
+
+namespace detail {
+void fold_old_steps(RunResult& res, const RunOptions& opt) {
+  if (!opt.record || opt.keep_steps <= 0) return;
+  auto& S = res.steps;
+  const std::size_t keep = static_cast<std::size_t>(opt.keep_steps);
+  if (S.size() < 2 * keep + 2) return;
+  // The oldest `keep` steps: their extrema, apex and probes, located as finish_run would, then
+  // dropped (steps and dense output up to the window's end, which stays as the new front).
+  const double from = S.front().t, cut = S[keep].t;
+  if (cut > from) {
+    const Extrema x = find_extrema(res, from, cut, opt.events.time_tolerance);
+    res.stats.event_evals += x.evaluations;
+    fold_extrema(res.folded, x);
+    find_apex(res, from, cut, opt.events.time_tolerance);
+    take_probes(res, opt, from, cut, false);
+  }
+  res.folded.steps += static_cast<long>(keep);
+  S.erase(S.begin(), S.begin() + static_cast<std::ptrdiff_t>(keep));
+  res.trajectory.drop_before(cut);
+}
+}  // namespace detail
+
 void finish_run(RunResult& res, const RunOptions& opt) {
   bool flew = false;
   for (const RecordedEvent& e : res.events) flew = flew || e.kind == EventKind::kLiftOff;
@@ -378,27 +467,16 @@ void finish_run(RunResult& res, const RunOptions& opt) {
     return;
   }
   const auto& S = res.steps;
-  const Trajectory& tr = res.trajectory;
-  const std::size_t n = S.size();
   const Extrema x = find_extrema(res, S.front().t, S.back().t, opt.events.time_tolerance);
   res.stats.event_evals += x.evaluations;
-  res.fn_min_ratio = x.fn_min_ratio;
-  res.t_fn_min = x.t_fn_min;
-  res.mu_required = x.mu_required;
-  res.t_mu_required = x.t_mu_required;
-  for (std::size_t i = 1; i < n; ++i) {
-    if (S[i - 1].s_h < 0 && S[i].s_h >= 0 && S[i].t > S[i - 1].t) {
-      const RootResult r = brent_root([&](double tau) { return tr.s_h(tau); }, S[i - 1].t, S[i].t,
-                                      S[i - 1].s_h, S[i].s_h, opt.events.time_tolerance);
-      res.t_apex = r.x;
-      res.fn_apex_ratio = tr.sample(r.x).fn_ratio;
-      RecordedEvent apex;
-      apex.kind = EventKind::kApex;
-      apex.t = r.x;
-      res.events.push_back(apex);
-      break;
-    }
-  }
+  RunResult::Folded all = res.folded;  // the dropped steps' extrema, if any, and the kept ones'
+  fold_extrema(all, x);
+  res.fn_min_ratio = all.fn_min_ratio;
+  res.t_fn_min = all.t_fn_min;
+  res.mu_required = all.mu_required;
+  res.t_mu_required = all.t_mu_required;
+  find_apex(res, S.front().t, S.back().t, opt.events.time_tolerance);
+  take_probes(res, opt, S.front().t, S.back().t, true);
   res.contact_lost = res.reason == StopReason::kContactLost || res.fn_min_ratio < 0 || flew;
 }
 

@@ -94,13 +94,19 @@ struct SimulateRequest {
   std::optional<double> mu;
   std::optional<std::string> model;  ///< rolling or hybrid
   bool stop_on_contact_loss = true;  ///< rolling model only
+  /// Keep every step (a trajectory to write or return). false: the run keeps a bounded window
+  /// of recent steps (its extrema, apex and s_h(T) are folded as it goes), so that memory does
+  /// not grow with simulated time.
+  bool keep_trajectory = true;
 };
 struct PreparedSimulation {
   sim::SimulationSpec spec;
   std::shared_ptr<const sim::RollingProblem> problem;
+  bool keep_trajectory = true;
 };
 PreparedSimulation prepare_simulate(Scene scene, const SimulateRequest& request, Spelling spelling);
-/// The run, recorded (dense output and per-step samples).
+/// The run, recorded (dense output and per-step samples: every step, or with keep_trajectory
+/// false a bounded window of them and s_h at the butterfly's half period as a probe).
 sim::RunResult simulate(const PreparedSimulation& prepared);
 
 /// `time-optimal`: the fastest butterfly in [from, to] that keeps contact (and friction, with mu).

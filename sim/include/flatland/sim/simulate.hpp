@@ -69,6 +69,13 @@ struct RunOptions {
   std::optional<double> hand_inertia;
   bool record =
       true;  ///< keep every step (dense output, per-step samples, extrema); off for search
+  /// With `record`: keep at most about twice this many recent steps; the older ones are folded
+  /// into the run's extrema and apex (RunResult::folded) and dropped, so that memory does not
+  /// grow with simulated time. 0 keeps every step (a trajectory to write or to look up).
+  long keep_steps = 0;
+  /// With `record`: the samples at these times (within the run) are kept in RunResult::probes,
+  /// whatever keep_steps drops.
+  std::vector<double> probe_times;
   /// For the energy audit's own tests only: a factor on every impact's impulse where it changes
   /// the object's velocities (the audit books the law's impulse). 1 in every real run; anything
   /// else is a deliberately wrong term that the audit must catch.
@@ -174,6 +181,9 @@ class Trajectory {
   void begin_part(int dimension, Sampler sampler, int terms, int s_h_index);
   void append(double t0, double h, const Pieces& p, const double* coeffs /* terms * n values */);
   void add_closed_part(double t0, double t1, Closed f);
+  /// Forget everything before t (whole steps and closed parts that end at or before it), so that
+  /// a long run keeps a bounded window (RunOptions::keep_steps).
+  void drop_before(double t);
 
  private:
   struct Part {
@@ -214,6 +224,17 @@ struct RunResult {
   std::optional<HybridState> final_state;
   /// The energy balance (flatland/sim/energy.hpp): broken only with reason kNumericalFailure.
   EnergyAudit audit;
+  /// With RunOptions::keep_steps: the extrema of the steps already dropped (located there as
+  /// finish_run locates the kept ones'; finish_run merges them).
+  struct Folded {
+    long steps = 0;  ///< steps dropped
+    double fn_min_ratio = std::numeric_limits<double>::quiet_NaN();
+    double t_fn_min = std::numeric_limits<double>::quiet_NaN();
+    double mu_required = std::numeric_limits<double>::quiet_NaN();
+    double t_mu_required = std::numeric_limits<double>::quiet_NaN();
+  } folded;
+  /// The samples at RunOptions::probe_times, in the order the run reached them.
+  std::vector<Sample> probes;
 };
 
 struct Extrema {
