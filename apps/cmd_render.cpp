@@ -508,6 +508,7 @@ void run_render(const RenderOptions& o) {
             << format_number(spec.end_time() - spec.initial.t0) << " s\n";
   spec.run.record = true;  // the frames sample the dense output
   const sim::RunResult run = sim::run_spec(spec);
+  sim::require_no_numerical_failure(run, "render");
   if (run.trajectory.empty()) throw std::runtime_error("the run recorded no trajectory");
   const double t0 = run.trajectory.t_begin(), t_end = run.trajectory.t_end();
   if (run.reason != sim::StopReason::kEndTime)

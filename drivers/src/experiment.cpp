@@ -67,6 +67,7 @@ PlanInfo make_plan(const model::Model& nominal_model) {
   }
   plan_spec.motion.k = info.k;
   const sim::RunResult run = sim::run_spec(plan_spec);
+  sim::require_no_numerical_failure(run, "plan");
   auto motion = std::make_shared<sim::ButterflyMotion>(info.period, info.k);
   info.plan = std::make_shared<control::Plan>(motion, info.period, run,
                                               nominal.controller.dip_until,

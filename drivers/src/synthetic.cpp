@@ -171,11 +171,7 @@ double SimWorld::step_disk(double t, double t_end, double alpha) {
   }
   if (r.reason == sim::StopReason::kNumericalFailure) {
     failure_ = Outcome::kNumericalFailure;
-    failure_detail_ =
-        "the world's simulation failed numerically: its energy balance broke at t = " +
-        sim::format_significant(r.audit.t_broken, 8) + " s (" +
-        sim::format_significant(r.audit.balance, 3) + " J, bound " +
-        sim::format_significant(r.audit.bound(), 3) + " J)";
+    failure_detail_ = "the world's simulation failed numerically: " + sim::breach_text(r.audit);
     disk_.t = t_end;
     return t_end;
   }

@@ -245,6 +245,12 @@ void validate_run_options(const RunOptions& o, double t0) {
   check_fixed_step_budget(is, o.t_end - t0);
 }
 
+void require_no_numerical_failure(const RunResult& run, const std::string& what) {
+  if (run.reason == StopReason::kNumericalFailure)
+    throw std::runtime_error(what + ": numerical failure: " + breach_text(run.audit) +
+                             " (docs/DYNAMICS.md, \"Energy audit\")");
+}
+
 void check_drag_stiffness(const RollingProblem& pb, const IntegratorSettings& is, double span) {
   // Drag relaxes the velocities at c / m (and the spin at c_w / I): an explicit Runge-Kutta step
   // is stable only below about 3 / rate (the methods' stability intervals on the negative real

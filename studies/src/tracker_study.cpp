@@ -102,6 +102,7 @@ TrackerStudyResult run_tracker_study(const model::Model& model,
   const auto wall0 = std::chrono::steady_clock::now();
   spec.run.record = true;  // the frames sample the dense output
   const sim::RunResult run = sim::simulate(model.plant, spec.initial, sim::run_options(spec));
+  sim::require_no_numerical_failure(run, "study tracker");
   if (run.trajectory.empty()) throw std::runtime_error("study tracker: the run recorded nothing");
   const sim::Trajectory& tr = run.trajectory;
   std::vector<double>& times = out.times;

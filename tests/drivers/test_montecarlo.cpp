@@ -246,3 +246,41 @@ TEST(MonteCarloRun, OneControllerLeavesTheOtherUncounted) {
   ASSERT_EQ(r.records.size(), 1u);
   EXPECT_EQ(r.records[0].controller, "feedback");
 }
+
+// One world made to fail numerically (a step budget of one step per servo period: its
+// integrator gives up in the first period): the study finishes, the world is recorded as
+// numerical_failure with the seed and run that rebuild it, its rate leaves it out, and runs.csv
+// says so; the other worlds are untouched (the same records as without the fault).
+TEST(MonteCarloRun, AWorldThatFailsNumericallyIsRecordedAndTheStudyGoesOn) {
+  const Scene s0 = nominal();
+  const auto model = flatland::model::compile(s0);
+  const int runs = flatland::test::short_tests() ? 2 : 3;
+  const drivers::WorldEdit fault = [](Scene& world, int run) {
+    if (run == 1) world.sim.run.integrator.max_steps = 1;
+  };
+  const auto clean = drivers::run_montecarlo(*model, {}, runs, 77, {"open-loop"}, 2);
+  const auto r = drivers::run_montecarlo(*model, {}, runs, 77, {"open-loop"}, 2, {}, fault);
+  ASSERT_EQ(r.records.size(), static_cast<std::size_t>(runs));
+  const drivers::RunRecord& bad = r.records[1];
+  EXPECT_EQ(bad.run, 1);
+  EXPECT_EQ(bad.seed, 77u);
+  EXPECT_EQ(bad.outcome, drivers::Outcome::kNumericalFailure);
+  EXPECT_FALSE(bad.success);
+  EXPECT_NE(bad.failure.find("step budget"), std::string::npos) << bad.failure;
+  EXPECT_EQ(r.numerical_failures_open_loop, 1);
+  EXPECT_EQ(clean.numerical_failures_open_loop, 0);
+  for (int i = 0; i < runs; ++i) {
+    if (i == 1) continue;
+    EXPECT_EQ(r.records[i].outcome, clean.records[i].outcome) << "run " << i;
+    EXPECT_EQ(r.records[i].s_end, clean.records[i].s_end) << "run " << i;
+  }
+  int ok = 0;
+  for (const auto& rec : r.records) ok += rec.success;
+  EXPECT_EQ(r.success_open_loop, ok);
+  const auto ci = drivers::wilson_interval(ok, runs - 1);  // over the worlds that did not fail
+  EXPECT_EQ(r.ci_open_loop.lo, ci.lo);
+  EXPECT_EQ(r.ci_open_loop.hi, ci.hi);
+  const std::string csv = drivers::runs_csv(r);
+  EXPECT_NE(csv.find(",numerical_failure,"), std::string::npos) << csv;
+  EXPECT_NE(csv.find(",seed\n"), std::string::npos);  // the header's last column
+}

@@ -16,6 +16,7 @@
 #include <cmath>
 #include <limits>
 #include <optional>
+#include <string>
 
 namespace flatland::sim {
 
@@ -47,6 +48,10 @@ struct EnergyAudit {
   /// tolerance x scale, plus the rounding of E itself (1e-12 |E|).
   double bound() const { return tolerance * scale + 1e-12 * magnitude; }
 };
+
+/// Where and by how much a broken balance broke: "the energy balance broke at t = ... s (... J,
+/// bound ... J)".
+std::string breach_text(const EnergyAudit& audit);
 
 /// The relative tolerance of a run's energy balance: `given`, else 1e3 x rtol for the adaptive
 /// methods (their global error stays within a few hundred local tolerances over the runs the

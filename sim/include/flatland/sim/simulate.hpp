@@ -256,6 +256,10 @@ Extrema find_extrema(const RunResult& run, double t_from, double t_to, double ti
 /// The formulation a problem will use under `requested`; throws if kReduced is impossible.
 Formulation resolve_formulation(const RollingProblem& problem, Formulation requested);
 
+/// std::runtime_error ("WHAT: numerical failure: the energy balance broke at ...") when `run`
+/// ended as a numerical failure: for callers that go on to use a recorded run (a plan, frames).
+void require_no_numerical_failure(const RunResult& run, const std::string& what);
+
 /// Settings that every model checks: integrator tolerances, step and the time span from t0; a
 /// fixed step (RK4) that would take more than max_steps over the span is refused here, before
 /// any work (std::invalid_argument naming integrator.step).
