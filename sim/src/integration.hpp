@@ -93,14 +93,17 @@ struct SegmentEnd {
   Sample last;                     ///< the sample at the end
 };
 
-template <class Model>
+/// `kAudited`: integrate the works and check the energy balance (every run but a search's
+/// bracketing probes, RunOptions::audit).
+template <class Model, bool kAudited = true>
 class Integration {
  public:
   using State = typename Model::State;
   static constexpr int N = Model::N;
   /// The state and, at N and N + 1, the work done on the object since the segment began by the
   /// hand and by the losses, J.
-  using Y = Eigen::Matrix<double, N + 2, 1>;
+  static constexpr int kWorks = kAudited ? 2 : 0;
+  using Y = Eigen::Matrix<double, N + kWorks, 1>;
   using Dense = DenseCoefficients<Y>;  // 5 used unless dop853
 
   /// `run_start`: where the whole run (all its segments) began, for the step budget's forecast.
@@ -128,7 +131,7 @@ class Integration {
 
  private:
   static State head(const Y& y) { return y.template head<N>(); }
-  Sample sample(double t, const Y& y) { return sample(t, State(head(y))); }
+  Sample sample_at(double t, const Y& y) { return sample(t, State(head(y))); }
   double s_h(const Y& y) const { return Model::s_h(head(y)); }
   /// The model's projection of the state part (the works are not constrained).
   double project(double t, Y& y) const {
@@ -138,12 +141,16 @@ class Integration {
     return drift;
   }
   void rhs(double t, const Y& y, Y& dy) {
-    State d;
-    Power power;
-    model_.derivative(t, head(y), pieces_, d, &power);
-    dy.template head<N>() = d;
-    dy[N] = power.hand;
-    dy[N + 1] = power.losses;
+    if constexpr (kAudited) {
+      State d;
+      Power power;
+      model_.derivative(t, head(y), pieces_, d, &power);
+      dy.template head<N>() = d;
+      dy[N] = power.hand;
+      dy[N + 1] = power.losses;
+    } else {
+      model_.derivative(t, y, pieces_, dy);
+    }
     ++st_.rhs_evals;
   }
   /// One step of size h from (t, y) with k1 = f(t, y): y1, k7 = f(t + h, y1) and the scaled
@@ -156,6 +163,7 @@ class Integration {
   void record(double t, const State& y, const Sample* s);
   /// The energy balance at a sample; false when it broke.
   bool audit(const Sample& s) {
+    if constexpr (!kAudited) return true;
     const double kinetic = kinetic_energy(model_.problem(), s);
     return ledger_.check(s.t,
                          kinetic - model_.problem().object.mass *
@@ -180,9 +188,9 @@ class Integration {
   Stages853<Y> k853_;
 };
 
-template <class Model>
-double Integration<Model>::attempt(double t, const Y& y, const Y& k1, double h, Y& y1, Y& k7,
-                                   Dense& rc, bool trial) {
+template <class Model, bool kAudited>
+double Integration<Model, kAudited>::attempt(double t, const Y& y, const Y& k1, double h, Y& y1,
+                                             Y& k7, Dense& rc, bool trial) {
   const auto f = [this](double tt, const Y& yy, Y& dy) { rhs(tt, yy, dy); };
   const double rtol = opt_.integrator.rtol, atol = opt_.integrator.atol;
   if (opt_.integrator.method == Method::kDormandPrince853) {
@@ -197,23 +205,24 @@ double Integration<Model>::attempt(double t, const Y& y, const Y& k1, double h, 
   return dopri5_step(f, t, y, k1, h, rtol, atol, y1, k7, rc, N);
 }
 
-template <class Model>
-double Integration<Model>::initial_step(double t, const Y& y, const Y& f0, double t_stop) {
+template <class Model, bool kAudited>
+double Integration<Model, kAudited>::initial_step(double t, const Y& y, const Y& f0,
+                                                  double t_stop) {
   return starting_step([this](double tt, const Y& yy, Y& dy) { rhs(tt, yy, dy); }, t, y, f0, t_stop,
                        opt_.integrator.rtol, opt_.integrator.atol, opt_.integrator.max_step,
                        opt_.integrator.method == Method::kDormandPrince853 ? 8.0 : 5.0, N);
 }
 
-template <class Model>
-void Integration<Model>::record(double t, const State& y, const Sample* s) {
+template <class Model, bool kAudited>
+void Integration<Model, kAudited>::record(double t, const State& y, const Sample* s) {
   if (!opt_.record) return;
   res_.steps.push_back(s ? *s : sample(t, y));
   fold_old_steps(res_, opt_);
 }
 
-template <class Model>
-SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y_start,
-                                                               Pieces pieces) {
+template <class Model, bool kAudited>
+SegmentEnd<typename Model::State> Integration<Model, kAudited>::run_from(double t, State y_start,
+                                                                         Pieces pieces) {
   const IntegratorSettings& is = opt_.integrator;
   const EventSettings& ev = opt_.events;
   const bool rk4 = is.method == Method::kRungeKutta4;
@@ -222,7 +231,10 @@ SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y
   pieces_ = pieces;
   SegmentEnd<State> end;
   Y y;
-  y << y_start, 0.0, 0.0;  // the works start from zero in every segment
+  if constexpr (kAudited)
+    y << y_start, 0.0, 0.0;  // the works start from zero in every segment
+  else
+    y = y_start;
 
   if (opt_.record) {
     res_.trajectory.begin_part(
@@ -234,11 +246,12 @@ SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y
         },
         terms, N == 10 ? 4 : 0);
   }
-  Sample s_start = sample(t, y);
+  Sample s_start = sample_at(t, y);
   end.first = s_start;
   record(t, head(y), &s_start);
-  ledger_.start(mechanical_energy(model_.problem(), s_start),
-                kinetic_energy(model_.problem(), s_start));
+  if constexpr (kAudited)
+    ledger_.start(mechanical_energy(model_.problem(), s_start),
+                  kinetic_energy(model_.problem(), s_start));
   const auto stop_now = [&](EventKind kind, const Sample& s) {
     end.t = t;
     end.y = head(y);
@@ -346,12 +359,12 @@ SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y
       Sample s_end;
       bool have_end = false;
       if (need_force) {
-        s_end = sample(t1, y1p);
+        s_end = sample_at(t1, y1p);
         have_end = true;
         for (const Guard& gd : guards_) {
           const double g0 = gd.value(s_start), g1 = gd.value(s_end);
           if (!(g1 < 0)) continue;
-          const auto value = [&](const Y& s, double tau) { return gd.value(sample(tau, s)); };
+          const auto value = [&](const Y& s, double tau) { return gd.value(sample_at(tau, s)); };
           double tg = t;
           if (g0 > 0) {
             tg = locate(value, g0, g1);
@@ -411,7 +424,7 @@ SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y
           for (int j = 0; j < terms; ++j) Eigen::Map<State>(c.data() + j * N) = head(rc[j]);
           res_.trajectory.append(t, h_try, pieces_, c.data());
         }
-        ledger_.add_work(y1p[N] - y[N], y1p[N + 1] - y[N + 1]);
+        if constexpr (kAudited) ledger_.add_work(y1p[N] - y[N], y1p[N + 1] - y[N + 1]);
         const bool moved = drift > 0 && N == 10;
         t = t1;
         y = y1p;
@@ -420,7 +433,7 @@ SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y
         else
           k1 = k7;
         if (opt_.record || kind != kNone || need_force) {
-          s_new = have_end ? s_end : sample(t, y);
+          s_new = have_end ? s_end : sample_at(t, y);
           st_.max_constraint_residual =
               std::max(st_.max_constraint_residual, s_new.constraint_residual);
           st_.max_redundant_residual =
@@ -467,7 +480,7 @@ SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y
           pieces_.hand = model_.problem().hand->piece_at(junction, d);
           pieces_.motion = motion;
           need_k1 = true;
-          if (need_force) s_start = sample(t, y);
+          if (need_force) s_start = sample_at(t, y);
           break;
         }
         case kGuard:
@@ -485,7 +498,7 @@ SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y
       need_k1 = true;
       if (need_force) {
         // The forces jump with the acceleration: a guard the jump violates fires here and now.
-        s_start = sample(t, y);
+        s_start = sample_at(t, y);
         if (auto kind = violated(s_start)) {
           record(t, head(y), &s_start);
           return stop_now(*kind, s_start);
@@ -498,9 +511,10 @@ SegmentEnd<typename Model::State> Integration<Model>::run_from(double t, State y
   end.pieces = pieces_;
   end.fired = stopped;
   end.last = (opt_.record && !res_.steps.empty() && res_.steps.back().t == t) ? res_.steps.back()
-                                                                              : sample(t, y);
+                                                                              : sample_at(t, y);
   // Runs that sample no step (searches) are audited here, at their end.
-  if (!ledger_.audit().broken && !audit(end.last)) end.fired = EventKind::kNumericalFailure;
+  if (kAudited && !ledger_.audit().broken && !audit(end.last))
+    end.fired = EventKind::kNumericalFailure;
   return end;
 }
 

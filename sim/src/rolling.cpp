@@ -481,9 +481,9 @@ ReducedDiskRolling::State ReducedDiskRolling::initial_state(const InitialContact
   return y;
 }
 
-double ReducedDiskRolling::sddot(const HandKinematics& h, const CurveGeometry& g,
-                                 double sdot) const {
-  if (rest_) return 0.0;
+double ReducedDiskRolling::sddot(const HandKinematics& h, const CurveGeometry& g, double sdot,
+                                 Power* power) const {
+  if (rest_ && !power) return 0.0;
   const RollingProblem& pb = *problem_;
   const double one_rk = 1.0 + r_ * g.curvature;
   const double sigma = g.speed * one_rk;
@@ -492,20 +492,55 @@ double ReducedDiskRolling::sddot(const HandKinematics& h, const CurveGeometry& g
   const double c = std::cos(h.angle), s = std::sin(h.angle);
   const Vec2 a = h.acceleration - pb.gravity_vector();
   const Vec2 a_local(c * a.x() + s * a.y(), -s * a.x() + c * a.y());  // R^T (a_h - g)
-  const double th2 = h.angular_velocity * h.angular_velocity;
-  double drive = a_local.dot(g.tangent) + h.angular_acceleration * perp(q).dot(g.tangent) -
-                 th2 * q.dot(g.tangent) - side_ * rho2_ / r_ * h.angular_acceleration;
-  if (losses_) {
-    // Q / m: drag on the centre along the rolling direction, the drag couple and the
-    // rolling-resistance couple eps delta sign(s') f_n, through the lever -eps sigma / r.
-    const DiskTerms d = disk_terms(pb, r_, side_, h, g, sdot);
-    const double m = pb.object.mass;
-    const double omega_o = h.angular_velocity - side_ * sigma * sdot / r_;
-    const double couple = side_ * pb.contact.rolling_resistance * phase_.sign * normal_force(pb, d) -
-                          pb.contact.drag_angular * omega_o;
-    drive += pb.contact.drag / m * d.velocity.dot(d.T) + side_ * couple / (m * r_);
+  double sdd = 0.0;
+  if (!rest_) {
+    const double th2 = h.angular_velocity * h.angular_velocity;
+    double drive = a_local.dot(g.tangent) + h.angular_acceleration * perp(q).dot(g.tangent) -
+                   th2 * q.dot(g.tangent) - side_ * rho2_ / r_ * h.angular_acceleration;
+    if (losses_) {
+      // Q / m: drag on the centre along the rolling direction, the drag couple and the
+      // rolling-resistance couple eps delta sign(s') f_n, through the lever -eps sigma / r.
+      const DiskTerms d = disk_terms(pb, r_, side_, h, g, sdot);
+      const double m = pb.object.mass;
+      const double omega_o = h.angular_velocity - side_ * sigma * sdot / r_;
+      const double couple =
+          side_ * pb.contact.rolling_resistance * phase_.sign * normal_force(pb, d) -
+          pb.contact.drag_angular * omega_o;
+      drive += pb.contact.drag / m * d.velocity.dot(d.T) + side_ * couple / (m * r_);
+    }
+    sdd = -(sigma_ds * sdot * sdot + drive / (1.0 + rho2_ / (r_ * r_))) / sigma;
   }
-  return -(sigma_ds * sdot * sdot + drive / (1.0 + rho2_ / (r_ * r_))) / sigma;
+  if (power) {
+    // The energy audit's powers, in the hand's axes (dot products do not care), from the terms
+    // above: no second rotation, the centre's acceleration as centre_acceleration() has it.
+    const double w = h.angular_velocity;
+    const Vec2& T = g.tangent;
+    const Vec2 v_pivot(c * h.velocity.x() + s * h.velocity.y(),
+                       -s * h.velocity.x() + c * h.velocity.y());  // R^T v_h
+    const Vec2 v_hand = v_pivot + w * perp(g.point);  // the hand's point at the contact
+    const double ssd = sigma * sdot;
+    const Vec2 accel = a_local + h.angular_acceleration * perp(q) - w * w * q +
+                       2.0 * w * ssd * perp(T) +
+                       (sigma_ds * T - sigma * g.curvature * g.speed * g.normal) * sdot * sdot +
+                       sigma * sdd * T;  // R^T (p'' - g)
+    if (!losses_ && !rest_) {  // the paper's rolling: the contact force's work through the hand
+      power->hand = pb.object.mass * accel.dot(v_hand);
+      power->losses = 0.0;
+      return sdd;
+    }
+    const Vec2 v_centre = v_pivot + w * perp(q) + ssd * T;
+    const Vec2 force = pb.object.mass * accel + pb.contact.drag * v_centre;
+    const double omega_o = w - side_ * ssd / r_;
+    // Rolling: the rolling-resistance couple against the rolling; at rest, the couple that holds
+    // the disk (as sample_with reports them).
+    const double couple =
+        rest_ ? pb.object.inertia * h.angular_acceleration - side_ * r_ * force.dot(T) +
+                    pb.contact.drag_angular * omega_o
+              : side_ * pb.contact.rolling_resistance * phase_.sign * force.dot(g.normal);
+    // Rolling, the disk's contact point moves with the hand's.
+    *power = contact_power(pb, force, couple, v_hand, w, v_hand, v_centre, omega_o);
+  }
+  return sdd;
 }
 
 void ReducedDiskRolling::derivative(double t, const State& y, const Pieces& p, State& dy,
@@ -516,26 +551,7 @@ void ReducedDiskRolling::derivative(double t, const State& y, const Pieces& p, S
   if (!(sigma > 0)) check_fits(*problem_, r_, t, y[0], sigma, p, "reduced formulation");
   dy[0] = y[2];
   dy[1] = h.angular_velocity - side_ * sigma * y[2] / r_;
-  dy[2] = sddot(h, g, y[2]);
-  if (power) *power = rolling_power(h, g, y[2], dy[2], dy[1]);
-}
-
-Power ReducedDiskRolling::rolling_power(const HandKinematics& h, const CurveGeometry& g,
-                                        double sdot, double sddot_h, double omega_o) const {
-  const RollingProblem& pb = *problem_;
-  const DiskTerms d = disk_terms(pb, r_, side_, h, g, sdot);
-  const Vec2 force =
-      pb.object.mass * (centre_acceleration(h, g, d, sdot, sddot_h) - pb.gravity_vector()) +
-      pb.contact.drag * d.velocity;
-  // Rolling: the rolling-resistance couple against the rolling; at rest, the couple that holds
-  // the disk (as sample_with reports them).
-  const double couple = rest_
-                            ? pb.object.inertia * h.angular_acceleration -
-                                  side_ * r_ * force.dot(d.T) + pb.contact.drag_angular * omega_o
-                            : side_ * pb.contact.rolling_resistance * phase_.sign * force.dot(d.N);
-  // Rolling, the disk's contact point moves with the hand's.
-  const Vec2 v_hand = h.velocity + h.angular_velocity * perp(d.R * g.point);
-  return contact_power(pb, force, couple, v_hand, h.angular_velocity, v_hand, d.velocity, omega_o);
+  dy[2] = sddot(h, g, y[2], power);
 }
 
 double ReducedDiskRolling::acceleration(const HandKinematics& h, double s_h, double sdot_h,

@@ -38,6 +38,11 @@ RunOptions search_options(const SimulationSpec& spec, double t_end) {
   // around the hand; stopping there keeps s_h(T) continuous (it ends at the bound) and avoids
   // integrating an enforced roll that spins ever faster.
   o.events.s_h_bounds = std::make_pair(-3.0, 3.0);
+  // The bracketing probes are not audited (the audit's per-stage power costs ~20 % of this
+  // hot loop): their s_h(T) only steers Brent's method, and the answer is run again, recorded
+  // and audited (evaluate_on), before anything is reported. The surface, whose every point is
+  // a reported number, turns the audit back on.
+  o.audit = false;
   return o;
 }
 
@@ -50,13 +55,14 @@ std::string numerical_failure_text(double period, double k, const EnergyAudit& a
          " J, bound " + format_significant(a.bound(), 3) + " J)";
 }
 
-/// s_h(T) of one unrecorded run; NaN where the run failed numerically (its energy balance broke),
-/// with `failure` (if given) saying where.
+/// s_h(T) of one unrecorded run (audited with `audit`); NaN where the run failed numerically (its
+/// energy balance broke), with `failure` (if given) saying where.
 double s_at_half_period(const std::shared_ptr<const RollingProblem>& base,
                         const SimulationSpec& spec, double period, double k, long* rhs_evals,
-                        std::string* failure = nullptr) {
-  const RunResult r = simulate(with_motion(base, period, k), spec.initial,
-                               search_options(spec, spec.initial.t0 + 0.5 * period));
+                        std::string* failure = nullptr, bool audit = false) {
+  RunOptions o = search_options(spec, spec.initial.t0 + 0.5 * period);
+  o.audit = audit;
+  const RunResult r = simulate(with_motion(base, period, k), spec.initial, o);
   if (rhs_evals) *rhs_evals += r.stats.rhs_evals;
   if (r.reason == StopReason::kNumericalFailure) {
     if (failure) *failure = numerical_failure_text(period, k, r.audit);
@@ -69,9 +75,9 @@ double s_at_half_period(const std::shared_ptr<const RollingProblem>& base,
 /// root cannot be bracketed through numbers known to be wrong.
 double searched_s_at_half_period(const std::shared_ptr<const RollingProblem>& base,
                                  const SimulationSpec& spec, double period, double k,
-                                 long* rhs_evals) {
+                                 long* rhs_evals, bool audit = false) {
   std::string failure;
-  const double s = s_at_half_period(base, spec, period, k, rhs_evals, &failure);
+  const double s = s_at_half_period(base, spec, period, k, rhs_evals, &failure, audit);
   if (!failure.empty()) throw std::runtime_error("solve: " + failure);
   return s;
 }
@@ -170,7 +176,7 @@ double half_period_s_h(const SimulationSpec& spec, double period, double k, long
   s.motion.kind = MotionSpec::Kind::kButterfly;
   s.motion.period = period;
   s.motion.k = k;
-  return searched_s_at_half_period(build_problem(s), s, period, k, rhs_evals);
+  return searched_s_at_half_period(build_problem(s), s, period, k, rhs_evals, true);
 }
 
 namespace {
@@ -183,6 +189,7 @@ SolveReport evaluate_on(const std::shared_ptr<const RollingProblem>& base,
   s.motion.k = k;
   RunOptions o = search_options(s, s.initial.t0 + period);
   o.record = true;
+  o.audit = true;  // the answer is audited (the probes were not)
   SolveReport rep;
   rep.period = period;
   rep.k = k;
@@ -344,7 +351,7 @@ SurfaceResult surface(const SimulationSpec& spec, double k_lo, double k_hi, int 
           long evals = 0;
           // A point whose run fails numerically stays NaN and is reported; the grid goes on.
           res.s_T[idx] = s_at_half_period(base, s, res.period[j], res.k[i], &evals,
-                                          &failures[static_cast<std::size_t>(idx)]);
+                                          &failures[static_cast<std::size_t>(idx)], true);
           rhs += evals;
         },
         [&](long finished) {

@@ -515,7 +515,6 @@ RunResult run_rolling(std::shared_ptr<const RollingProblem> problem, const Initi
                       1e-12 * weight});
   }
   detail::EnergyLedger ledger = detail::planar_ledger(res.audit, *problem, options);
-  detail::Integration<Model> integration(model, options, res, std::move(guards), ledger, init.t0);
 
   double t = init.t0;
   typename Model::State y = model.initial_state(init);
@@ -534,7 +533,12 @@ RunResult run_rolling(std::shared_ptr<const RollingProblem> problem, const Initi
   Pieces pieces = model.pieces_for(y, dir);
   pieces.motion = motion_segment;
   model.project(t, y, pieces);
-  const auto end = integration.run_from(t, y, pieces);
+  const auto end = options.audit ? detail::Integration<Model, true>(
+                                       model, options, res, std::move(guards), ledger, init.t0)
+                                       .run_from(t, y, pieces)
+                                 : detail::Integration<Model, false>(
+                                       model, options, res, std::move(guards), ledger, init.t0)
+                                       .run_from(t, y, pieces);
   res.initial = end.first;
   res.final = end.last;
   if (end.fired) {

@@ -193,9 +193,9 @@ class ReducedDiskRolling {
   const ContactPhase& phase() const { return phase_; }
 
  private:
-  double sddot(const HandKinematics& h, const CurveGeometry& g, double sdot) const;
-  Power rolling_power(const HandKinematics& h, const CurveGeometry& g, double sdot, double sddot,
-                      double omega_o) const;
+  /// s'' and, with `power`, the energy audit's powers at the same state (sharing its terms).
+  double sddot(const HandKinematics& h, const CurveGeometry& g, double sdot,
+               Power* power = nullptr) const;
   std::shared_ptr<const RollingProblem> problem_;
   ContactPhase phase_;
   double r_, rho2_, side_;

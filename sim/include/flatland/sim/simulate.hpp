@@ -76,6 +76,11 @@ struct RunOptions {
   /// With `record`: the samples at these times (within the run) are kept in RunResult::probes,
   /// whatever keep_steps drops.
   std::vector<double> probe_times;
+  /// Keep the energy audit (flatland/sim/energy.hpp). Off only for a search's bracketing probes
+  /// (sim/search.cpp): their s_h(T) only steers the root finder, and the answer is run again,
+  /// recorded and audited, before anything is reported; the rolling model only (the hybrid
+  /// model always audits).
+  bool audit = true;
   /// For the energy audit's own tests only: a factor on every impact's impulse where it changes
   /// the object's velocities (the audit books the law's impulse). 1 in every real run; anything
   /// else is a deliberately wrong term that the audit must catch.
