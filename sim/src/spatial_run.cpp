@@ -218,26 +218,48 @@ ContactWorld contact_world(const SpatialRollingProblem& pb, const HandPose3& han
 }
 
 /// The velocities y_v = (v, omega, sdot_o, sdot_h) of a rolling contact satisfy C y_v = d:
-/// rolling (3), equal contact point rates (3), normals staying opposite (3); rank 7. `scale`
-/// makes every unknown a velocity in m/s: omega times the lever |r_o|, each sdot times its
-/// column of J.
+/// rolling (3), equal contact point rates along the tangent plane (2), normals staying opposite
+/// along the tangent plane (2). `scale` makes every unknown a velocity in m/s: omega times the
+/// lever |r_o|, each sdot times its column of J.
+///
+/// The normal components of the last two conditions are left out because they hold for every
+/// y_v (J_o, J_h, K_o, K_h and n_o x omega are all tangent where n_o = -n_h): with them C had two
+/// rows more than its rank, and the two singular values that should be zero were rounding noise
+/// of ~eps |C| (5e-14 for a 2 cm ball). A rank-revealing solve then decided the rank by a
+/// threshold that noise straddles: where it counted 8, the least-squares correction divided a
+/// residual of ~1e-12 by that noise and changed the velocities by O(1) while leaving them
+/// consistent (a ball on a tilted turntable jumped from 0.19 to 7.2 m/s, one in a bowl lost 29 %
+/// of its energy in one step). With the seven independent rows C has full row rank, its smallest
+/// singular value of the order of 1, and no rank has to be decided.
 struct VelocityConstraints {
-  Eigen::Matrix<double, 9, 10> C = Eigen::Matrix<double, 9, 10>::Zero();
-  Eigen::Matrix<double, 9, 1> d = Eigen::Matrix<double, 9, 1>::Zero();
+  static constexpr int kRows = 7;
+  Eigen::Matrix<double, kRows, 10> C = Eigen::Matrix<double, kRows, 10>::Zero();
+  Eigen::Matrix<double, kRows, 1> d = Eigen::Matrix<double, kRows, 1>::Zero();
   Eigen::Matrix<double, 10, 1> scale;
+  /// C with its columns divided by `scale`: the constraints on the scaled unknowns.
+  Eigen::Matrix<double, kRows, 10> scaled() const { return C * scale.cwiseInverse().asDiagonal(); }
 };
 
+/// An orthonormal basis (3 x 2) of the plane spanned by J's columns (Gram-Schmidt).
+Mat32 tangent_basis(const Mat32& J) {
+  Mat32 E;
+  E.col(0) = J.col(0).normalized();
+  E.col(1) = (J.col(1) - J.col(1).dot(E.col(0)) * E.col(0)).normalized();
+  return E;
+}
+
 VelocityConstraints velocity_constraints(const ContactWorld& w, const HandPose3& hand) {
+  const Eigen::Matrix<double, 2, 3> Et = tangent_basis(w.Jh).transpose();
   VelocityConstraints v;
   v.C.block<3, 3>(0, 0) = Eigen::Matrix3d::Identity();
   v.C.block<3, 3>(0, 3) = -cross_matrix(w.ro);
   v.d.segment<3>(0) = hand.velocity + hand.angular_velocity.cross(w.rh);
-  v.C.block<3, 2>(3, 6) = -w.Jo;
-  v.C.block<3, 2>(3, 8) = w.Jh;
-  v.C.block<3, 3>(6, 3) = -cross_matrix(w.No);
-  v.C.block<3, 2>(6, 6) = w.Ko;
-  v.C.block<3, 2>(6, 8) = w.Kh;
-  v.d.segment<3>(6) = -hand.angular_velocity.cross(w.Nh);
+  v.C.block<2, 2>(3, 6) = -Et * w.Jo;
+  v.C.block<2, 2>(3, 8) = Et * w.Jh;
+  v.C.block<2, 3>(5, 3) = -Et * cross_matrix(w.No);
+  v.C.block<2, 2>(5, 6) = Et * w.Ko;
+  v.C.block<2, 2>(5, 8) = Et * w.Kh;
+  v.d.segment<2>(5) = -Et * hand.angular_velocity.cross(w.Nh);
   const double lever = std::max(w.ro.norm(), 1e-12);
   v.scale << 1, 1, 1, lever, lever, lever, w.Jo.col(0).norm(), w.Jo.col(1).norm(),
       w.Jh.col(0).norm(), w.Jh.col(1).norm();
@@ -349,14 +371,14 @@ class SpatialIntegration {
     }
     const ContactWorld w = world(hand, Rc, s);
     const VelocityConstraints vc = velocity_constraints(w, hand);
-    const auto& C = vc.C;
-    const auto& d = vc.d;
-    const auto& scale = vc.scale;
     Eigen::Matrix<double, 10, 1> yv;
     yv << s.velocity, s.angular_velocity, s.sdot_o, s.sdot_h;
-    const Eigen::Matrix<double, 9, 10> Cs = C * scale.cwiseInverse().asDiagonal();
-    const Eigen::Matrix<double, 10, 1> dz = Cs.completeOrthogonalDecomposition().solve(d - C * yv);
-    yv += dz.cwiseQuotient(scale);
+    // The smallest scaled change dz with Cs dz = d - C y_v: Cs has full row rank (7), so
+    // dz = Cs^T (Cs Cs^T)^-1 (d - C y_v), with no rank to decide.
+    const auto Cs = vc.scaled();
+    const Eigen::Matrix<double, VelocityConstraints::kRows, 1> r = vc.d - vc.C * yv;
+    const Eigen::Matrix<double, 10, 1> dz = Cs.transpose() * (Cs * Cs.transpose()).llt().solve(r);
+    yv += dz.cwiseQuotient(vc.scale);
     s.velocity = yv.segment<3>(0);
     s.angular_velocity = yv.segment<3>(3);
     s.sdot_o = yv.segment<2>(6);
@@ -756,12 +778,13 @@ SpatialState place_in_contact(const SpatialRollingProblem& pb, const HandPose3& 
   // are the ones asked for.
   const ContactWorld w = contact_world(pb, hand, Rc, s);
   const VelocityConstraints vc = velocity_constraints(w, hand);
-  const Eigen::Matrix<double, 9, 10> Cs = vc.C * vc.scale.cwiseInverse().asDiagonal();
-  const Eigen::CompleteOrthogonalDecomposition<Eigen::Matrix<double, 9, 10>> cod(Cs);
-  const Eigen::Matrix<double, 10, 1> particular = cod.solve(vc.d);
-  const Eigen::JacobiSVD<Eigen::Matrix<double, 10, 10>> svd(
-      Eigen::Matrix<double, 10, 10>::Identity() - cod.pseudoInverse() * Cs, Eigen::ComputeFullU);
-  const Eigen::Matrix<double, 10, 3> Z = svd.matrixU().leftCols<3>();
+  // C has full row rank (7): its SVD gives the smallest solution and the null space's basis.
+  const Eigen::JacobiSVD<Eigen::Matrix<double, VelocityConstraints::kRows, 10>> svd(
+      vc.scaled(), Eigen::ComputeFullU | Eigen::ComputeFullV);
+  const Eigen::Matrix<double, 10, 1> particular =
+      svd.matrixV().leftCols<VelocityConstraints::kRows>() *
+      (svd.matrixU().transpose() * vc.d).cwiseQuotient(svd.singularValues());
+  const Eigen::Matrix<double, 10, 3> Z = svd.matrixV().rightCols<3>();
   const Mat32 E = frame(th, -nh).leftCols<2>();  // the tangent plane
   Eigen::Matrix<double, 3, 10> S = Eigen::Matrix<double, 3, 10>::Zero();
   S.block<2, 3>(0, 0) = E.transpose();
@@ -770,7 +793,7 @@ SpatialState place_in_contact(const SpatialRollingProblem& pb, const HandPose3& 
   target << E.transpose() * at.velocity, at.spin;
   const Eigen::Matrix3d SZ = S * Z;
   const Eigen::FullPivLU<Eigen::Matrix3d> lu(SZ);
-  if (lu.rank() < 3)
+  if (lu.rank() < 3 || !particular.allFinite())
     throw std::invalid_argument(
         "contact placement: the centre's velocity and the spin do not fix the rolling motion "
         "here (a degenerate contact: the object's and the hand's curvatures match, or a "
