@@ -10,6 +10,7 @@
 #include <limits>
 #include <numbers>
 #include <stdexcept>
+#include <utility>
 
 namespace flatland::sim {
 
@@ -143,6 +144,31 @@ std::string EllipsoidSurface::describe() const {
                  : "semi-axes " + format_significant(a_) + ", " + format_significant(b_) + ", " +
                        format_significant(c_)) +
          " m)";
+}
+
+// ---- a surface in a turned frame ---------------------------------------------------------------
+
+RotatedSurface::RotatedSurface(SurfacePtr inner, const Eigen::Matrix3d& rotation,
+                               std::string description)
+    : inner_(std::move(inner)), rotation_(rotation), description_(std::move(description)) {
+  if (!inner_) throw std::invalid_argument("rotated surface: no surface");
+  if (!rotation.allFinite() ||
+      (rotation.transpose() * rotation - Eigen::Matrix3d::Identity()).norm() > 1e-9 ||
+      std::abs(rotation.determinant() - 1) > 1e-9)
+    throw std::invalid_argument("rotated surface: the frame must be a rotation");
+}
+
+// Every derivative is a vector of the inner frame, turned as the position is; a rotation keeps
+// c_u x c_v turned too, so the normal's side is the inner surface's.
+SurfaceJet RotatedSurface::jet(const SurfaceParam& s) const {
+  SurfaceJet j = inner_->jet(s);
+  for (Vec3* v : {&j.c, &j.cu, &j.cv, &j.cuu, &j.cuv, &j.cvv, &j.cuuu, &j.cuuv, &j.cuvv, &j.cvvv})
+    *v = rotation_ * *v;
+  return j;
+}
+
+std::string RotatedSurface::describe() const {
+  return description_.empty() ? inner_->describe() : description_;
 }
 
 // ---- extruded curve ---------------------------------------------------------------------------

@@ -4,6 +4,7 @@
 #include "flatland/sim/surface.hpp"
 
 #include <gtest/gtest.h>
+#include <Eigen/Geometry>
 
 #include <cmath>
 #include <memory>
@@ -65,6 +66,9 @@ TEST(Surface, DerivativesAgreeWithFiniteDifferencesOnEverySurface) {
       std::make_shared<EllipsoidSurface>(0.4, 0.3, 0.2, EllipsoidSurface::Side::kDish),
       std::make_shared<ExtrudedSurface>(hand, 0),
       std::make_shared<RevolutionSurface>(ellipse, 0),
+      std::make_shared<RotatedSurface>(
+          std::make_shared<EllipsoidSurface>(0.4, 0.3, 0.2, EllipsoidSurface::Side::kDish),
+          Eigen::AngleAxisd(0.7, Vec3(1, -2, 0.5).normalized()).toRotationMatrix()),
   };
   for (const auto& surface : surfaces)
     for (const SurfaceParam& s : {SurfaceParam(0.3, 0.2), SurfaceParam(-1.1, -0.7),
@@ -158,6 +162,35 @@ TEST(Surface, AnEllipseTurnedAboutItsAxisIsTheEllipsoidOfRevolution) {
     EXPECT_LT((g1.curvature_form - g2.curvature_form).norm(), 1e-12);
     EXPECT_LT((g1.curvature_form_ds[1] - g2.curvature_form_ds[1]).norm(), 1e-10);
   }
+}
+
+TEST(Surface, ARotatedSurfaceIsItsSurfaceTurned) {
+  // An ellipsoid's chart with its poles on the x axis: the ellipsoid with semi-axes (b, c, a) in
+  // the frame that takes its x, y, z to the body's y, z, x is the same ellipsoid.
+  const double a = 0.07, b = 0.05, c = 0.03;
+  const auto inner = std::make_shared<EllipsoidSurface>(b, c, a, EllipsoidSurface::Side::kDish);
+  Eigen::Matrix3d Q;
+  Q << 0, 0, 1, 1, 0, 0, 0, 1, 0;
+  const RotatedSurface turned(inner, Q, "dish, chart with its poles on x");
+  EXPECT_EQ(turned.describe(), "dish, chart with its poles on x");
+  EXPECT_EQ(turned.normal_sign(), inner->normal_sign());
+  EXPECT_EQ(turned.patch().hi, inner->patch().hi);
+  for (const SurfaceParam& s : {SurfaceParam(0.3, 0.2), SurfaceParam(-2.0, -1.1)}) {
+    const SurfaceGeometry g = turned.geometry(s), gi = inner->geometry(s);
+    const Vec3 x = g.point;
+    EXPECT_NEAR(x.x() * x.x() / (a * a) + x.y() * x.y() / (b * b) + x.z() * x.z() / (c * c), 1,
+                1e-14);
+    EXPECT_LT((x - Q * gi.point).norm(), 1e-16);
+    EXPECT_LT((g.normal - Q * gi.normal).norm(), 1e-15);
+    EXPECT_LT((g.curvature_form - Q * gi.curvature_form).norm(), 1e-12);
+    EXPECT_NEAR(g.gaussian_curvature(), gi.gaussian_curvature(), 1e-9 * gi.gaussian_curvature());
+    // The dish's normal points towards the centre, as the unturned dish's does.
+    EXPECT_LT(g.normal.dot(x), 0);
+  }
+  EXPECT_EQ(RotatedSurface(inner, Eigen::Matrix3d::Identity()).describe(), inner->describe());
+  EXPECT_THROW(RotatedSurface(inner, 2 * Q), std::invalid_argument);
+  EXPECT_THROW(RotatedSurface(inner, -Q), std::invalid_argument);  // a reflection
+  EXPECT_THROW(RotatedSurface(nullptr, Q), std::invalid_argument);
 }
 
 TEST(Surface, SingularChartsAndBadShapesAreRefused) {

@@ -110,11 +110,32 @@ class EllipsoidSurface final : public Surface {
   std::string describe() const override;
   Vec3 semi_axes() const { return {a_, b_, c_}; }
   Side side() const { return side_; }
+  double pole_margin() const { return pole_margin_; }
 
  private:
   double a_, b_, c_;
   Side side_;
   double pole_margin_;
+};
+
+/// A surface given in a turned frame: c(s) = Q c_inner(s), Q a rotation, with the inner surface's
+/// parameters, normal side and patch. A spatial run moves a contact between charts made so (an
+/// ellipsoid's with its poles on another axis, a ball's laid along the contact's path).
+class RotatedSurface final : public Surface {
+ public:
+  /// std::invalid_argument without an inner surface or unless `rotation` is a rotation (to
+  /// 1e-9). `description`: what describe() says (empty: the inner surface's description).
+  RotatedSurface(SurfacePtr inner, const Eigen::Matrix3d& rotation, std::string description = {});
+  SurfaceJet jet(const SurfaceParam& s) const override;
+  int normal_sign() const override { return inner_->normal_sign(); }
+  SurfacePatch patch() const override { return inner_->patch(); }
+  std::string describe() const override;
+  const Eigen::Matrix3d& rotation() const { return rotation_; }
+
+ private:
+  SurfacePtr inner_;
+  Eigen::Matrix3d rotation_;
+  std::string description_;
 };
 
 /// A planar curve extruded along z: c(u, v) = (x(u), y(u), v), u the curve's parameter (on one
