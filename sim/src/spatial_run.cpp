@@ -1,10 +1,11 @@
-// Spatial rolling in time: hand motions in SE(3), Dormand-Prince 5(4) on the 21 state values
+// Spatial rolling in time: hand motions in SE(3), Runge-Kutta steps on the 21 state values
 // (position 3, orientation quaternion 4, velocity 3, angular velocity 3, s_o, s_h, sdot_o, sdot_h)
-// with the projection onto the contact manifold after every accepted step, and the ball's chart
-// turned away from its poles.
+// with the projection onto the contact manifold after every accepted step, and the contact
+// carried into another chart of its surface when it nears a chart's poles (spatial_charts.hpp).
 #include "flatland/sim/spatial_run.hpp"
 
 #include "runge_kutta.hpp"
+#include "spatial_charts.hpp"
 
 #include "flatland/sim/format.hpp"
 #include "flatland/sim/roots.hpp"
@@ -193,27 +194,27 @@ using namespace detail;  // the Runge-Kutta steps
 
 /// The contact's geometry in the world at a state: the contact points (hand's ph, object's po)
 /// and their offsets from the hand frame's origin (rh) and the object's centre (ro), the normals,
-/// the Jacobians and curvature forms. Rc: the object's chart frame.
+/// the Jacobians and curvature forms. Ro: the object's orientation (body -> world).
 struct ContactWorld {
   Vec3 ph, po, rh, ro, Nh, No;
   Mat32 Jh, Jo, Kh, Ko;
 };
 
 ContactWorld contact_world(const SpatialRollingProblem& pb, const HandPose3& hand,
-                           const Eigen::Matrix3d& Rc, const SpatialState& s) {
+                           const Eigen::Matrix3d& Ro, const SpatialState& s) {
   const SurfaceGeometry gh = pb.hand->geometry(s.s_h);
   const SurfaceGeometry go = pb.object.surface->geometry(s.s_o);
   ContactWorld w;
   w.rh = hand.rotation * gh.point;
-  w.ro = Rc * go.point;
+  w.ro = Ro * go.point;
   w.ph = hand.position + w.rh;
   w.po = s.position + w.ro;
   w.Nh = hand.rotation * gh.normal;
-  w.No = Rc * go.normal;
+  w.No = Ro * go.normal;
   w.Jh = hand.rotation * gh.jacobian;
-  w.Jo = Rc * go.jacobian;
+  w.Jo = Ro * go.jacobian;
   w.Kh = hand.rotation * gh.curvature_form;
-  w.Ko = Rc * go.curvature_form;
+  w.Ko = Ro * go.curvature_form;
   return w;
 }
 
@@ -275,20 +276,20 @@ struct Guards {
       SpatialStop::kContactLost, SpatialStop::kSlip, SpatialStop::kLeftPatch};
 };
 
-/// The run's equations. The object's orientation in the state is its chart frame's, R_c = R_o C:
-/// the frame in which its surface is parameterised. For a ball the chart can be turned (C changes,
-/// the ball does not), which keeps the contact away from the chart's poles.
+/// The run's equations. The contact coordinates s_o, s_h in the state are in the charts in use
+/// (spatial_charts.hpp): `chart_pb_` is the problem with both surfaces in those charts, which
+/// change (with s and sdot re-expressed) when the contact nears a chart's poles. The object's
+/// orientation is its body's in every chart.
 class SpatialIntegration {
  public:
   SpatialIntegration(const SpatialRollingProblem& pb, const HandMotion3& motion,
                      const SpatialRunOptions& o)
-      : pb_(pb), chart_pb_(pb), motion_(motion), o_(o) {
-    const auto* e = dynamic_cast<const EllipsoidSurface*>(pb.object.surface.get());
-    if (e) {
-      const Vec3 ax = e->semi_axes();
-      ball_radius_ = ax.x() == ax.y() && ax.y() == ax.z() ? ax.x() : 0.0;
-    }
-  }
+      : pb_(pb),
+        chart_pb_(pb),
+        motion_(motion),
+        o_(o),
+        hand_charts_(pb.hand, false),
+        object_charts_(pb.object.surface, true) {}
 
   SpatialRunResult run(const SpatialState& initial, double t0);
 
@@ -349,9 +350,9 @@ class SpatialIntegration {
     const double before = constraint_residual(t, y);
     const HandPose3 hand = motion_.at(t, segment_);
     SpatialState s = unpack(y);
-    const Eigen::Matrix3d Rc = s.orientation.toRotationMatrix();
+    const Eigen::Matrix3d Ro = s.orientation.toRotationMatrix();
     for (int iteration = 0; iteration < 8; ++iteration) {
-      const ContactWorld w = world(hand, Rc, s);
+      const ContactWorld w = world(hand, Ro, s);
       Eigen::Vector4d F;
       F.head<2>() = w.Jh.transpose() * (w.ph - w.po);
       F.tail<2>() = w.Jh.transpose() * (w.No + w.Nh);
@@ -366,10 +367,10 @@ class SpatialIntegration {
       s.s_h += d.tail<2>();
     }
     {
-      const ContactWorld w = world(hand, Rc, s);
+      const ContactWorld w = world(hand, Ro, s);
       s.position += w.ph - w.po;
     }
-    const ContactWorld w = world(hand, Rc, s);
+    const ContactWorld w = world(hand, Ro, s);
     const VelocityConstraints vc = velocity_constraints(w, hand);
     Eigen::Matrix<double, 10, 1> yv;
     yv << s.velocity, s.angular_velocity, s.sdot_o, s.sdot_h;
@@ -400,27 +401,24 @@ class SpatialIntegration {
                      (w.Jo * s.sdot_o - w.Jh * s.sdot_h).norm()});
   }
 
-  /// Turn the ball's chart so that the contact is at its (0, 0) when it has come within 0.57 rad
-  /// of a pole. Returns whether it did.
+  /// Between steps: each surface's contact into another chart if it has come near its chart's
+  /// poles (counted in stats.chart_changes), the longitudes wrapped. Returns whether a chart
+  /// changed (the state's derivative is then to be evaluated again: the same motion, but s and
+  /// sdot in other coordinates).
   bool rechart(Y& y) {
-    if (!(ball_radius_ > 0)) return false;
     SpatialState s = unpack(y);
-    if (std::abs(s.s_o.y()) < 1.0) return false;
-    const Surface& ball = *pb_.object.surface;
-    const SurfaceGeometry g = ball.geometry(s.s_o);
-    // D takes the new chart frame into the old one, with the new chart's (0, 0) point, body +x
-    // times r, onto the contact.
-    const Eigen::Matrix3d D =
-        Eigen::Quaterniond::FromTwoVectors(Vec3::UnitX(), g.point.normalized()).toRotationMatrix();
-    const SurfaceGeometry g0 = ball.geometry(SurfaceParam::Zero());
-    const Vec3 w = D.transpose() * (g.jacobian * s.sdot_o);  // the contact point's rate, new frame
-    s.sdot_o = (g0.jacobian.transpose() * g0.jacobian).ldlt().solve(g0.jacobian.transpose() * w);
-    s.s_o = SurfaceParam::Zero();
-    s.orientation = Eigen::Quaterniond(s.orientation.toRotationMatrix() * D).normalized();
-    chart_ = chart_ * D;
-    chart_pb_.object.inertia = chart_.transpose() * pb_.object.inertia * chart_;
-    ++stats.chart_changes;
-    y = pack(s);
+    const int changes =
+        int{object_charts_.update(s.s_o, s.sdot_o)} + int{hand_charts_.update(s.s_h, s.sdot_h)};
+    object_charts_.wrap_longitude(s.s_o);
+    hand_charts_.wrap_longitude(s.s_h);
+    y.segment<2>(13) = s.s_o;
+    y.segment<2>(15) = s.s_h;
+    y.segment<2>(17) = s.sdot_o;
+    y.segment<2>(19) = s.sdot_h;
+    if (changes == 0) return false;
+    chart_pb_.object.surface = object_charts_.chart();
+    chart_pb_.hand = hand_charts_.chart();
+    stats.chart_changes += changes;
     return true;
   }
 
@@ -430,16 +428,13 @@ class SpatialIntegration {
     out.t = t;
     const SpatialState s = unpack(y);
     out.state = s;
-    // The body's orientation: R_o = R_c C^T.
-    out.state.orientation =
-        Eigen::Quaterniond(s.orientation.toRotationMatrix() * chart_.transpose()).normalized();
     const HandPose3 hand = motion_.at(t, segment_);
     const ContactWorld w = world(hand, s.orientation.toRotationMatrix(), s);
     out.contact = w.ph;
     out.force = x.force;
     out.force_normal = x.force_normal;
     out.mu_required = x.mu_required;
-    out.energy = spatial_energy(chart_pb_, s);
+    out.energy = spatial_energy(pb_, s);
     out.constraint_residual = constraint_residual(hand, s, w);
     out.redundant_residual = x.residual;
     return out;
@@ -454,9 +449,8 @@ class SpatialIntegration {
     const auto margin = [](const SurfacePatch& p, const SurfaceParam& v) {
       return std::min({v.x() - p.lo.x(), p.hi.x() - v.x(), v.y() - p.lo.y(), p.hi.y() - v.y()});
     };
-    g.value[2] = margin(pb_.hand->patch(), s.s_h);
-    if (!(ball_radius_ > 0))
-      g.value[2] = std::min(g.value[2], margin(pb_.object.surface->patch(), s.s_o));
+    g.value[2] = std::min(margin(chart_pb_.hand->patch(), s.s_h),
+                          margin(chart_pb_.object.surface->patch(), s.s_o));
     return g;
   }
 
@@ -479,8 +473,9 @@ class SpatialIntegration {
     if (!(eig.eigenvalues().minCoeff() > 0))
       throw std::invalid_argument(
           "spatial run: the object does not fit the hand's curvature at the contact (" +
-          pb_.object.surface->describe() + " on " + pb_.hand->describe() + ": relative curvature " +
-          format_significant(eig.eigenvalues().minCoeff()) + " 1/m, must be > 0)");
+          chart_pb_.object.surface->describe() + " on " + chart_pb_.hand->describe() +
+          ": relative curvature " + format_significant(eig.eigenvalues().minCoeff()) +
+          " 1/m, must be > 0)");
   }
 
   /// One step of the chosen method; the error norm (0 for RK4). The dense output is complete in
@@ -566,17 +561,16 @@ class SpatialIntegration {
       stats.max_mu_required = std::numeric_limits<double>::infinity();
   }
 
-  ContactWorld world(const HandPose3& hand, const Eigen::Matrix3d& Rc,
+  ContactWorld world(const HandPose3& hand, const Eigen::Matrix3d& Ro,
                      const SpatialState& s) const {
-    return contact_world(pb_, hand, Rc, s);
+    return contact_world(chart_pb_, hand, Ro, s);
   }
 
   const SpatialRollingProblem& pb_;
-  SpatialRollingProblem chart_pb_;  ///< the object's inertia in its chart frame
+  SpatialRollingProblem chart_pb_;  ///< pb_ with both surfaces in the charts in use
   const HandMotion3& motion_;
   const SpatialRunOptions& o_;
-  Eigen::Matrix3d chart_ = Eigen::Matrix3d::Identity();  ///< C: chart frame -> body frame
-  double ball_radius_ = 0;
+  SurfaceCharts hand_charts_, object_charts_;
   int segment_ = 0;  ///< the motion's segment the run is in
   Stages853<Y> k853_;
   double facold_ = 1e-4;  ///< PI step-size controller memory
@@ -599,11 +593,10 @@ SpatialRunResult SpatialIntegration::run(const SpatialState& initial, double t0)
   SpatialSolution x = rhs(t, y, k1);
   Guards g_start = guards(y, x);
   if (g_start.value[2] < -1e-9)
-    throw std::invalid_argument(
-        "spatial run: the contact starts outside the patch of " +
-        (ball_radius_ > 0 || pb_.object.surface->patch().contains(unpack(y).s_o)
-             ? pb_.hand->describe()
-             : pb_.object.surface->describe()));
+    throw std::invalid_argument("spatial run: the contact starts outside the patch of " +
+                                (chart_pb_.object.surface->patch().contains(unpack(y).s_o)
+                                     ? chart_pb_.hand->describe()
+                                     : chart_pb_.object.surface->describe()));
   const auto record = [&](double tt, const Y& yy, const SpatialSolution& xx) {
     const SpatialSample s = sample(tt, yy, xx);
     note(s, xx);
@@ -767,16 +760,16 @@ SpatialState place_in_contact(const SpatialRollingProblem& pb, const HandPose3& 
   };
   const Vec3 nh = hand.rotation * gh.normal;
   const Vec3 th = Eigen::AngleAxisd(at.twist, nh) * (hand.rotation * gh.jacobian.col(0));
-  const Eigen::Matrix3d Rc = frame(th, -nh) * frame(go.jacobian.col(0), go.normal).transpose();
+  const Eigen::Matrix3d Ro = frame(th, -nh) * frame(go.jacobian.col(0), go.normal).transpose();
   SpatialState s;
   s.s_h = at.s_h;
   s.s_o = at.s_o;
-  s.orientation = Eigen::Quaterniond(Rc).normalized();
-  s.position = hand.position + hand.rotation * gh.point - Rc * go.point;
+  s.orientation = Eigen::Quaterniond(Ro).normalized();
+  s.position = hand.position + hand.rotation * gh.point - Ro * go.point;
   // The velocities: the rolling constraints' solutions x_p + Z z (Z spans their null space, 3
   // dimensions), z chosen so that the centre's tangential velocity and the spin about the normal
   // are the ones asked for.
-  const ContactWorld w = contact_world(pb, hand, Rc, s);
+  const ContactWorld w = contact_world(pb, hand, Ro, s);
   const VelocityConstraints vc = velocity_constraints(w, hand);
   // C has full row rank (7): its SVD gives the smallest solution and the null space's basis.
   const Eigen::JacobiSVD<Eigen::Matrix<double, VelocityConstraints::kRows, 10>> svd(

@@ -95,36 +95,53 @@ TEST(SpatialRun, BallOnAnInclinedTurntableDriftsAcrossTheSlope) {
 }
 
 TEST(SpatialRun, BallRollsStraightOnForManyTurnsAcrossItsChartsPoles) {
-  // Without gravity along the plane a rolling ball keeps its velocity. The ball's chart has its
-  // poles on the rolling axis's great circle, so the contact reaches them within a quarter turn:
-  // the chart is turned again and again, and the motion must not notice.
-  const double r = 0.02, speed = 0.3;
+  // Without gravity along the plane a rolling ball keeps its velocity and its angular velocity
+  // omega, a spin about the normal included; its contact runs over the ball on a circle about
+  // omega's axis. The motion must not notice the charts it is carried through:
+  //  - without spin, started with its chart's poles on the rolling direction (twist 90 degrees:
+  //    the chart's u direction across the path), the contact reaches a pole within a quarter turn;
+  //    the chart is then laid along the path, a great circle, which stays on its equator;
+  //  - spinning as fast as it rolls, the path is a circle of 45 degrees' radius, which passes
+  //    through the poles of a chart whose equator touches it: the chart changes at least once
+  //    per circle, a circle every 2 pi r sin(45 degrees) of rolling.
+  const double r = 0.02, speed = 0.3, turns = 10;
   SpatialRollingProblem pb;
   pb.hand = std::make_shared<PlaneSurface>(Vec3::Zero(), Vec3::UnitX(), Vec3::UnitY());
   pb.object = uniform_ball(r, 0.2);
   const FixedHand3 hand;
-  const SpatialState initial =
-      ball_on(pb, hand.at(0), r, SurfaceParam(0.0, 0.0), Vec3(speed, 0, 0), 1.0);
-  const double turns = 10;
-  SpatialRunOptions o;
-  o.t_end = turns * 2 * kPi * r / speed;
-  o.integrator.rtol = 1e-12;
-  o.integrator.atol = 1e-14;
-  const SpatialRunResult run = simulate_spatial(pb, hand, initial, 0.0, o);
-  ASSERT_EQ(run.stop, SpatialStop::kEndTime);
-  EXPECT_GE(run.stats.chart_changes, static_cast<int>(2 * turns));
-  for (const SpatialSample& s : run.samples) {
-    ASSERT_LT((s.state.position - Vec3(speed * s.t, 0, r)).norm(), 1e-10 * speed * o.t_end)
-        << "t " << s.t;
-    ASSERT_LT((s.state.angular_velocity - Vec3(0, speed / r, 0)).norm(), 1e-9 * speed / r);
-    ASSERT_LT(s.constraint_residual, 1e-12);
+  struct Case {
+    double twist, spin;
+    int min_changes, max_changes;
+  };
+  const int circles = static_cast<int>(turns / std::sin(kPi / 4));
+  for (const Case& c : {Case{kPi / 2, 0.0, 1, 1}, Case{0.0, speed / r, circles, 1000}}) {
+    SCOPED_TRACE("spin " + std::to_string(c.spin));
+    ContactPlacement at;
+    at.twist = c.twist;
+    at.velocity = Vec3(speed, 0, 0);
+    at.spin = c.spin;
+    const SpatialState initial = place_in_contact(pb, hand.at(0), at);
+    const Vec3 omega(0, speed / r, c.spin);
+    SpatialRunOptions o;
+    o.t_end = turns * 2 * kPi * r / speed;
+    o.integrator.rtol = 1e-12;
+    o.integrator.atol = 1e-14;
+    const SpatialRunResult run = simulate_spatial(pb, hand, initial, 0.0, o);
+    ASSERT_EQ(run.stop, SpatialStop::kEndTime);
+    EXPECT_GE(run.stats.chart_changes, c.min_changes);
+    EXPECT_LE(run.stats.chart_changes, c.max_changes);
+    for (const SpatialSample& s : run.samples) {
+      ASSERT_LT((s.state.position - Vec3(speed * s.t, 0, r)).norm(), 1e-10 * speed * o.t_end)
+          << "t " << s.t;
+      ASSERT_LT((s.state.angular_velocity - omega).norm(), 1e-9 * omega.norm());
+      ASSERT_LT(s.constraint_residual, 1e-12);
+    }
+    // The body turned at the constant angular velocity.
+    const Vec3 body_x = run.final.state.orientation * Vec3::UnitX();
+    const Vec3 expected = Eigen::AngleAxisd(omega.norm() * o.t_end, omega.normalized()) *
+                          (initial.orientation * Vec3::UnitX());
+    EXPECT_LT((body_x - expected).norm(), 1e-9);
   }
-  // The body turned by the distance over r about world y: its x axis is where it began after
-  // whole turns.
-  const Vec3 body_x = run.final.state.orientation * Vec3::UnitX();
-  const Vec3 expected =
-      Eigen::AngleAxisd(speed * o.t_end / r, Vec3::UnitY()) * (initial.orientation * Vec3::UnitX());
-  EXPECT_LT((body_x - expected).norm(), 1e-9);
 }
 
 /// A spherical bowl of radius R (the hand turned so that its chart's poles are horizontal) with

@@ -1,12 +1,12 @@
 // Spatial rolling in time (issue 16): hand motions in SE(3) and a run of the 11 x 10 equations
 // with the planar path's integrators (Dormand-Prince 5(4) and 8(5,3), classical RK4), the state
 // projected back onto the contact manifold after every accepted step (unit quaternion, coincident
-// contact points with opposite normals, rolling velocities). A ball's chart is turned whenever
-// the contact nears its poles, so that it can roll for ever. Contact loss, slip at mu and a
-// contact leaving a surface's patch are events located within the step to a time tolerance; the
-// run stops there (the spatial path has no flight or sliding mode: a run that loses its contact
-// or slips is not a success). Samples come from every step or, at a fixed spacing, from the
-// steps' dense output.
+// contact points with opposite normals, rolling velocities). The contact is carried into another
+// chart of its surface whenever it nears a chart's poles (a ball's, an ellipsoid's, a bowl's or a
+// dish's), so that it can roll for ever. Contact loss, slip at mu and a contact leaving a
+// surface's patch are events located within the step to a time tolerance; the run stops there
+// (the spatial path has no flight or sliding mode: a run that loses its contact or slips is not a
+// success). Samples come from every step or, at a fixed spacing, from the steps' dense output.
 #pragma once
 
 #include "flatland/sim/motion.hpp"
@@ -141,9 +141,11 @@ struct SpatialRunOptions {
 /// Everything known at one instant of a spatial run.
 struct SpatialSample {
   double t = 0;
-  SpatialState state;           ///< the object's orientation is its body frame's (not its chart's)
-  Vec3 contact = Vec3::Zero();  ///< the contact point, world, m
-  Vec3 force = Vec3::Zero();    ///< N: the hand's contact force on the object, world
+  /// The object's orientation is its body frame's; s_o, s_h and their rates are in the charts in
+  /// use at t (SpatialRunStats::chart_changes), the longitudes in [-pi, pi].
+  SpatialState state;
+  Vec3 contact = Vec3::Zero();               ///< the contact point, world, m
+  Vec3 force = Vec3::Zero();                 ///< N: the hand's contact force on the object, world
   double force_normal = 0, mu_required = 0;  ///< N; |f_t| / f_n
   double energy = 0;                         ///< J: kinetic + potential (-m g . x) of the object
   /// max(|contact gap| in m, |n_o + n_h|, rolling velocity in m/s, contact point rates in m/s)
@@ -155,15 +157,20 @@ enum class SpatialStop {
   kEndTime,      ///< reached t_end (the only success)
   kContactLost,  ///< f_n reached 0 (located)
   kSlip,         ///< |f_t| reached mu f_n (located)
-  kLeftPatch,    ///< the contact left a surface's patch that cannot be recharted (located)
+  kLeftPatch,    ///< the contact left a surface's patch with no chart to move to (located)
 };
 std::string to_string(SpatialStop s);
 
 struct SpatialRunStats {
   long steps = 0, rejected = 0, rhs_evals = 0;
-  long event_evals = 0;                ///< guard evaluations while locating events
-  int restarts = 0;                    ///< at the motion's breakpoints
-  int chart_changes = 0;               ///< the ball's chart turned (the contact neared its poles)
+  long event_evals = 0;  ///< guard evaluations while locating events
+  int restarts = 0;      ///< at the motion's breakpoints
+  /// Every move of the contact into another chart of its surface, made when it came within
+  /// 0.57 rad of a chart's pole: of the object's surface (a ball's chart turned along the
+  /// contact's path, an ellipsoid's three charts with their poles on its x, y, z axes) and of the
+  /// hand's (a sphere's or an ellipsoid's three: a bowl, dish or dome). A step that moves both
+  /// counts two. A plane, an extruded curve and a surface of revolution keep their one chart.
+  int chart_changes = 0;
   double max_constraint_residual = 0;  ///< after projection, over the samples
   double max_redundant_residual = 0;
   double max_drift = 0;  ///< the largest constraint residual a projection removed
