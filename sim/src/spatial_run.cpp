@@ -445,13 +445,18 @@ class SpatialIntegration {
     constexpr double kHolds = std::numeric_limits<double>::infinity();
     g.value[0] = o_.stop_on_contact_loss ? x.force_normal : kHolds;
     g.value[1] = pb_.mu ? *pb_.mu * x.force_normal - x.force_tangential.norm() : kHolds;
-    const SpatialState s = unpack(y);
+    g.value[2] = patch_margin(unpack(y));
+    return g;
+  }
+
+  /// How far inside both surfaces' patches (in the charts in use) the contact is, in their
+  /// parameters: < 0 outside.
+  double patch_margin(const SpatialState& s) const {
     const auto margin = [](const SurfacePatch& p, const SurfaceParam& v) {
       return std::min({v.x() - p.lo.x(), p.hi.x() - v.x(), v.y() - p.lo.y(), p.hi.y() - v.y()});
     };
-    g.value[2] = std::min(margin(chart_pb_.hand->patch(), s.s_h),
-                          margin(chart_pb_.object.surface->patch(), s.s_o));
-    return g;
+    return std::min(margin(chart_pb_.hand->patch(), s.s_h),
+                    margin(chart_pb_.object.surface->patch(), s.s_o));
   }
 
   /// std::invalid_argument unless the object fits the hand at the contact: the relative curvature
@@ -586,17 +591,19 @@ SpatialRunResult SpatialIntegration::run(const SpatialState& initial, double t0)
   double t = t0;
   segment_ = motion_.segment_at(t0);
   Y y = pack(initial);
-  rechart(y);
   project(t, y);
   require_fit(t, y);
+  // The start is given in the surfaces' own charts and must lie in their patches; only then may
+  // the contact move into another chart (a start within 0.57 rad of a pole does).
+  if (patch_margin(unpack(y)) < -1e-9)
+    throw std::invalid_argument("spatial run: the contact starts outside the patch of " +
+                                (pb_.object.surface->patch().contains(unpack(y).s_o)
+                                     ? pb_.hand->describe()
+                                     : pb_.object.surface->describe()));
+  rechart(y);
   Y k1, k7, y1;
   SpatialSolution x = rhs(t, y, k1);
   Guards g_start = guards(y, x);
-  if (g_start.value[2] < -1e-9)
-    throw std::invalid_argument("spatial run: the contact starts outside the patch of " +
-                                (chart_pb_.object.surface->patch().contains(unpack(y).s_o)
-                                     ? chart_pb_.hand->describe()
-                                     : chart_pb_.object.surface->describe()));
   const auto record = [&](double tt, const Y& yy, const SpatialSolution& xx) {
     const SpatialSample s = sample(tt, yy, xx);
     note(s, xx);
