@@ -19,23 +19,24 @@ namespace flatland::sim::detail {
 inline constexpr double kSwitchLatitude = 1.0;
 
 /// One surface's charts and the one in use. Three kinds:
-///  - a surface without poles (a plane, an extruded curve, a surface of revolution): its own chart;
-///  - a ball object (`turn_freely`, a sphere): the sphere in any turned frame. A change puts the
-///    contact at the new chart's (0, 0) with its path over the ball along the equator, where the
-///    coordinates are the smoothest and the poles the farthest (a ball rolling straight on keeps
-///    its chart for ever);
+///  - a surface with no other chart here (a plane, an extruded curve, a surface of revolution,
+///    whose patch is one piece of its outline or profile): its own;
+///  - a ball (a sphere with `turn_a_sphere_freely`: the object's side): the sphere in any turned
+///    frame. A change puts the contact at the new chart's (0, 0) with its path over the ball
+///    along the equator, where the coordinates are the smoothest and the poles the farthest (a
+///    ball rolling straight on keeps its chart for ever);
 ///  - any other ellipsoid (an ellipsoid object, a bowl or dish, a dome): three charts, the
 ///    ellipsoid with its poles on the body's x, y or z axis (the chart's semi-axes permuted
 ///    cyclically, in the frame that permutation turns to); a change picks the chart whose poles
 ///    are farthest from the contact, where its latitude is at most asin(1/sqrt 3) = 0.62 rad.
-/// Chart 0 of each is the surface itself (the scene's chart, where a run starts).
+/// Chart 0 of each is the surface itself (the scene's chart, where a run starts). A sphere hand
+/// keeps to the three axis charts, whose coordinates (the outputs' s_h) a reader can follow.
 class SurfaceCharts {
  public:
-  SurfaceCharts(SurfacePtr surface, bool turn_freely);
+  SurfaceCharts(SurfacePtr surface, bool turn_a_sphere_freely);
 
   /// The surface in the chart in use, in the body's (or the hand's) frame.
   const SurfacePtr& chart() const { return chart_; }
-  bool has_poles() const { return ellipsoid_ != nullptr; }
 
   /// If the contact at s is past kSwitchLatitude and another chart has it nearer its equator,
   /// changes to that chart and gives the same point and velocity over the surface there: s and
