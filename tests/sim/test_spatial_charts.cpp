@@ -183,15 +183,20 @@ void expect_kept_energy_over_a_minute(const SpatialRollingProblem& pb, double de
 }
 
 TEST(SpatialCharts, ABallSwingsInABowlForAMinuteAcrossItsPoles) {
+  // Started 1.4 rad from the bottom, it swings through the bottom (the first chart's pole) and
+  // climbs, as its swing turns, within 0.57 rad of the points at the rim's height on the x and y
+  // axes (the other charts' poles): the bowl's charts change most (about 90 of some 160).
   const double R = 0.3, r = 0.05;
   SpatialRollingProblem pb;
   pb.hand = std::make_shared<EllipsoidSurface>(
       EllipsoidSurface::sphere(R, EllipsoidSurface::Side::kDish));
   pb.object = uniform_ball(r, 0.1);
-  expect_kept_energy_over_a_minute(pb, R, 1.1, 0.2, 5.0);
+  expect_kept_energy_over_a_minute(pb, R, 1.4, 0.6, 1.0);
 }
 
 TEST(SpatialCharts, AnEllipsoidSwingsInADishForAMinuteAcrossItsPoles) {
+  // The ellipsoid's own charts change most here (its contact wanders over it as it rolls and
+  // spins); started higher or faster, this one rocks off the dish's wall (its contact is lost).
   SpatialRollingProblem pb;
   pb.hand = std::make_shared<EllipsoidSurface>(0.3, 0.4, 0.35, EllipsoidSurface::Side::kDish);
   pb.object = uniform_ellipsoid(0.03, 0.05, 0.04, 0.3);
