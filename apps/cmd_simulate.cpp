@@ -170,6 +170,8 @@ void run_simulate_spatial(const SimulateOptions& o, const Scene& scene) {
   }
   if (o.sample_dt_opt->count()) setup.options.sample_dt = o.sample_dt;
   const fs::path out = o.common.out;
+  // Samples are kept only for the CSV: without --out the run's memory does not grow with time.
+  setup.options.record = !out.empty();
   if (!out.empty() && (o.common.out.back() == '/' || fs::is_directory(out)))
     throw UsageError("--out: must be a file name (FILE.csv), not a directory: " + o.common.out);
   const bool plots = !out.empty() && !o.no_plot;
@@ -215,6 +217,7 @@ void run_simulate_spatial(const SimulateOptions& o, const Scene& scene) {
     j["csv"] = out.empty() ? Json(nullptr) : Json(out.string());
     j["png"] = plots ? Json(png.string()) : Json(nullptr);
     emit_json(j);
+    fail_if_broken(r.audit);
     return;
   }
   const sim::SpatialSample& f = r.final;
@@ -237,16 +240,17 @@ void run_simulate_spatial(const SimulateOptions& o, const Scene& scene) {
      << "  min f_n            " << f6(r.stats.min_force_normal) << " N\n"
      << "  required mu        " << f6(r.stats.max_mu_required)
      << (spec.mu ? " (mu = " + f6(*spec.mu) + ")" : std::string()) << "\n"
-     << "  energy change      "
-     << f6(f.energy - (r.samples.empty() ? f.energy : r.samples.front().energy)) << " J\n"
-     << "  steps              " << r.stats.steps << " accepted, " << r.stats.rejected
-     << " rejected, " << r.stats.rhs_evals << " rhs evaluations, " << r.stats.chart_changes
-     << " chart changes (" << sim::to_string(spec.integrator.method) << ")\n"
+     << "  energy change      " << f6(f.energy - r.initial.energy) << " J\n"
+     << energy_text(r.audit) << "  steps              " << r.stats.steps << " accepted, "
+     << r.stats.rejected << " rejected, " << r.stats.rhs_evals << " rhs evaluations, "
+     << r.stats.chart_changes << " chart changes (" << sim::to_string(spec.integrator.method)
+     << ")\n"
      << "  residuals          constraints " << f6(r.stats.max_constraint_residual)
      << ", redundant row " << f6(r.stats.max_redundant_residual) << "\n";
   if (!out.empty())
     os << "  wrote              " << out.string() << (plots ? ", " + png.string() : "") << "\n";
   std::cout << os.str();
+  fail_if_broken(r.audit);
 }
 
 void run_simulate(const SimulateOptions& o) {

@@ -213,13 +213,13 @@ Json param(const sim::SurfaceParam& v) { return Json::array({number(v.x()), numb
 Json spatial_simulate_json(const sim::SpatialSpec& spec, const sim::SpatialRunResult& r) {
   const sim::SpatialSample& f = r.final;
   const sim::SpatialRunStats& st = r.stats;
-  const double e0 = r.samples.empty() ? f.energy : r.samples.front().energy;
+  const double e0 = r.initial.energy;
   Json j;
   j["space"] = "3d";
   j["stop_reason"] = sim::to_string(r.stop);
-  j["success"] = r.stop == sim::SpatialStop::kEndTime;
-  j["t_end"] = number(spec.end_time());
-  j["t"] = number(f.t);
+  j["success"] = r.stop == sim::SpatialStop::kEndTime && !r.audit.broken;
+  j["t_end"] = number(f.t);                 // where the run stopped, as in a planar report
+  j["duration"] = number(spec.end_time());  // what was asked
   Json fin;
   fin["position"] = vec3(f.state.position);
   const Eigen::Quaterniond q = f.state.orientation.normalized();
@@ -250,6 +250,7 @@ Json spatial_simulate_json(const sim::SpatialSpec& spec, const sim::SpatialRunRe
   j["max_redundant_residual"] = number(st.max_redundant_residual);
   j["max_drift"] = number(st.max_drift);
   j["samples"] = r.samples.size();
+  j["energy"] = energy_json(r.audit);
   return j;
 }
 

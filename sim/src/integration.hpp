@@ -19,6 +19,7 @@
 #include "flatland/sim/roots.hpp"
 #include "flatland/sim/simulate.hpp"
 #include "runge_kutta.hpp"
+#include "step_budget.hpp"
 
 #include <algorithm>
 #include <array>
@@ -43,23 +44,6 @@ inline std::string at_text(double t, double s_h) {
 /// With options.keep_steps, fold the oldest recorded steps into the run's extrema, apex and
 /// probes and drop them (simulate.cpp), so that a recorded run's memory stays bounded.
 void fold_old_steps(RunResult& res, const RunOptions& opt);
-
-/// A run that has used a hundredth of its step budget and, at the rate so far, would need more
-/// than four times the budget to reach its end is refused now (std::invalid_argument naming the
-/// duration: an input too long for the budget) instead of after minutes and gigabytes. Checked
-/// every 1024 steps.
-inline void forecast_step_budget(long used, long budget, double t_start, double t, double t_end) {
-  if (used < std::max(1000L, budget / 100) || used % 1024 != 0 || !(t > t_start)) return;
-  const double forecast = static_cast<double>(used) * (t_end - t_start) / (t - t_start);
-  if (!(forecast > 4.0 * static_cast<double>(budget))) return;
-  std::ostringstream os;
-  os.precision(3);
-  os << "duration: " << (t_end - t_start) << " s would take about " << forecast
-     << " integrator steps at the rate of its first " << (t - t_start)
-     << " s, beyond the step budget of " << budget
-     << " (integrator.max_steps; or a shorter duration, or a looser rtol)";
-  throw std::invalid_argument(os.str());
-}
 
 /// The energy ledger of a planar run (its audit in `audit`): the tolerance from the options, the
 /// floor of the energy scale m g times the object's size.

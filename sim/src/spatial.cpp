@@ -129,6 +129,8 @@ SpatialSolution solve_spatial_rolling(const SpatialRollingProblem& pb, const Han
   s.force_tangential = s.force - s.force_normal * h.n;
   s.mu_required = s.force_normal > 0 ? s.force_tangential.norm() / s.force_normal
                                      : std::numeric_limits<double>::infinity();
+  // d/dt (m |v|^2 / 2 + omega . I omega / 2) = f . v + omega . (r_o x f) by rows (4).
+  s.power = s.force.dot(st.velocity + wo.cross(o.r));
   return s;
 }
 

@@ -4,8 +4,10 @@
 // carried into another chart of its surface when it nears a chart's poles (spatial_charts.hpp).
 #include "flatland/sim/spatial_run.hpp"
 
+#include "energy_ledger.hpp"
 #include "runge_kutta.hpp"
 #include "spatial_charts.hpp"
+#include "step_budget.hpp"
 
 #include "flatland/sim/format.hpp"
 #include "flatland/sim/roots.hpp"
@@ -173,6 +175,8 @@ std::string to_string(SpatialStop s) {
       return "slip";
     case SpatialStop::kLeftPatch:
       return "left_patch";
+    case SpatialStop::kNumericalFailure:
+      return "numerical_failure";
   }
   return "?";
 }
@@ -187,7 +191,8 @@ double spatial_energy(const SpatialRollingProblem& pb, const SpatialState& s) {
 
 namespace {
 
-constexpr int kN = 21;
+constexpr int kN = 22;  // the state's 21 values and, last, the contact force's work (the audit)
+constexpr int kWork = 21;
 using Y = Eigen::Matrix<double, kN, 1>;
 
 using namespace detail;  // the Runge-Kutta steps
@@ -294,8 +299,10 @@ class SpatialIntegration {
   SpatialRunResult run(const SpatialState& initial, double t0);
 
  private:
-  Y pack(const SpatialState& s) const {
+  /// The state and the work done so far (which only the integrator changes).
+  Y pack(const SpatialState& s, double work = 0) const {
     Y y;
+    y[kWork] = work;
     y.segment<3>(0) = s.position;
     const Eigen::Quaterniond q = s.orientation.normalized();
     y.segment<4>(3) << q.w(), q.x(), q.y(), q.z();
@@ -339,6 +346,7 @@ class SpatialIntegration {
     dy.segment<2>(15) = s.sdot_h;
     dy.segment<2>(17) = x.sddot_o;
     dy.segment<2>(19) = x.sddot_h;
+    dy[kWork] = x.power;
     return x;
   }
 
@@ -384,7 +392,7 @@ class SpatialIntegration {
     s.angular_velocity = yv.segment<3>(3);
     s.sdot_o = yv.segment<2>(6);
     s.sdot_h = yv.segment<2>(8);
-    y = pack(s);
+    y = pack(s, y[kWork]);
     return before;
   }
 
@@ -494,11 +502,11 @@ class SpatialIntegration {
         rk4_step(f, t, y, k1, h, y1, k7, rc);
         return 0.0;
       case Method::kDormandPrince853:
-        return dop853_step(f, t, y, k1, h, is.rtol, is.atol, y1, k7, k853_);
+        return dop853_step(f, t, y, k1, h, is.rtol, is.atol, y1, k7, k853_, kWork);
       case Method::kDormandPrince54:
         break;
     }
-    return dopri5_step(f, t, y, k1, h, is.rtol, is.atol, y1, k7, rc);
+    return dopri5_step(f, t, y, k1, h, is.rtol, is.atol, y1, k7, rc, kWork);
   }
   void dense(double t, const Y& y, const Y& y1, double h, DenseCoefficients<Y>& rc) {
     if (o_.integrator.method != Method::kDormandPrince853) return;
@@ -611,6 +619,15 @@ SpatialRunResult SpatialIntegration::run(const SpatialState& initial, double t0)
     return s;
   };
   SpatialSample last = record(t, y, x);
+  res.initial = last;
+  // The energy audit: the floor of its scale m |g| times the object's size (centre to contact).
+  EnergyLedger ledger(
+      res.audit, energy_tolerance(is.energy_tolerance, rk4, is.rtol),
+      pb_.object.mass * pb_.gravity.norm() * (last.contact - last.state.position).norm());
+  const auto kinetic = [&](const SpatialSample& ss) {
+    return ss.energy + pb_.object.mass * pb_.gravity.dot(ss.state.position);
+  };
+  ledger.start(last.energy, kinetic(last));
   // A run may start on a boundary (a disk resting at the edge of the hand's piece): a value
   // within a rounding tolerance of it is taken as on it; one further beyond stops the run at once.
   const double weight = pb_.object.mass * std::max(pb_.gravity.norm(), 1.0);
@@ -637,10 +654,11 @@ SpatialRunResult SpatialIntegration::run(const SpatialState& initial, double t0)
       if (h == 0.0)
         h = starting_step([this](double tt, const Y& yy, Y& dy) { rhs(tt, yy, dy); }, t, y, k1,
                           t_stop, is.rtol, is.atol, is.max_step,
-                          is.method == Method::kDormandPrince853 ? 8.0 : 5.0);
+                          is.method == Method::kDormandPrince853 ? 8.0 : 5.0, kWork);
       if (stats.steps + stats.rejected >= is.max_steps)
         throw std::runtime_error("spatial run: step budget (" + std::to_string(is.max_steps) +
                                  ") exhausted at t=" + format_significant(t, 10) + " s");
+      forecast_step_budget(stats.steps + stats.rejected, is.max_steps, t0, t, o_.t_end);
       double h_try = rk4 ? is.fixed_step : std::min(h, is.max_step);
       if (t + 1.01 * h_try >= t_stop) h_try = t_stop - t;  // land exactly on the stop
       const double err = attempt(t, y, k1, h_try, y1, k7, rc);
@@ -689,6 +707,7 @@ SpatialRunResult SpatialIntegration::run(const SpatialState& initial, double t0)
             record(tg, yg, xg);
           }
         }
+        ledger.add_work(y1p[kWork] - y[kWork], 0.0);
         t = t1;
         y = y1p;
         x = x1;
@@ -700,6 +719,10 @@ SpatialRunResult SpatialIntegration::run(const SpatialState& initial, double t0)
         last = s;
         g_start = guards(y, x);
         if (o_.progress) o_.progress(t);
+        if (!ledger.check(t, s.energy, kinetic(s))) {
+          stopped = SpatialStop::kNumericalFailure;  // the numbers are wrong from here on
+          break;
+        }
       }
       if (!rk4 && event < 0) h = next_step(h_try, err, last_rejected);
       last_rejected = false;
@@ -740,6 +763,9 @@ void check(const SpatialRollingProblem& pb, const SpatialRunOptions& o, double t
       !(is.fixed_step > 0) || !std::isfinite(is.fixed_step))
     throw std::invalid_argument(
         "spatial run: rtol, atol, step, max_step and max_steps must be positive");
+  if (is.energy_tolerance && !(*is.energy_tolerance > 0 && std::isfinite(*is.energy_tolerance)))
+    throw std::invalid_argument("spatial run: energy_tolerance must be positive and finite");
+  check_fixed_step_budget(is, o.t_end - t0);  // (after t_end's own check: the span is finite)
   if (!(o.time_tolerance > 0) || !std::isfinite(o.time_tolerance))
     throw std::invalid_argument("spatial run: the event time tolerance must be positive");
   if (!(o.sample_dt >= 0) || !std::isfinite(o.sample_dt))

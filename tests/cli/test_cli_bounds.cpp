@@ -92,6 +92,20 @@ TEST_F(CliBounds, TolerancesOutsideTheirRangeAreRefused) {
   fs::remove(dir_ / "tol.yaml");
 }
 
+TEST_F(CliBounds, SpatialInputsAreBoundedToo) {
+  scene("turntable.yaml", kTurntable);
+  expect_refused("simulate --scene turntable.yaml --rtol 1e-300 --atol 1e-302", "--rtol");
+  expect_refused("simulate --scene turntable.yaml --duration 1e6", "duration");
+  expect_refused("simulate --scene turntable.yaml --method rk4 --step 1e-12", "integrator.step");
+  expect_refused("simulate --scene turntable.yaml --sample-dt 1e-12 --out run.csv", "--sample-dt");
+  fs::remove(dir_ / "turntable.yaml");
+  std::string tight = kTurntable;
+  tight.replace(tight.find("rtol: 1.0e-11"), 13, "rtol: 1.0e-300");
+  scene("tol.yaml", tight);
+  expect_refused("simulate --scene tol.yaml", "integrator.rtol");
+  fs::remove(dir_ / "tol.yaml");
+}
+
 // A long run without --out writes nothing and keeps a bounded window of its steps: ten thousand
 // seconds of the butterfly's disk rocking on the back (2.9 million steps) within the 1 GB limit,
 // and its extrema the same as the paper's 1.181 s run's (the motion ends there; the rocking after

@@ -35,7 +35,7 @@ TEST_F(CliSpatial, TheBowlsConicalOrbitKeepsItsHeight) {
   EXPECT_EQ(j["space"], "3d");
   EXPECT_EQ(j["stop_reason"], "end_time");
   EXPECT_TRUE(j["success"].get<bool>());
-  EXPECT_EQ(j["t"].get<double>(), 5.0);
+  EXPECT_EQ(j["t_end"].get<double>(), 5.0);
   // The centre stays on the orbit's latitude: rho cos(0.6) below the bowl's centre (the scene's
   // start velocity is the closed form's to 7 digits).
   const double rho = 0.3 - 0.05;
@@ -44,6 +44,10 @@ TEST_F(CliSpatial, TheBowlsConicalOrbitKeepsItsHeight) {
       std::hypot(j["final"]["position"][0].get<double>(), j["final"]["position"][1].get<double>()),
       rho * std::sin(0.6), 1e-7);
   EXPECT_LT(std::abs(j["energy_change"].get<double>()), 1e-9);
+  // The run's own audit: a fixed bowl does (next to) no work, and the balance holds.
+  EXPECT_TRUE(j["energy"]["holds"].get<bool>());
+  EXPECT_LT(std::abs(j["energy"]["work_hand"].get<double>()), 1e-9);
+  EXPECT_EQ(j["duration"].get<double>(), 5.0);
   EXPECT_LT(j["max_constraint_residual"].get<double>(), 1e-12);
   EXPECT_GT(j["steps"].get<long>(), 0);
   EXPECT_TRUE(j["csv"].is_null());
@@ -73,7 +77,7 @@ TEST_F(CliSpatial, SlipStopsTheRunAndIsNoSuccess) {
   const json j = json::parse(r.out);
   EXPECT_EQ(j["stop_reason"], "slip");
   EXPECT_FALSE(j["success"].get<bool>());
-  EXPECT_LT(j["t"].get<double>(), 1e-9);
+  EXPECT_LT(j["t_end"].get<double>(), 1e-9);
 }
 
 TEST_F(CliSpatial, BadInputIsRefusedWithNothingWritten) {

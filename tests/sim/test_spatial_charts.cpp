@@ -101,6 +101,11 @@ void expect_weltner(const Drift& d) {
   // margin.
   EXPECT_LE(d.speed_over_bound, 1 + 1e-9);
   EXPECT_LT(d.run.stats.max_constraint_residual, 1e-12);
+  // The run's own energy audit: the table's work (the ball spins up to thousands of rad/s)
+  // accounts for every joule the ball gains.
+  EXPECT_FALSE(d.run.audit.broken);
+  EXPECT_LE(std::abs(d.run.audit.balance), d.run.audit.bound());
+  EXPECT_GT(d.run.audit.work_hand, 0.0);
 }
 
 TEST(SpatialCharts, TheInclinedTurntableDriftsAsWeltnerSaysForTwentySecondsWithDopri5) {
@@ -174,6 +179,10 @@ void expect_kept_energy_over_a_minute(const SpatialRollingProblem& pb, double de
     lowest = std::min(lowest, s.contact.z() / depth);
   }
   EXPECT_LT(worst / scale, 1e-8) << run.stats.steps << " steps";
+  // The run's own audit holds, and the fixed dish does no work (to the constraints' drift).
+  EXPECT_FALSE(run.audit.broken);
+  EXPECT_LE(std::abs(run.audit.balance), run.audit.bound());
+  EXPECT_LT(std::abs(run.audit.work_hand), 1e-8 * scale);
   EXPECT_GE(run.stats.chart_changes, o.t_end < 60 ? 10 : 50);
   EXPECT_LT(run.stats.max_constraint_residual, 1e-12);
   EXPECT_GT(run.stats.min_force_normal, 0);

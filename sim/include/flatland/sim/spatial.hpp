@@ -80,6 +80,9 @@ struct SpatialSolution {
   double force_normal = 0;  ///< N, along the hand's outward normal (> 0: pushes)
   Vec3 force_tangential;    ///< N, in the tangent plane
   double mu_required = 0;   ///< |f_t| / f_n (inf where f_n <= 0)
+  /// W: the contact force's power on the object, f . (v + omega x r_o): all of it the hand's
+  /// (rolling without losses), the energy audit's integrand (flatland/sim/energy.hpp).
+  double power = 0;
 };
 
 /// Assemble A x = b at `state` with the hand at `hand` and solve it. std::invalid_argument (naming

@@ -9,6 +9,7 @@
 // success). Samples come from every step or, at a fixed spacing, from the steps' dense output.
 #pragma once
 
+#include "flatland/sim/energy.hpp"
 #include "flatland/sim/motion.hpp"
 #include "flatland/sim/simulate.hpp"
 #include "flatland/sim/spatial.hpp"
@@ -158,6 +159,8 @@ enum class SpatialStop {
   kContactLost,  ///< f_n reached 0 (located)
   kSlip,         ///< |f_t| reached mu f_n (located)
   kLeftPatch,    ///< the contact left a surface's patch with no chart to move to (located)
+  /// The energy balance broke its bound (SpatialRunResult::audit): never a success.
+  kNumericalFailure,
 };
 std::string to_string(SpatialStop s);
 
@@ -180,9 +183,13 @@ struct SpatialRunStats {
 
 struct SpatialRunResult {
   SpatialStop stop = SpatialStop::kEndTime;
+  SpatialSample initial;               ///< where the run started (after projection)
   std::vector<SpatialSample> samples;  ///< the start, then every step or every sample_dt
   SpatialSample final;
   SpatialRunStats stats;
+  /// The energy balance (flatland/sim/energy.hpp): the hand's work is the contact force's
+  /// (no losses in space); broken only with stop kNumericalFailure.
+  EnergyAudit audit;
 };
 
 /// Run from `initial` at t0 (projected onto the contact manifold first) to options.t_end or the
