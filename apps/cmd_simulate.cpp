@@ -122,12 +122,44 @@ sim::SpatialSpec spatial_spec_with_overrides(const SimulateOptions& o, const Sce
   return spec;
 }
 
+/// The y range of a panel whose values `v` do not vary beyond rounding: gnuplot would spread the
+/// rounding over the whole axis and label every tick with the same number. Such a quantity is
+/// drawn on a range of +-0.1 % of itself (at least 1e-9: a flat line with distinct tick labels)
+/// and its panel's title says that it is constant to the digits it keeps; a varying one is left
+/// to gnuplot's autoscale.
+std::string constant_axis(const std::vector<double>& v, std::string& title) {
+  const std::string autoscale = "set autoscale y\nset format y '% h'\n";
+  if (v.empty()) return autoscale;
+  const auto [lo, hi] = std::minmax_element(v.begin(), v.end());
+  const double mid = 0.5 * (*lo + *hi), spread = *hi - *lo;
+  const double size = std::max(std::abs(mid), 1e-300);
+  if (!(spread <= 1e-9 * size) || !std::isfinite(mid)) return autoscale;
+  const int digits =
+      spread > 0 ? std::min(15, static_cast<int>(std::floor(-std::log10(spread / size)))) : 15;
+  title += " (constant: " + sim::format_significant(mid, 6) + " to " + std::to_string(digits) +
+           " digits)";
+  const double half = std::max(1e-3 * std::abs(mid), 1e-9);
+  return "set yrange [" + sim::format_number(mid - half) + ":" + sim::format_number(mid + half) +
+         "]\nset format y '%.7g'\n";
+}
+
 /// The plot beside a spatial run's CSV: the contact's path over the hand's surface coordinates,
-/// the object's path in the world (seen from above, and its height) and the contact force.
-std::string spatial_plot(const std::string& title) {
+/// the object's path in the world (seen from above, and its height) and the contact force. A
+/// panel whose quantity stays constant says so instead of drawing its rounding at full scale.
+std::string spatial_plot(const std::string& title, const std::vector<sim::SpatialSample>& samples) {
   const auto col = [](const char* name) {
     return std::to_string(sim::spatial_sample_column(name));
   };
+  std::vector<double> heights, forces;  // the two panels' values (the forces': both curves)
+  for (const sim::SpatialSample& q : samples) {
+    heights.push_back(q.state.position.z());
+    forces.push_back(q.force_normal);
+    forces.push_back(
+        std::sqrt(std::max(0.0, q.force.squaredNorm() - q.force_normal * q.force_normal)));
+  }
+  std::string height_title = "object centre height", force_title = "contact force on the object";
+  const std::string height_range = constant_axis(heights, height_title);
+  const std::string force_range = constant_axis(forces, force_title);
   return "set multiplot layout 2,2 title " + gnuplot_quote(title) +
          "\n"
          "set grid\n"
@@ -137,22 +169,25 @@ std::string spatial_plot(const std::string& title) {
          col("sh_u") + ":" + col("sh_v") +
          " with lines lw 2 notitle\n"
          "set title 'object centre, seen along z (m)'\n"
-         "set xlabel 'x'\nset ylabel 'y'\nset size ratio -1\n"
+         "set xlabel 'x'\nset ylabel 'y'\nset size ratio -1\nset xtics rotate by 45 right\n"
          "plot datafile skip 1 using " +
          col("x") + ":" + col("y") +
          " with lines lw 2 notitle\n"
-         "set size noratio\n"
-         "set title 'object centre height'\n"
-         "set xlabel 't (s)'\nset ylabel 'z (m)'\n"
-         "plot datafile skip 1 using " +
-         col("t") + ":" + col("z") +
+         "set size noratio\nset xtics norotate\n"
+         "set title " +
+         gnuplot_quote(height_title) +
+         "\n"
+         "set xlabel 't (s)'\nset ylabel 'z (m)'\n" +
+         height_range + "plot datafile skip 1 using " + col("t") + ":" + col("z") +
          " with lines lw 2 notitle\n"
-         "set title 'contact force on the object'\n"
-         "set xlabel 't (s)'\nset ylabel 'N'\n"
-         "plot datafile skip 1 using " +
-         col("t") + ":" + col("f_n") + " with lines lw 2 title 'normal', datafile skip 1 using " +
-         col("t") + ":(sqrt(($" + col("f_x") + ")**2 + ($" + col("f_y") + ")**2 + ($" + col("f_z") +
-         ")**2 - ($" + col("f_n") +
+         "set title " +
+         gnuplot_quote(force_title) +
+         "\n"
+         "set xlabel 't (s)'\nset ylabel 'N'\n" +
+         force_range + "plot datafile skip 1 using " + col("t") + ":" + col("f_n") +
+         " with lines lw 2 title 'normal', datafile skip 1 using " + col("t") + ":(sqrt(($" +
+         col("f_x") + ")**2 + ($" + col("f_y") + ")**2 + ($" + col("f_z") + ")**2 - ($" +
+         col("f_n") +
          ")**2)) with lines lw 2 title 'tangential'\n"
          "unset multiplot\n";
 }
@@ -208,7 +243,7 @@ void run_simulate_spatial(const SimulateOptions& o, const Scene& scene) {
     if (plots) {
       run_plot(outputs, dir,
                {script.filename().string(), out.filename().string(), png.filename().string(),
-                spatial_plot(scene.name.empty() ? scene.origin : scene.name)});
+                spatial_plot(scene.name.empty() ? scene.origin : scene.name, r.samples)});
     }
     outputs.commit();
   }

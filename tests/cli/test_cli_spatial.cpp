@@ -128,3 +128,24 @@ TEST_F(CliSpatial, RenderFilmsTheRunThroughTheScenesCamera) {
 }
 
 }  // namespace
+
+// A quantity that stays constant (the turntable ball's height, 0.02 m to 14 digits) is drawn on a
+// range around itself and its panel says so, instead of its rounding at full scale; one that
+// varies (the ellipsoid's height in its dish) is left to gnuplot's autoscale.
+TEST_F(CliSpatial, APlotSaysWhatStaysConstantInsteadOfDrawingItsRounding) {
+  const std::string scenes = std::string(FLATLAND_ASSET_DIR) + "/scenes/";
+  Result r = run("simulate --scene " + quote(scenes + "ball-on-turntable.yaml") +
+                 " --duration 1 --out turntable.csv");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const std::string turntable = read_text(dir_ / "turntable.gp");
+  EXPECT_NE(turntable.find("set title 'object centre height (constant: 0.02 to "),
+            std::string::npos)
+      << turntable;
+  EXPECT_NE(turntable.find("set yrange [0.01998:0.02002]"), std::string::npos) << turntable;
+  r = run("simulate --scene " + quote(scenes + "ellipsoid-in-dish.yaml") +
+          " --duration 1 --out dish.csv");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const std::string dish = read_text(dir_ / "dish.gp");
+  EXPECT_NE(dish.find("set title 'object centre height'"), std::string::npos) << dish;
+  EXPECT_EQ(dish.find("constant"), std::string::npos) << dish;
+}
