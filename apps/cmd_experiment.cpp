@@ -386,8 +386,12 @@ void run_experiment(const ExperimentOptions& o) {
     start.t = loop.log.empty() ? 0.0 : loop.log.front().t;
     j["contact"] = contact_summary_json(synthetic->mode_time, synthetic->mode_changes,
                                         synthetic->impacts, synthetic->contact_events, start);
+    // The world's own energy audit: every servo period's run balances within its bound.
+    j["world_energy"] = {{"worst_balance", number(synthetic->energy_worst)},
+                         {"bound", number(synthetic->energy_worst_bound)}};
   } else {
     j["contact"] = nullptr;
+    j["world_energy"] = nullptr;
   }
   if (log_joint_driver)
     j["replay"] = {{"ticks", log_joint_driver->ticks()},

@@ -271,6 +271,8 @@ SyntheticResult run_synthetic(const LoopSetup& setup, std::shared_ptr<const mode
   r.impacts = world.impacts();
   r.mode_changes = world.mode_changes();
   r.contact_events = world.events();
+  r.energy_worst = world.energy_worst();
+  r.energy_worst_bound = world.energy_worst_bound();
   // The first thing that went wrong: the disk lost during the loop (the loop then stops
   // safely), a safe stop of the loop's own, an unfinished motion, the disk lost afterwards.
   if (failed_in_loop) {

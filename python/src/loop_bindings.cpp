@@ -102,6 +102,10 @@ py::tuple experiment_binding(const py::object& scene_arg,
   start.t = loop.log.empty() ? 0.0 : loop.log.front().t;
   r["contact"] = to_python(
       api::contact_summary_json(s.mode_time, s.mode_changes, s.impacts, s.contact_events, start));
+  py::dict world_energy;
+  world_energy["worst_balance"] = s.energy_worst;
+  world_energy["bound"] = s.energy_worst_bound;
+  r["world_energy"] = world_energy;
   r["scene"] = scene.origin;
   return py::make_tuple(r, log_columns(loop.log));
 }

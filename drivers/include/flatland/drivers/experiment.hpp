@@ -103,6 +103,9 @@ struct SyntheticResult {
   std::array<double, 4> mode_time{0, 0, 0, 0};  ///< s in each sim::ContactMode
   int impacts = 0, mode_changes = 0;
   std::vector<sim::RecordedEvent> contact_events;  ///< SimWorld::events()
+  /// The world's energy audit: the largest |balance| of a servo period's run, J, and that
+  /// period's bound (SimWorld::energy_worst).
+  double energy_worst = 0, energy_worst_bound = 0;
   /// s the world ran on after a finished motion (hand held) until the disk was trapped in a well
   /// or gone (at most 10 s): the outcome is where the disk ends up.
   double settle_s = 0;
