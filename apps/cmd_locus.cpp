@@ -105,7 +105,8 @@ void run_locus(const LocusOptions& o) {
       os << line;
     }
     os << (p.fn_min_ratio < 0 ? "  contact lost" : "")
-       << (friction && p.friction_margin < 0 ? "  slips" : "") << "\n";
+       << (friction && p.friction_margin < 0 ? "  slips" : "")
+       << (p.failure.empty() ? "" : "  " + p.failure) << "\n";
   }
   for (const auto& p : outputs.paths()) os << "  wrote " << p << "\n";
   std::cout << os.str();

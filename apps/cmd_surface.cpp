@@ -113,6 +113,11 @@ void run_surface(const SurfaceOptions& o) {
     j["png"] = png_path.empty() ? Json(nullptr) : Json(png_path);
     j["rhs_evals"] = s.rhs_evals;
     j["seconds"] = seconds;
+    // Points whose run failed numerically: s_h(T) is NaN ("nan" in the CSV) there.
+    Json failed = Json::array();
+    for (const auto& f : s.numerical_failures)
+      failed.push_back({{"k", s.k[f.i]}, {"period", s.period[f.j]}, {"failure", f.what}});
+    j["numerical_failures"] = failed;
     emit_json(j);
     return;
   }
@@ -123,6 +128,10 @@ void run_surface(const SurfaceOptions& o) {
             << format_number(std::round(seconds * 1000) / 1000) << " s, " << s.rhs_evals
             << " rhs evaluations\n"
             << "  s_h(T) ranges over [" << format_number(lo) << ", " << format_number(hi) << "]\n";
+  if (!s.numerical_failures.empty())
+    std::cout << "  " << s.numerical_failures.size()
+              << " points failed numerically (left out, NaN); the first: "
+              << s.numerical_failures.front().what << "\n";
   for (const auto& p : outputs.paths()) std::cout << "  wrote " << p << "\n";
 }
 

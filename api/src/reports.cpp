@@ -159,6 +159,7 @@ Json locus_json(const std::vector<sim::SolveReport>& points, const sim::Simulati
     q["friction_margin"] = number(p.friction_margin);
     q["slips"] = friction && p.friction_margin < 0;
     q["contact_lost"] = p.fn_min_ratio < 0;
+    q["failure"] = p.failure.empty() ? Json(nullptr) : Json(p.failure);
     arr.push_back(q);
   }
   Json j;

@@ -173,6 +173,15 @@ py::dict surface_binding(const py::object& scene, double k_from, double k_to, in
   out["period"] = py::array_t<double>(static_cast<py::ssize_t>(s.period.size()), s.period.data());
   out["s_T"] = s_T;
   out["rhs_evals"] = s.rhs_evals;
+  py::list failed;  // points whose run failed numerically (s_T is NaN there)
+  for (const auto& f : s.numerical_failures) {
+    py::dict d;
+    d["k"] = s.k[f.i];
+    d["period"] = s.period[f.j];
+    d["failure"] = f.what;
+    failed.append(d);
+  }
+  out["numerical_failures"] = failed;
   return out;
 }
 

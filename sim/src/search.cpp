@@ -78,7 +78,7 @@ double searched_s_at_half_period(const std::shared_ptr<const RollingProblem>& ba
                                  long* rhs_evals, bool audit = false) {
   std::string failure;
   const double s = s_at_half_period(base, spec, period, k, rhs_evals, &failure, audit);
-  if (!failure.empty()) throw std::runtime_error("solve: " + failure);
+  if (!failure.empty()) throw NumericalFailure("solve: " + failure);
   return s;
 }
 
@@ -197,7 +197,7 @@ SolveReport evaluate_on(const std::shared_ptr<const RollingProblem>& base,
   rep.run = simulate(with_motion(base, period, k), s.initial, o);
   const RunResult& r = rep.run;
   if (r.reason == StopReason::kNumericalFailure)
-    throw std::runtime_error("solve: " + numerical_failure_text(period, k, r.audit));
+    throw NumericalFailure("solve: " + numerical_failure_text(period, k, r.audit));
   const double T = s.initial.t0 + 0.5 * period;
   rep.s_T = r.trajectory.s_h(T);
   rep.s_end = r.final.s_h;
@@ -315,9 +315,19 @@ std::vector<SolveReport> locus(const SimulationSpec& spec, double from, double t
   double k0 = spec.motion.k;
   for (int i = 0; i < n; ++i) {
     const double period = n == 1 ? from : from + (to - from) * i / (n - 1);
-    out.push_back(solve_k_from(s, base, period, k0, set));
-    out.back().run = RunResult{};  // keep the locus light: the reports, not every trajectory
-    k0 = out.back().k;             // warm start: the locus is smooth
+    try {
+      out.push_back(solve_k_from(s, base, period, k0, set));
+      out.back().run = RunResult{};  // keep the locus light: the reports, not every trajectory
+      k0 = out.back().k;             // warm start: the locus is smooth
+    } catch (const NumericalFailure& e) {
+      // A period whose runs fail numerically is recorded (no k) and the locus goes on.
+      SolveReport failed;
+      failed.period = period;
+      failed.k = failed.s_T = failed.s_end = failed.sdot_end = kNaN;
+      failed.fn_apex_ratio = failed.fn_min_ratio = failed.mu_required = kNaN;
+      failed.failure = e.what();
+      out.push_back(std::move(failed));
+    }
     if (progress) progress(i + 1, n);
   }
   return out;

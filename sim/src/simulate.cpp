@@ -247,8 +247,8 @@ void validate_run_options(const RunOptions& o, double t0) {
 
 void require_no_numerical_failure(const RunResult& run, const std::string& what) {
   if (run.reason == StopReason::kNumericalFailure)
-    throw std::runtime_error(what + ": numerical failure: " + breach_text(run.audit) +
-                             " (docs/DYNAMICS.md, \"Energy audit\")");
+    throw NumericalFailure(what + ": numerical failure: " + breach_text(run.audit) +
+                           " (docs/DYNAMICS.md, \"Energy audit\")");
 }
 
 void check_drag_stiffness(const RollingProblem& pb, const IntegratorSettings& is, double span) {

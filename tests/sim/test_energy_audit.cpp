@@ -204,3 +204,27 @@ TEST(EnergyAudit, TheSolutionOfASearchIsAudited) {
   const SolveReport rep = solve_k(spec, 1.181);
   expect_holds(rep.run.audit);
 }
+
+// A sweep never dies for one world: with a balance held to 1e-20 (below rounding: every run's
+// audit breaks) a locus still returns every duration, each with its failure and no numbers, and a
+// surface every point, NaN and listed.
+TEST(EnergyAudit, ASweepRecordsThePointsThatFailAndGoesOn) {
+  SimulationSpec spec;
+  spec.run.integrator.energy_tolerance = 1e-20;
+  const std::vector<SolveReport> points = locus(spec, 1.1, 1.3, 3);
+  ASSERT_EQ(points.size(), 3u);
+  for (const SolveReport& p : points) {
+    EXPECT_TRUE(std::isnan(p.k));
+    EXPECT_NE(p.failure.find("failed numerically"), std::string::npos) << p.failure;
+  }
+  EXPECT_DOUBLE_EQ(points[2].period, 1.3);
+  const SurfaceResult s = surface(spec, -1.2, -1.1, 2, 1.1, 1.2, 2, 1);
+  ASSERT_EQ(s.s_T.size(), 4u);
+  for (double v : s.s_T) EXPECT_TRUE(std::isnan(v));
+  EXPECT_EQ(s.numerical_failures.size(), 4u);
+  // The same sweeps at the default tolerance have no failure.
+  spec.run.integrator.energy_tolerance.reset();
+  const SurfaceResult good = surface(spec, -1.2, -1.1, 2, 1.1, 1.2, 2, 1);
+  EXPECT_TRUE(good.numerical_failures.empty());
+  for (double v : good.s_T) EXPECT_TRUE(std::isfinite(v));
+}

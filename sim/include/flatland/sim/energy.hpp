@@ -16,6 +16,7 @@
 #include <cmath>
 #include <limits>
 #include <optional>
+#include <stdexcept>
 #include <string>
 
 namespace flatland::sim {
@@ -47,6 +48,13 @@ struct EnergyAudit {
   double t_broken = std::numeric_limits<double>::quiet_NaN();
   /// tolerance x scale, plus the rounding of E itself (1e-12 |E|).
   double bound() const { return tolerance * scale + 1e-12 * magnitude; }
+};
+
+/// A run's numbers are wrong (its energy balance broke, sim/energy.hpp): what a caller that uses
+/// a run (a search, a plan, frames) throws, so that a sweep can record it and go on.
+class NumericalFailure : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
 };
 
 /// Where and by how much a broken balance broke: "the energy balance broke at t = ... s (... J,

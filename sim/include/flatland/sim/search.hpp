@@ -41,6 +41,8 @@ struct SolveReport {
   int simulations = 0;       ///< runs the search made
   long rhs_evals = 0;        ///< right-hand-side evaluations over all of them
   RunResult run;             ///< the full recorded run of the solution
+  /// A locus point whose runs failed numerically (NumericalFailure): why; its numbers are NaN.
+  std::string failure;
 };
 
 /// s_h at the half period T for the spec with (period, k) set; one unrecorded run.
@@ -57,7 +59,8 @@ SolveReport solve_d(const SimulationSpec& spec, double period, double k,
 /// Evaluate a motion with one full recorded run (rolling enforced); forces over [0, T].
 SolveReport evaluate(const SimulationSpec& spec, double period, double k);
 
-/// The locus k(2T) for n periods evenly spaced over [from, to] (paper Fig. 7).
+/// The locus k(2T) for n periods evenly spaced over [from, to] (paper Fig. 7). A period whose
+/// runs fail numerically is a point with NaN numbers and its `failure`; the locus goes on.
 std::vector<SolveReport> locus(const SimulationSpec& spec, double from, double to, int n,
                                const SearchSettings& s = {}, const Progress& progress = {});
 
