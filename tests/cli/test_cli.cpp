@@ -384,9 +384,10 @@ TEST_F(CliSurface, SmallGrid) {
                        (plots ? "" : " --no-plot"));
   ASSERT_EQ(r.code, 0) << r.err;
   const json j = parse_json(r);
-  expect_keys(j, {"nk", "np", "csv", "png", "rhs_evals", "seconds"}, {});
+  expect_keys(j, {"nk", "np", "csv", "png", "rhs_evals", "seconds", "numerical_failures"}, {});
   EXPECT_EQ(j["nk"], 3);
   EXPECT_EQ(j["np"], 4);
+  EXPECT_TRUE(j["numerical_failures"].empty());  // every point's run balanced
   const auto rows = lines_of(read_text(dir_ / "surf" / "surface.csv"));
   ASSERT_EQ(rows.size(), 13u);
   EXPECT_EQ(rows[0], "k,period,s_T");
