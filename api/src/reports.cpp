@@ -108,11 +108,8 @@ Json energy_json(const sim::EnergyAudit& a) {
 }
 
 std::string energy_failure_text(const sim::EnergyAudit& a) {
-  return "numerical failure: the energy balance broke at t = " +
-         sim::format_significant(a.t_broken, 10) +
-         " s (E - E0 - work = " + sim::format_significant(a.balance, 3) + " J, bound " +
-         sim::format_significant(a.bound(), 3) +
-         " J); the results from there on are wrong (docs/DYNAMICS.md, \"Energy audit\")";
+  return "numerical failure: " + sim::breach_text(a) +
+         "; the results from there on are wrong (docs/DYNAMICS.md, \"Energy audit\")";
 }
 
 Json solve_report_json(const sim::SolveReport& r) {

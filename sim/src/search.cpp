@@ -49,10 +49,7 @@ RunOptions search_options(const SimulationSpec& spec, double t_end) {
 /// What a numerical failure (a broken energy balance) of the run at (period, k) says.
 std::string numerical_failure_text(double period, double k, const EnergyAudit& a) {
   return "the run at 2T = " + format_significant(period, 8) +
-         " s, k = " + format_significant(k, 8) +
-         " failed numerically: its energy balance broke at t = " +
-         format_significant(a.t_broken, 8) + " s (" + format_significant(a.balance, 3) +
-         " J, bound " + format_significant(a.bound(), 3) + " J)";
+         " s, k = " + format_significant(k, 8) + " failed numerically: " + breach_text(a);
 }
 
 /// s_h(T) of one unrecorded run (audited with `audit`); NaN where the run failed numerically (its
@@ -71,7 +68,7 @@ double s_at_half_period(const std::shared_ptr<const RollingProblem>& base,
   return r.final.s_h;
 }
 
-/// s_at_half_period for a search: a numerical failure ends the search (std::runtime_error): a
+/// s_at_half_period for a search: a numerical failure ends the search (NumericalFailure): a
 /// root cannot be bracketed through numbers known to be wrong.
 double searched_s_at_half_period(const std::shared_ptr<const RollingProblem>& base,
                                  const SimulationSpec& spec, double period, double k,
