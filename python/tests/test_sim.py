@@ -143,3 +143,15 @@ def test_sim_study_equals_the_clis_csv_but_for_its_timings(cli, tmp_path):
     dopri = (got["method"] == "dopri5") & (got["formulation"] == "reduced")
     err = got["err_k"][dopri][np.argsort(got["rtol"][dopri])]
     assert err[0] < err[-1]
+
+
+def test_every_run_reports_its_energy_audit():
+    """The report's energy audit (docs/DYNAMICS.md): its terms add up to its balance, which is
+    within its bound; the paper's hand does work on the disk, and a surface's points all balance."""
+    e = flatland.simulate().report["energy"]
+    assert e["holds"] and abs(e["balance"]) <= e["bound"]
+    terms = e["final"] - e["initial"] - e["work_hand"] - e["work_losses"] - e["impact_losses"]
+    assert abs(terms - e["balance"]) <= 1e-14
+    assert e["work_hand"] != 0 and e["work_losses"] == 0
+    s = flatland.surface(nk=2, np=2)
+    assert s["numerical_failures"] == []
