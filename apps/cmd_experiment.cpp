@@ -214,7 +214,7 @@ void run_experiment(const ExperimentOptions& o) {
   outputs.begin_directory(out);
   const CameraSpec& cam = *scene.camera;
   const cv::Size size(cam.width, cam.height);
-  cv::VideoWriter writer;  // after `outputs`: released before its files are removed
+  render::Mp4Writer writer;  // after `outputs`: released before its files are removed
   fs::path video_tmp;
   std::string codec;
   if (o.video) {

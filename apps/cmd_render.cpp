@@ -193,7 +193,7 @@ constexpr long kMaxRenderFrames = 200000;
 constexpr double kMaxRenderFps = 1000;
 
 /// One frame into the MP4 (when `video` is given) or as DIR/frame_NNNNNN.png, staged.
-void write_frame(const cv::Mat& bgr, long index, cv::VideoWriter* video, OutputSet& outputs,
+void write_frame(const cv::Mat& bgr, long index, render::Mp4Writer* video, OutputSet& outputs,
                  const fs::path& dir, std::vector<unsigned char>& png) {
   if (video) {
     video->write(bgr);
@@ -308,7 +308,7 @@ void run_render_spatial(const RenderOptions& o, Scene scene) {
 
   OutputSet outputs(o.common.force);
   const cv::Size size(model.width, model.height);
-  cv::VideoWriter writer;
+  render::Mp4Writer writer;
   fs::path video_tmp;
   std::string codec;
   if (mp4) {
@@ -476,7 +476,7 @@ void run_render(const RenderOptions& o) {
   const cv::Size size(model.width, model.height);
   const double fps = model.fps;
   fs::path truth_path, meta_path, camera_path, encoder_path, video_tmp;
-  cv::VideoWriter writer;  // declared after `outputs`: released before its files are removed
+  render::Mp4Writer writer;  // declared after `outputs`: released before its files are removed
   std::string codec;
   if (mp4) {
     outputs.ensure_directory(out.parent_path());

@@ -26,7 +26,7 @@ packages=(
   gnuplot-nox python3
   python3-dev pybind11-dev python3-numpy python3-pytest python3-matplotlib python3-scipy
   libmujoco-dev
-  libopencv-dev libavutil-dev libosmesa6-dev mesa-common-dev libegl-dev libegl-mesa0 ffmpeg
+  libopencv-dev libavutil-dev libavcodec-dev libavformat-dev libswscale-dev libosmesa6-dev mesa-common-dev libegl-dev libegl-mesa0 ffmpeg
   libceres-dev
   clang libclang-rt-14-dev
 )

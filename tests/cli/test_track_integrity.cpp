@@ -3,6 +3,7 @@
 // with frozen frames, and the same run with bits flipped; which frames are damaged is decided
 // independently, by decoding the intact and the damaged file side by side.
 #include "cli_support.hpp"
+#include "test_scale.hpp"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -10,6 +11,7 @@
 #include <opencv2/videoio.hpp>
 
 #include <cmath>
+#include <cstdlib>
 #include <random>
 #include <sstream>
 #include <string>
@@ -60,11 +62,20 @@ std::vector<cv::Point2d> truth_px(const fs::path& csv) {
   return out;
 }
 
-std::vector<cv::Mat> decode(const fs::path& video) {
-  std::vector<cv::Mat> frames;
+// The reference decode, by OpenCV (FFmpeg with frame threads): each frame at its place in the
+// video by its timestamp (30 fps), so that a frame the decoder drops leaves a gap (an empty Mat)
+// instead of shifting the frames after it.
+std::vector<cv::Mat> decode(const fs::path& video, std::size_t frames = 91) {
+  std::vector<cv::Mat> out(frames);
   cv::VideoCapture cap(video.string(), cv::CAP_FFMPEG);
-  for (cv::Mat f; cap.read(f);) frames.push_back(f.clone());
-  return frames;
+  long i = -1;
+  for (cv::Mat f; cap.read(f);) {
+    // OpenCV 4.6 reports 0 ms for the frames it drains from the decoder at the end: the next.
+    const double ms = cap.get(cv::CAP_PROP_POS_MSEC);
+    i = ms > 0 ? std::lround(ms * 30.0 / 1000.0) : i + 1;
+    if (i >= 0 && i < static_cast<long>(frames)) out[static_cast<std::size_t>(i)] = f.clone();
+  }
+  return out;
 }
 
 bool measured(const Row& r) { return r.state == "found" || r.state == "tracking"; }
@@ -73,6 +84,7 @@ class TrackIntegrity : public flatland_test::CliTestBase {
  protected:
   void SetUp() override {
     CliTestBase::SetUp();
+    ::setenv("OPENCV_FFMPEG_LOGLEVEL", "-8", 1);  // the reference decoder's complaints: expected
     const std::string scene =
         (fs::path(FLATLAND_ASSET_DIR) / "scenes" / "butterfly-camera.yaml").string();
     const Result r =
@@ -138,39 +150,55 @@ TEST_F(TrackIntegrity, FrozenFramesAreFlaggedRepeated) {
   expect_honest(rows);
 }
 
-TEST_F(TrackIntegrity, DamagedFramesAreFlaggedAndNeverMeasured) {
-  std::string data = read_text(dir_ / "run.mp4");
-  std::mt19937 rng(3);
-  // 20 bit flips in the middle third of the file (the frames' data; the header and index stay).
+// 20 bit flips in the middle third of the file (the frames' data; the header and index stay).
+std::string flip_bits(std::string data, unsigned seed) {
+  std::mt19937 rng(seed);
   for (int k = 0; k < 20; ++k) {
     const std::size_t i = data.size() / 3 + rng() % (data.size() / 3);
     data[i] = static_cast<char>(data[i] ^ (1 << (rng() % 8)));
   }
-  flatland_test::write_text(dir_ / "damaged.mp4", data);
-  const std::vector<cv::Mat> intact = decode(dir_ / "run.mp4");
-  const std::vector<cv::Mat> damaged = decode(dir_ / "damaged.mp4");
-  ASSERT_EQ(intact.size(), 91u);
+  return data;
+}
 
-  nlohmann::json j;
-  const std::vector<Row> rows = track("damaged.mp4", j);
-  ASSERT_EQ(rows.size(), 91u);
-  int differing = 0;
-  for (const Row& r : rows) {
-    const std::size_t i = static_cast<std::size_t>(r.frame);
-    const bool differs = i >= damaged.size() || damaged[i].empty() ||
-                         cv::norm(intact[i], damaged[i], cv::NORM_INF) > 0;
-    differing += differs;
-    if (differs) {
-      EXPECT_TRUE(r.state == "damaged" || r.state == "unreadable")
-          << "frame " << r.frame << " differs from the intact decode but is " << r.state;
+TEST_F(TrackIntegrity, DamagedFramesAreFlaggedAndNeverMeasured) {
+  // Several damaged copies: each seed hits other packets (a key frame, a reference P frame, a
+  // B frame), and a frame that the damage reaches silently (no error reported for it) shows
+  // up in one seed or another. Seed 10 of the previous reader (frame threads) measured a frame
+  // 5 px off at sigma 0.03 px.
+  const std::vector<cv::Mat> intact = decode(dir_ / "run.mp4");
+  for (const cv::Mat& f : intact) ASSERT_FALSE(f.empty());
+  const std::string data = read_text(dir_ / "run.mp4");
+  const int seeds = flatland::test::short_tests() ? 2 : 12;
+  int differing = 0, flagged = 0, measured_rows = 0;
+  for (int seed = 0; seed < seeds; ++seed) {
+    SCOPED_TRACE("seed " + std::to_string(seed));
+    flatland_test::write_text(dir_ / "damaged.mp4", flip_bits(data, static_cast<unsigned>(seed)));
+    const std::vector<cv::Mat> damaged = decode(dir_ / "damaged.mp4");
+    nlohmann::json j;
+    const std::vector<Row> rows = track("damaged.mp4", j);
+    ASSERT_EQ(rows.size(), 91u);
+    for (const Row& r : rows) {
+      const std::size_t i = static_cast<std::size_t>(r.frame);
+      // A frame the reference decoder dropped is not known to differ.
+      const bool differs = !damaged[i].empty() && cv::norm(intact[i], damaged[i], cv::NORM_INF) > 0;
+      differing += differs;
+      measured_rows += measured(r);
+      const bool flag = r.state == "damaged" || r.state == "unreadable";
+      flagged += flag;
+      // The reference decode (OpenCV, frame threads) and flatland's agree on an intact frame;
+      // a frame that differs was reached by the damage and must not be measured.
+      if (differs) {
+        EXPECT_TRUE(flag) << "frame " << r.frame << " differs but is " << r.state;
+      }
+      if (flag) {
+        EXPECT_TRUE(std::isnan(r.u)) << "frame " << r.frame;
+      }
     }
-    if (r.state == "damaged") {
-      EXPECT_TRUE(std::isnan(r.u)) << "frame " << r.frame;
-    }
+    expect_honest(rows);
   }
-  EXPECT_GT(differing, 5) << "the bit flips damaged nothing: the test tests nothing";
-  EXPECT_GT(j["damaged"].get<int>(), 0);
-  expect_honest(rows);
-  std::printf("damaged video: %d frames differ from the intact decode, %d flagged damaged\n",
-              differing, j["damaged"].get<int>());
+  EXPECT_GT(differing, 5 * seeds) << "the bit flips damaged little: the test tests little";
+  std::printf(
+      "damaged videos (%d seeds): %d frames differ from the intact decode, %d flagged, "
+      "%d measured\n",
+      seeds, differing, flagged, measured_rows);
 }

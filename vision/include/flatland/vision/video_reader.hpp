@@ -1,12 +1,13 @@
 // Reading real footage frame by frame, and saying which frames can be trusted: a decoder that
-// meets a damaged stream conceals the damage (it repeats or patches earlier pictures) and
-// OpenCV hands those frames over as if they were fine. docs/VISION.md ("Frame integrity").
+// meets a damaged stream conceals the damage (it repeats or patches earlier pictures) and a
+// plain reader hands those frames over as if they were fine. docs/VISION.md ("Frame integrity").
+// Every consumer of a video (track, the recorded camera of the closed loop) reads through this.
 #pragma once
 
 #include <opencv2/core.hpp>
-#include <opencv2/videoio.hpp>
 
 #include <cmath>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -38,44 +39,44 @@ class RepeatCheck {
   double previous_time_ = std::nan("");
 };
 
-/// A video read through OpenCV's FFmpeg backend, with each frame's integrity. A frame is damaged
-/// when FFmpeg logs a decoding error while it is read, and so is every later frame until a key
-/// frame at least `kDamageMargin` frames after the last error (a damaged picture is the reference
-/// of the ones that follow it, up to the next key frame; the margin covers FFmpeg's frame-threaded
-/// decoding, which logs a frame's errors up to a thread count of reads before it is returned). In
-/// an intra-only stream (every frame a key frame: MJPEG, which FFmpeg 5.1 decodes without frame
-/// threads) only the frames with errors are damaged.
+/// A video decoded with FFmpeg's libraries (libavformat, libavcodec, libswscale) on the calling
+/// thread, with each frame's integrity. Decoding is single-threaded on purpose: then every
+/// error the decoder reports belongs to the packet being decoded, and a frame handed out before
+/// that error was decoded before the damaged packet and cannot depend on it (with frame threads
+/// a frame can come out while an earlier packet it references is still being decoded, so damage
+/// showed up several frames before its error). A frame is damaged when the decoder reported an
+/// error or concealed part of it, and so is every later frame until a key frame decoded cleanly
+/// (a damaged picture is the reference of those that follow it, up to the next key frame).
 class VideoReader {
  public:
-  static constexpr long kDamageMargin = 16;
-
-  /// Throws std::invalid_argument "cannot open PATH as a video" (one line).
+  /// Throws std::invalid_argument "cannot open PATH as a video (REASON)" (one line).
   explicit VideoReader(const std::string& path);
+  ~VideoReader();
+  VideoReader(const VideoReader&) = delete;
+  VideoReader& operator=(const VideoReader&) = delete;
+  VideoReader(VideoReader&&) noexcept;
+  VideoReader& operator=(VideoReader&&) noexcept;
 
   struct Frame {
     cv::Mat image;  ///< BGR; empty when unreadable
     FrameIntegrity integrity = FrameIntegrity::kIntact;
     double timestamp_s = 0;   ///< the stream's presentation time (NaN if unknown)
-    long decoder_errors = 0;  ///< errors FFmpeg logged since the previous frame was read
+    long decoder_errors = 0;  ///< errors the decoder logged since the previous frame was read
   };
-  /// The next frame; false after the last. Within the announced frame count a frame that cannot
-  /// be decoded is returned as kUnreadable instead of ending the video.
+  /// The next frame in presentation order; false after the last. Every packet of the video
+  /// stream is one frame: a packet that decodes to nothing is returned in its place as
+  /// kUnreadable instead of shifting the frames after it.
   bool read(Frame& frame);
 
-  long frame_count() const { return total_; }
-  double fps() const { return fps_; }
-  long key_frames() const;
+  /// Frames: the video stream's packets, or the number its container announces if that is
+  /// more (a file cut short).
+  long frame_count() const;
+  double fps() const;       ///< the stream's average frame rate (0 if unknown)
+  long key_frames() const;  ///< key-frame packets
 
  private:
-  cv::VideoCapture video_;
-  std::vector<bool> key_;  ///< per packet (decode order; the stream's key frames)
-  long total_ = 0, index_ = 0;
-  double fps_ = 0;
-  long errors_seen_ = 0;  ///< FFmpeg's error count at the last read
-  long last_error_ = -1;  ///< index of the last frame read with a decoder error
-  bool damaged_ = false;
-  bool intra_only_ = false;  ///< every packet a key frame: damage does not propagate
-  RepeatCheck repeat_;
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
 };
 
 }  // namespace flatland::vision
