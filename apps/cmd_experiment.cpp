@@ -253,7 +253,10 @@ void run_experiment(const ExperimentOptions& o) {
     k.t_arrival = f.t_arrival;
     k.track = tr;
     if (z) k.s_meas = z->s_h;
-    if (!cv::imencode(".jpg", to_bgr8(f.image), k.jpeg, jpeg_params))
+    // An unreadable frame keeps its place in the video as a black picture.
+    const cv::Mat picture =
+        f.image.empty() ? cv::Mat(size, CV_8UC3, cv::Scalar::all(0)) : to_bgr8(f.image);
+    if (!cv::imencode(".jpg", picture, k.jpeg, jpeg_params))
       throw std::runtime_error("--video: cannot encode frame " + std::to_string(f.index));
     kept.push_back(std::move(k));
   };
@@ -316,6 +319,7 @@ void run_experiment(const ExperimentOptions& o) {
       throw std::runtime_error("--video: the MP4 writer (" + codec + ") produced no data");
   }
   outputs.stage(out / "log.csv", drivers::tick_log_csv(loop.log));
+  outputs.stage(out / "frames.csv", drivers::frame_log_csv(loop.frame_log));
   if (plots) {
     const auto col = [](const char* name) {
       return std::to_string(drivers::tick_log_column_index(name));
@@ -361,6 +365,9 @@ void run_experiment(const ExperimentOptions& o) {
   j["mu_max"] = truth ? number(synthetic->mu_max) : Json(nullptr);
   j["frames"] = loop.frames;
   j["frames_lost"] = loop.frames_lost;
+  j["frames_damaged"] = loop.frames_damaged;
+  j["frames_repeated"] = loop.frames_repeated;
+  j["frames_unreadable"] = loop.frames_unreadable;
   j["safe_stop"] = loop.safe_stop;
   j["stop_reason"] = loop.stop_reason ? Json(loop.stop_reason->detail) : Json(nullptr);
   j["failure"] = truth ? nullable(synthetic->failure) : Json(nullptr);
@@ -437,14 +444,15 @@ void run_experiment(const ExperimentOptions& o) {
     for (const Json& f : j["contact"]["flights"])
       os << "  flight             leaves at t = " << opt(f["t_lift_off"], " s")
          << ", lands at t = " << opt(f["t_landing"], " s") << " on s_h = " << opt(f["s_landing"])
-         << ", impulse " << opt(f["impulse_normal"], " N s") << (f["dropped"].get<bool>() ? ", dropped" : "")
-         << "\n";
+         << ", impulse " << opt(f["impulse_normal"], " N s")
+         << (f["dropped"].get<bool>() ? ", dropped" : "") << "\n";
   }
-  os
-     << "  frames             " << loop.frames << " received, " << loop.frames_lost
-     << " not usable, " << loop.measurements << " measurements\n"
-     << "  safe stop          " << (loop.stop_reason ? "yes (" + loop.stop_reason->detail + ")" : "no")
-     << "\n";
+  os << "  frames             " << loop.frames << " received, " << loop.frames_lost
+     << " not usable (" << loop.frames_damaged << " damaged, " << loop.frames_repeated
+     << " repeated, " << loop.frames_unreadable << " unreadable), " << loop.measurements
+     << " measurements\n"
+     << "  safe stop          "
+     << (loop.stop_reason ? "yes (" + loop.stop_reason->detail + ")" : "no") << "\n";
   if (log_joint_driver)
     os << "  replay             " << log_joint_driver->mismatches()
        << " commands differ from the log\n";
@@ -458,11 +466,12 @@ void run_experiment(const ExperimentOptions& o) {
 Command add_experiment_command(CLI::App& app) {
   auto o = std::make_shared<ExperimentOptions>();
   CLI::App* cmd = add_command(app, "experiment");
-  add_common_options(*cmd, o->common,
-                     "Directory for log.csv, result.json, theta.png, s_h.png (+ their .gp "
-                     "scripts) and, with --video, video.mp4; created, and refused if it exists "
-                     "and is not empty. Required",
-                     true);
+  add_common_options(
+      *cmd, o->common,
+      "Directory for log.csv, frames.csv, result.json, theta.png, s_h.png (+ their .gp "
+      "scripts) and, with --video, video.mp4; created, and refused if it exists "
+      "and is not empty. Required",
+      true);
   cmd->get_option("--out")->required();
   cmd->get_option("--scene")->description(
       "Scene file (YAML, SI units; schema in docs/SCENE.md). Default: the bundled closed-loop "

@@ -69,9 +69,8 @@ PlanInfo make_plan(const model::Model& nominal_model) {
   const sim::RunResult run = sim::run_spec(plan_spec);
   sim::require_no_numerical_failure(run, "plan");
   auto motion = std::make_shared<sim::ButterflyMotion>(info.period, info.k);
-  info.plan = std::make_shared<control::Plan>(motion, info.period, run,
-                                              nominal.controller.dip_until,
-                                              nominal.controller.finish_after);
+  info.plan = std::make_shared<control::Plan>(
+      motion, info.period, run, nominal.controller.dip_until, nominal.controller.finish_after);
   return info;
 }
 
@@ -86,6 +85,26 @@ LoopSetup::LoopSetup(std::shared_ptr<const model::Model> nominal) : model(std::m
                                 ": object: the closed loop rolls a disk (object.type: disk)");
   plan = make_plan(*model);
 }
+
+namespace {
+
+void count_flagged(vision::FrameIntegrity integrity, LoopResult& out) {
+  switch (integrity) {
+    case vision::FrameIntegrity::kIntact:
+      return;
+    case vision::FrameIntegrity::kDamaged:
+      ++out.frames_damaged;
+      return;
+    case vision::FrameIntegrity::kRepeated:
+      ++out.frames_repeated;
+      return;
+    case vision::FrameIntegrity::kUnreadable:
+      ++out.frames_unreadable;
+      return;
+  }
+}
+
+}  // namespace
 
 LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint& joint,
                     const LoopOptions& options) {
@@ -127,13 +146,24 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
     // Frames that have arrived: track, map to s_h, fold in.
     while (auto frame = camera.poll(t)) {
       ++out.frames;
-      if (options.recorder) options.recorder->add_frame(*frame);
+      if (options.recorder && !frame->image.empty()) options.recorder->add_frame(*frame);
+      const bool intact = frame->integrity == vision::FrameIntegrity::kIntact;
+      count_flagged(frame->integrity, out);
       const bool fresh = frame->t_capture > last_capture;
       vision::TrackResult tr;
       std::optional<control::Measurement> z;
-      if (fresh) {
-        last_capture = frame->t_capture;
+      FrameLog flog;
+      flog.index = frame->index;
+      flog.t_capture = frame->t_capture;
+      flog.t_arrival = frame->t_arrival;
+      flog.t_received = t;
+      flog.integrity = frame->integrity;
+      flog.stale = !fresh;
+      if (fresh) last_capture = frame->t_capture;
+      if (fresh && intact) {
         tr = tracker.track(frame->image);
+        flog.tracked = true;
+        flog.track = tr;
         const std::optional<double> theta = angles.at(frame->t_capture);
         if (tr.ok() && theta) {
           const double guess = estimating ? estimator.estimate().s_h : scene.sim.initial.s_h;
@@ -149,9 +179,13 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
             double sigma = 1e-4;
             if (cx && cy) sigma = std::max(std::hypot(cx->s_h - c->s_h, cy->s_h - c->s_h), 1e-6);
             z = control::Measurement{frame->t_capture, frame->t_arrival, c->s_h, sigma};
+            flog.measured = true;
+            flog.s_meas = c->s_h;
+            flog.sigma_s = sigma;
           }
         }
       }
+      out.frame_log.push_back(flog);
       safety.frame(t, fresh, z.has_value());
       if (z) {
         ++out.measurements;
@@ -174,16 +208,18 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
     if (auto why = safety.check_time(t)) controller.safe_stop(t, *why);
     // Synthetic runs: the disk has left the hand's reach for good; stop the hand safely.
     if (options.world && options.world->failure())
-      controller.safe_stop(
-          t, {control::StopCause::kDisk, "disk: " + options.world->failure_detail()});
+      controller.safe_stop(t,
+                           {control::StopCause::kDisk, "disk: " + options.world->failure_detail()});
     if (t > t_limit)
       controller.safe_stop(
           t, {control::StopCause::kTimeout, "timeout: the motion did not finish by t = " +
                                                 sim::format_significant(t_limit, 5) + " s"});
 
     control::Estimate est;
-    if (estimating) est = estimator.estimate();
-    else est.s_h = scene.sim.initial.s_h;
+    if (estimating)
+      est = estimator.estimate();
+    else
+      est.s_h = scene.sim.initial.s_h;
     row.estimating = estimating;
     row.s_est = est.s_h;
     row.sdot_est = est.sdot_h;
@@ -192,9 +228,8 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
     const control::Command cmd = controller.step(t, reading, est);
     row.command = cmd.theta_ddot;
     row.stage = cmd.stage;
-    row.theta_plan = cmd.stage == control::Stage::kServo
-                         ? plan.hand(plan.time_at(est.s_h)).angle
-                         : plan.hand(std::max(t, 0.0)).angle;
+    row.theta_plan = cmd.stage == control::Stage::kServo ? plan.hand(plan.time_at(est.s_h)).angle
+                                                         : plan.hand(std::max(t, 0.0)).angle;
     joint.command(t, cmd.theta_ddot);
     if (options.recorder) options.recorder->add_tick(reading, cmd.theta_ddot);
     if (options.world) {
@@ -220,8 +255,7 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
 
     const double t_next = t_start + static_cast<double>(tick + 1) * dt;
     if (estimating) estimator.propagate(t_next, {reading.theta, reading.theta_dot, cmd.theta_ddot});
-    if (options.progress && tick % 100 == 0)
-      options.progress(t, plan.duration() + settle);
+    if (options.progress && tick % 100 == 0) options.progress(t, plan.duration() + settle);
     clock.sleep_until(t_next);
   }
   out.finished = controller.finished();
@@ -288,8 +322,8 @@ SyntheticResult run_synthetic(const LoopSetup& setup, std::shared_ptr<const mode
     r.outcome = *world.failure();
     r.failure = world.failure_detail();
   } else if (!r.goal.in_goal) {
-    const bool other_well = !(r.goal.well_bottom > 0.5 && r.goal.well_bottom < 1.5) &&
-                            r.goal.trapped;
+    const bool other_well =
+        !(r.goal.well_bottom > 0.5 && r.goal.well_bottom < 1.5) && r.goal.trapped;
     r.outcome = other_well ? Outcome::kWrongWell : Outcome::kNotSettled;
     r.failure = r.goal.reason;
   } else {

@@ -472,30 +472,13 @@ RecordedCamera::RecordedCamera(const fs::path& path) : path_(path) {
   while (csv.next())
     records_.push_back(read_frame_row(csv, records_.empty() ? nullptr : &records_.back()));
 
-  // FFmpeg only: CAP_ANY would also try GStreamer and the image-sequence reader, which print
-  // errors of their own for a file they cannot read and interpret "%d" in a file name.
-  auto open = [&](cv::VideoCapture& cap) {
-    try {
-      cap.open(path_.string(), cv::CAP_FFMPEG);
-    } catch (const cv::Exception&) {
-      cap.release();
-    }
-    return cap.isOpened();
-  };
-  if (!open(video_)) throw std::invalid_argument(path_.string() + ": cannot open as a video");
-  const double reported = video_.get(cv::CAP_PROP_FRAME_COUNT);
-  auto count = static_cast<long>(std::isfinite(reported) && reported > 0 ? reported : -1);
-  const auto expected = static_cast<long>(records_.size());
-  if (count != expected) {
-    // Some containers only estimate the count (duration x rate): count by reading before
-    // calling it a mismatch.
-    cv::VideoCapture counter;
-    count = 0;
-    if (open(counter)) try {
-        while (counter.grab()) ++count;
-      } catch (const cv::Exception&) {
-      }
+  try {
+    video_.emplace(path_.string());
+  } catch (const std::invalid_argument&) {
+    throw std::invalid_argument(path_.string() + ": cannot open as a video");
   }
+  const long count = video_->frame_count();
+  const auto expected = static_cast<long>(records_.size());
   if (count != expected)
     throw std::invalid_argument(path_.string() + ": frame count mismatch: the video has " +
                                 std::to_string(count) + " frames, " + stamps.string() + " lists " +
@@ -504,43 +487,36 @@ RecordedCamera::RecordedCamera(const fs::path& path) : path_(path) {
 
 std::string RecordedCamera::describe() const { return "video:" + path_.string(); }
 
-void RecordedCamera::warn_skip(const std::string& what) {
-  ++skipped_;
-  if (skipped_ <= kMaxSkipWarnings)
-    std::cerr << "flatland: warning: " << describe() << ": skipping " << what << "\n";
-  if (skipped_ == kMaxSkipWarnings)
-    std::cerr << "flatland: warning: " << describe() << ": further skipped frames not reported\n";
-}
-
-cv::Mat RecordedCamera::decode_next(const FrameRecord& r) {
-  if (!is_video_) return read_image(r.file);
-  cv::Mat image;
-  try {
-    if (!video_.read(image)) image.release();
-  } catch (const cv::Exception&) {
-    image.release();
-  }
-  return image;
+void RecordedCamera::warn_flagged(const CameraFrame& frame) {
+  ++flagged_;
+  if (flagged_ <= kMaxSkipWarnings)
+    std::cerr << "flatland: warning: " << describe() << ": frame " << frame.index << " is "
+              << vision::to_string(frame.integrity) << "; not measured\n";
+  if (flagged_ == kMaxSkipWarnings)
+    std::cerr << "flatland: warning: " << describe() << ": further flagged frames not reported\n";
 }
 
 std::optional<CameraFrame> RecordedCamera::poll(double now) {
-  while (next_ < records_.size() && records_[next_].t_arrival <= now) {
-    const FrameRecord& r = records_[next_++];
-    cv::Mat image = decode_next(r);
-    if (image.empty()) {
-      warn_skip("frame " + std::to_string(r.index) + " (cannot decode " +
-                (is_video_ ? "video frame " + std::to_string(next_ - 1) : r.file.string()) + ")");
-      continue;
-    }
-    ++delivered_;
-    CameraFrame frame;
-    frame.index = r.index;
-    frame.t_capture = r.t_capture;
-    frame.t_arrival = r.t_arrival;
-    frame.image = std::move(image);
-    return frame;
+  if (next_ >= records_.size() || records_[next_].t_arrival > now) return std::nullopt;
+  const FrameRecord& r = records_[next_++];
+  CameraFrame frame;
+  frame.index = r.index;
+  frame.t_capture = r.t_capture;
+  frame.t_arrival = r.t_arrival;
+  if (video_) {
+    vision::VideoReader::Frame v;
+    if (!video_->read(v)) v.integrity = vision::FrameIntegrity::kUnreadable;
+    frame.image = std::move(v.image);
+    frame.integrity = v.integrity;
+  } else {
+    // A recording's own frames are lossless and replayed bit for bit: no repeat check (the run
+    // that recorded them measured a still scene's frames too).
+    frame.image = read_image(r.file);
+    if (frame.image.empty()) frame.integrity = vision::FrameIntegrity::kUnreadable;
   }
-  return std::nullopt;
+  ++delivered_;
+  if (frame.integrity != vision::FrameIntegrity::kIntact) warn_flagged(frame);
+  return frame;
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -153,4 +153,29 @@ std::string tick_log_csv(const std::vector<TickLog>& log) {
   return out;
 }
 
+std::string frame_log_csv(const std::vector<FrameLog>& frames) {
+  std::string csv =
+      "index,t_capture[s],t_arrival[s],t_received[s],integrity,track,u[px],v[px],sigma_px[px],"
+      "quality,measured,s_meas,sigma_s\n";
+  csv.reserve(csv.size() + 160 * frames.size());
+  const auto num = [](double x) { return sim::format_number(x); };
+  for (const FrameLog& f : frames) {
+    csv += std::to_string(f.index) + "," + num(f.t_capture) + "," + num(f.t_arrival) + "," +
+           num(f.t_received) + "," + vision::to_string(f.integrity) + ",";
+    if (f.stale)
+      csv += "stale";
+    else if (f.tracked)
+      csv += vision::to_string(f.track.state);
+    csv += ",";
+    if (f.tracked && f.track.ok())
+      csv += num(f.track.center.x) + "," + num(f.track.center.y) + "," + num(f.track.sigma_px) +
+             "," + num(f.track.quality) + ",";
+    else
+      csv += ",,,,";
+    csv += f.measured ? "1," + num(f.s_meas) + "," + num(f.sigma_s) : std::string("0,,");
+    csv += "\n";
+  }
+  return csv;
+}
+
 }  // namespace flatland::drivers

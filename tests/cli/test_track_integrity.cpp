@@ -5,11 +5,15 @@
 #include "cli_support.hpp"
 #include "test_scale.hpp"
 
+#include "flatland/render/video_writer.hpp"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <random>
@@ -201,4 +205,119 @@ TEST_F(TrackIntegrity, DamagedFramesAreFlaggedAndNeverMeasured) {
       "damaged videos (%d seeds): %d frames differ from the intact decode, %d flagged, "
       "%d measured\n",
       seeds, differing, flagged, measured_rows);
+}
+
+// The closed loop reads a recorded video through the same reader as `track`: a recording
+// re-encoded as MP4 (a key frame a second, as flatland writes them) with bits flipped is
+// replayed, and the loop's frames.csv flags exactly the frames that `track` flags in the same
+// file, and measures none of them. The reference for what is left is the intact file's track.
+namespace {
+
+struct CsvTable {
+  std::vector<std::string> header;
+  std::vector<std::vector<std::string>> rows;
+  std::size_t column(const std::string& name) const {
+    for (std::size_t i = 0; i < header.size(); ++i)
+      if (header[i] == name) return i;
+    ADD_FAILURE() << "no column " << name;
+    return 0;
+  }
+};
+
+CsvTable read_csv(const fs::path& p) {
+  CsvTable t;
+  const auto lines = lines_of(read_text(p));
+  for (std::size_t i = 0; i < lines.size(); ++i) {
+    std::vector<std::string> f;
+    std::stringstream ss(lines[i]);
+    for (std::string x; std::getline(ss, x, ',');) f.push_back(x);
+    if (!lines[i].empty() && lines[i].back() == ',') f.emplace_back();
+    (i == 0 ? t.header : t.rows.emplace_back()) = f;
+  }
+  return t;
+}
+
+}  // namespace
+
+class ReplayIntegrity : public flatland_test::CliTestBase {};
+
+TEST_F(ReplayIntegrity, RecordedVideoIsFlaggedAsTrackFlagsIt) {
+  const std::string scene =
+      (fs::path(FLATLAND_ASSET_DIR) / "scenes" / "airtable-feedback.yaml").string();
+  const std::string sc = " --scene " + flatland_test::quote(scene);
+  Result r = run("experiment" + sc + " --out run --record rec --no-plot");
+  ASSERT_EQ(r.code, 0) << r.err;
+  r = run("render" + sc + " --duration 0.1 --out cam.mp4");  // its camera file, for track
+  ASSERT_EQ(r.code, 0) << r.err;
+
+  // The recording's frames as an MP4 with the recording's timestamps.
+  const CsvTable recorded = read_csv(dir_ / "rec" / "frames.csv");
+  ASSERT_GT(recorded.rows.size(), 100u);
+  {
+    flatland::render::Mp4Writer writer;
+    bool opened = false;
+    std::string stamps = "index,t_capture,t_arrival\n";
+    for (const auto& row : recorded.rows) {
+      const cv::Mat image = cv::imread((dir_ / "rec" / row[3]).string(), cv::IMREAD_COLOR);
+      ASSERT_FALSE(image.empty()) << row[3];
+      if (!opened)
+        flatland::render::open_mp4(writer, (dir_ / "rec.mp4").string(), 30, image.size(), "");
+      opened = true;
+      writer.write(image);
+      stamps += row[0] + "," + row[1] + "," + row[2] + "\n";
+    }
+    writer.release();
+    flatland_test::write_text(dir_ / "rec.mp4.timestamps.csv", stamps);
+  }
+  r = run("track --video rec.mp4 --camera cam.camera.yaml --out intact.csv");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const CsvTable intact = read_csv(dir_ / "intact.csv");
+
+  const std::string data = read_text(dir_ / "rec.mp4");
+  const int seeds = flatland::test::short_tests() ? 1 : 3;
+  for (int seed = 1; seed <= seeds; ++seed) {
+    SCOPED_TRACE("seed " + std::to_string(seed));
+    const std::string name = "damaged" + std::to_string(seed);
+    flatland_test::write_text(dir_ / (name + ".mp4"), flip_bits(data, static_cast<unsigned>(seed)));
+    fs::copy_file(dir_ / "rec.mp4.timestamps.csv", dir_ / (name + ".mp4.timestamps.csv"));
+    r = run("track --video " + name + ".mp4 --camera cam.camera.yaml --out " + name + ".csv");
+    ASSERT_EQ(r.code, 0) << r.err;
+    const CsvTable tracked = read_csv(dir_ / (name + ".csv"));
+    r = run("experiment" + sc + " --camera video:" + name + ".mp4 --joint log:rec --out " + name +
+            " --no-plot --json");
+    ASSERT_EQ(r.code, 0) << r.err;
+    const nlohmann::json j = nlohmann::json::parse(r.out);
+    const CsvTable loop = read_csv(dir_ / name / "frames.csv");
+    ASSERT_EQ(static_cast<long>(loop.rows.size()), j["frames"].get<long>());
+
+    const std::size_t state = tracked.column("state"), integrity = loop.column("integrity");
+    const std::size_t u = loop.column("u[px]"), v = loop.column("v[px]");
+    const std::size_t sigma = loop.column("sigma_px[px]"), measured = loop.column("measured");
+    long flagged = 0, kept = 0;
+    for (const auto& row : loop.rows) {
+      const long i = std::stol(row[0]) - std::stol(recorded.rows[0][0]);
+      ASSERT_GE(i, 0);
+      ASSERT_LT(static_cast<std::size_t>(i), tracked.rows.size());
+      const std::string& by_track = tracked.rows[static_cast<std::size_t>(i)][state];
+      const bool track_flags =
+          by_track == "damaged" || by_track == "unreadable" || by_track == "repeated";
+      EXPECT_EQ(row[integrity] != "intact", track_flags)
+          << "frame " << i << ": the loop says " << row[integrity] << ", track " << by_track;
+      if (row[integrity] != "intact") {
+        ++flagged;
+        EXPECT_EQ(row[measured], "0") << "frame " << i;
+        continue;
+      }
+      const auto& ref = intact.rows[static_cast<std::size_t>(i)];
+      if (row[u].empty() || ref[2].empty()) continue;
+      ++kept;
+      const double err =
+          std::hypot(std::stod(row[u]) - std::stod(ref[2]), std::stod(row[v]) - std::stod(ref[3]));
+      EXPECT_LT(err, std::max(6 * std::stod(row[sigma]), 0.1)) << "frame " << i;
+    }
+    EXPECT_GT(flagged, 0) << "the bit flips damaged nothing the loop read";
+    EXPECT_GT(kept, 10);
+    EXPECT_EQ(flagged, j["frames_damaged"].get<long>() + j["frames_repeated"].get<long>() +
+                           j["frames_unreadable"].get<long>());
+  }
 }

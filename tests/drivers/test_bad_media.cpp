@@ -287,7 +287,7 @@ TEST_F(BadMedia, RecordedCameraDeliversEightBitFramesFromOtherDepthsAndChannelCo
     EXPECT_EQ(f->image.type(), types[static_cast<std::size_t>(k)]) << k;
     EXPECT_EQ(f->image.size(), cv::Size(kWidth, kHeight));
   }
-  EXPECT_EQ(cam.skipped(), 0);
+  EXPECT_EQ(cam.flagged(), 0);
 
   // A truncated JPEG frame is refused when the recording is opened, naming the file.
   cv::imwrite((rec / "frames/000001.jpg").string(), img);

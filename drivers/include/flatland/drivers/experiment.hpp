@@ -49,8 +49,22 @@ struct TickLog {
   sim::ContactMode mode_true = sim::ContactMode::kRolling;  ///< the contact's mode (synthetic)
 };
 
+/// One camera frame as the loop received it (an experiment's frames.csv): what the reader said
+/// of it, what the tracker found and the measurement it became, if any.
+struct FrameLog {
+  long index = 0;
+  double t_capture = 0, t_arrival = 0;
+  double t_received = 0;  ///< the tick at which the loop took it
+  vision::FrameIntegrity integrity = vision::FrameIntegrity::kIntact;
+  bool stale = false;              ///< captured no later than a frame before it: not used
+  bool tracked = false;            ///< the tracker ran on it (intact and fresh)
+  vision::TrackResult track;       ///< with `tracked`
+  bool measured = false;           ///< it became a measurement of s_h
+  double s_meas = 0, sigma_s = 0;  ///< with `measured`
+};
+
 struct LoopOptions {
-  double t_start = -0.25;  ///< s; the hand waits until t = 0 while the estimator locks on
+  double t_start = -0.25;         ///< s; the hand waits until t = 0 while the estimator locks on
   std::optional<long> max_ticks;  ///< replay: stop after the recorded number of ticks
   Recorder* recorder = nullptr;
   /// Synthetic runs: the world's truth and its failure (the disk dropped).
@@ -68,8 +82,11 @@ struct LoopResult {
   bool finished = false;  ///< the controller completed its motion
   bool safe_stop = false;
   std::optional<control::StopReason> stop_reason;  ///< why it stopped safely (with safe_stop)
-  long frames = 0;  ///< frames received
-  long frames_lost = 0;  ///< received but not usable (disk not found, stale, not mapped)
+  long frames = 0;                                 ///< frames received
+  long frames_lost = 0;  ///< received but not usable (flagged, disk not found, stale, not mapped)
+  /// Of the frames received, those the camera flagged (not intact; never measured), by kind.
+  long frames_damaged = 0, frames_repeated = 0, frames_unreadable = 0;
+  std::vector<FrameLog> frame_log;  ///< every frame received, in order
   long measurements = 0;
   std::optional<double> t_stage2, t_stage3;
   double k = 0, period = 0;  ///< the plan used

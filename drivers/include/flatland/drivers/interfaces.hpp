@@ -5,6 +5,7 @@
 #pragma once
 
 #include "flatland/control/types.hpp"
+#include "flatland/vision/video_reader.hpp"
 
 #include <opencv2/core.hpp>
 
@@ -27,7 +28,11 @@ struct CameraFrame {
   long index = 0;        ///< frame number since the camera started (gaps = dropped frames)
   double t_capture = 0;  ///< s, mid-exposure, on the loop's clock
   double t_arrival = 0;  ///< s, when the frame became available to the loop
-  cv::Mat image;         ///< CV_8UC3 (BGR) or CV_8UC1
+  cv::Mat image;         ///< CV_8UC3 (BGR) or CV_8UC1; empty when unreadable
+  /// What the frame can be trusted for: only an intact frame is measured. A recorded video's
+  /// reader flags repeated, damaged and unreadable frames (vision::VideoReader); they keep their
+  /// place in the loop's frame log, with no measurement.
+  vision::FrameIntegrity integrity = vision::FrameIntegrity::kIntact;
 };
 
 class Camera {

@@ -6,7 +6,7 @@
 #include "flatland/drivers/interfaces.hpp"
 #include "flatland/files/output_set.hpp"
 
-#include <opencv2/videoio.hpp>
+#include "flatland/vision/video_reader.hpp"
 
 #include <cstddef>
 #include <filesystem>
@@ -93,8 +93,11 @@ struct FrameRecord {
 /// "run.timestamps.csv" is taken if only that exists; columns index,t_capture,t_arrival; one row
 /// per video frame, in order). Everything that can be checked
 /// without decoding every frame is checked by the constructor, which throws a one-line
-/// std::invalid_argument naming the file and the reason. Frames are decoded when poll() hands
-/// them out; one that fails to decode then is skipped with a warning on stderr.
+/// std::invalid_argument naming the file and the reason. A video is read through
+/// vision::VideoReader, as `flatland track` reads it: its damaged, repeated and unreadable frames
+/// are handed out flagged (CameraFrame::integrity), in their place, and the loop measures none of
+/// them. An image of a recording directory that fails to decode is handed out as unreadable. A
+/// warning on stderr names the first flagged frames.
 class RecordedCamera : public Camera {
  public:
   explicit RecordedCamera(const std::filesystem::path& path);
@@ -107,22 +110,21 @@ class RecordedCamera : public Camera {
 
   /// Every frame of the recording, in order (with its timestamps).
   const std::vector<FrameRecord>& records() const { return records_; }
-  /// Frames handed out so far, and frames skipped because they could not be decoded.
+  /// Frames handed out so far, and of them the ones flagged (not intact: no measurement).
   long delivered() const { return delivered_; }
-  long skipped() const { return skipped_; }
-  /// True once every frame has been handed out or skipped.
+  long flagged() const { return flagged_; }
+  /// True once every frame has been handed out.
   bool exhausted() const { return next_ >= records_.size(); }
 
  private:
-  cv::Mat decode_next(const FrameRecord& r);
-  void warn_skip(const std::string& what);
+  void warn_flagged(const CameraFrame& frame);
 
   std::filesystem::path path_;
   bool is_video_ = false;
   std::vector<FrameRecord> records_;
   std::size_t next_ = 0;
-  cv::VideoCapture video_;
-  long delivered_ = 0, skipped_ = 0;
+  std::optional<vision::VideoReader> video_;
+  long delivered_ = 0, flagged_ = 0;
 };
 
 /// Plays back a recording's joint log (DIR/joint.csv, or the CSV file itself): read(t) returns

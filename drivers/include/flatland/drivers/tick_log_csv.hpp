@@ -28,4 +28,11 @@ std::string tick_log_text(const TickLog& r, int column);
 /// log.csv: a header of the columns, one row per tick; numbers in shortest round-trip form.
 std::string tick_log_csv(const std::vector<TickLog>& log);
 
+/// frames.csv: one row per frame the loop received, in order: index, t_capture[s],
+/// t_arrival[s], t_received[s] (the tick that took it), integrity (intact, repeated, damaged,
+/// unreadable: what the camera's reader said), track (found, tracking, lost; stale for a frame
+/// captured no later than one before it; empty when flagged), u[px], v[px], sigma_px[px],
+/// quality (the tracker's, where it ran), measured (0/1), s_meas, sigma_s (the measurement).
+std::string frame_log_csv(const std::vector<FrameLog>& frames);
+
 }  // namespace flatland::drivers
