@@ -2,14 +2,20 @@
 // interest, and whole-frame re-acquisition, for each method, on one rendered frame of the
 // air-table butterfly (noise 2 DN, 30 Hz exposure blur). Medians over repetitions are reported.
 // Run: build/bin/flatland_vision_bench
-#include "flatland/model/compile.hpp"
 #include <benchmark/benchmark.h>
+#include "flatland/model/compile.hpp"
 
 #include "flatland/model/model.hpp"
 #include "flatland/render/renderer.hpp"
+#include "flatland/render/video_writer.hpp"
 #include "flatland/vision/mapping.hpp"
 #include "flatland/vision/tracker.hpp"
+#include "flatland/vision/video_reader.hpp"
 
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+
+#include <filesystem>
 #include <numbers>
 
 using namespace flatland;
@@ -115,9 +121,56 @@ void PixelToContact(benchmark::State& state) {
   }
 }
 
+// A 3 s, 30 fps MP4 of the rendered frame with the disk region moving (a key frame a second,
+// as flatland writes them), read whole per iteration: flatland's reader (two single-threaded
+// decoding passes: the integrity scan, then the frames) against OpenCV's capture (one pass, frame
+// threads, no integrity). Counter: frames per second of wall time.
+const std::string& test_video() {
+  static const std::string path = [] {
+    const std::string p =
+        (std::filesystem::temp_directory_path() / "flatland_vision_bench_read.mp4").string();
+    render::Mp4Writer w;
+    render::open_mp4(w, p, 30.0, frame().size(), "");
+    cv::Mat moving;
+    for (int i = 0; i < 90; ++i) {
+      moving = frame().clone();
+      cv::circle(moving, {200 + 2 * i, 240}, 30, cv::Scalar(250, 250, 250), -1);
+      w.write(moving);
+    }
+    w.release();
+    return p;
+  }();
+  return path;
+}
+
+void ReadVideo(benchmark::State& state) {
+  const bool opencv = state.range(0) != 0;
+  long frames = 0;
+  for (auto _ : state) {
+    if (opencv) {
+      cv::VideoCapture cap(test_video(), cv::CAP_FFMPEG);
+      for (cv::Mat f; cap.read(f);) ++frames;
+    } else {
+      vision::VideoReader reader(test_video());
+      for (vision::VideoReader::Frame f; reader.read(f);) ++frames;
+    }
+  }
+  state.counters["frames_per_s"] =
+      benchmark::Counter(static_cast<double>(frames), benchmark::Counter::kIsRate);
+  state.SetLabel(opencv ? "opencv" : "flatland");
+}
+
 constexpr int kReps = 7;
 
 }  // namespace
+
+BENCHMARK(ReadVideo)
+    ->Arg(0)
+    ->Arg(1)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Repetitions(5)
+    ->ReportAggregatesOnly(true);
 
 BENCHMARK(TrackRoi)
     ->Arg(static_cast<int>(vision::TrackMethod::kEdge))
