@@ -83,6 +83,9 @@ py::tuple experiment_binding(const py::object& scene_arg,
   r["mu_max"] = s.mu_max;
   r["frames"] = loop.frames;
   r["frames_lost"] = loop.frames_lost;
+  r["frames_damaged"] = loop.frames_damaged;
+  r["frames_repeated"] = loop.frames_repeated;
+  r["frames_unreadable"] = loop.frames_unreadable;
   r["safe_stop"] = loop.safe_stop;
   r["stop_reason"] =
       loop.stop_reason ? py::object(py::str(loop.stop_reason->detail)) : py::object(py::none());
