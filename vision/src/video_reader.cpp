@@ -126,11 +126,6 @@ class Decoding {
     if (const int e = avcodec_open2(decoder_, codec, nullptr); e < 0)
       throw std::invalid_argument("cannot open " + path + " as a video (" + av_error(e) + ")");
   }
-  ~Decoding() {
-    av_frame_free(&frame_);
-    av_packet_free(&packet_);
-    avcodec_free_context(&decoder_);
-  }
   Decoding(const Decoding&) = delete;
   Decoding& operator=(const Decoding&) = delete;
 
@@ -180,9 +175,20 @@ class Decoding {
  private:
   FormatPtr format_;
   int stream_ = -1;
-  AVCodecContext* decoder_ = nullptr;
-  AVPacket* packet_ = nullptr;
-  AVFrame* frame_ = nullptr;
+  // Freed also when the constructor throws after allocating them (a member, not the body).
+  struct Owned {
+    AVCodecContext* decoder = nullptr;
+    AVPacket* packet = nullptr;
+    AVFrame* frame = nullptr;
+    ~Owned() {
+      av_frame_free(&frame);
+      av_packet_free(&packet);
+      avcodec_free_context(&decoder);
+    }
+  } own_;
+  AVCodecContext*& decoder_ = own_.decoder;
+  AVPacket*& packet_ = own_.packet;
+  AVFrame*& frame_ = own_.frame;
   long sent_ = 0;
   bool flushed_ = false, finished_ = false;
 };
