@@ -10,6 +10,7 @@
 #include <cmath>
 #include <functional>
 #include <limits>
+#include <numbers>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -87,6 +88,21 @@ void check_period(double period) {
 struct Bracket {
   double a, b, fa, fb;
 };
+
+// What to try when no motion of duration 2T has a solution. Durations scale as
+// 1/sqrt(g sin(tilt)) (the rolling equations in units of sqrt(length / (g sin(tilt)))), so a 2T
+// meant for a vertical plane, the paper's 1.181 s say, is the commonest miss on a tilted table.
+std::string no_solution_hint(const SimulationSpec& spec, double period) {
+  std::string hint = " (";
+  const double vertical = 0.5 * std::numbers::pi;
+  if (std::abs(spec.tilt - vertical) > 1e-9 && spec.tilt > 0) {
+    hint += "durations scale as 1/sqrt(g sin(tilt)): 2T = " + format_significant(period, 6) +
+            " s in a vertical plane is 2T = " +
+            format_significant(period / std::sqrt(std::sin(spec.tilt)), 4) + " s at this tilt of " +
+            format_significant(spec.tilt * 180 / std::numbers::pi, 4) + " deg; ";
+  }
+  return hint + "try the scene's own period, or a locus over a range of 2T to see which have one)";
+}
 
 // Walk from x0 in steps that double until f changes sign, first in the direction in which |f|
 // decreases, then the other way. f may throw std::invalid_argument for a parameter outside its
@@ -203,8 +219,8 @@ SolveReport evaluate_on(const std::shared_ptr<const RollingProblem>& base,
   // it onto itself, so its second half repeats the first. Forces are therefore taken over
   // [0, T], where they are well conditioned; integrating a slow, nearly balanced roll on to 2T
   // amplifies rounding exponentially (s_end shows it).
-  const Extrema x = find_extrema(r, s.initial.t0, std::min(T, r.final.t), o.events.time_tolerance,
-                                 s.contact.mu);
+  const Extrema x =
+      find_extrema(r, s.initial.t0, std::min(T, r.final.t), o.events.time_tolerance, s.contact.mu);
   rep.fn_apex_ratio = r.final.t >= T ? r.trajectory.sample(T).fn_ratio : kNaN;
   rep.fn_min_ratio = x.fn_min_ratio;
   rep.mu_required = x.mu_required;
@@ -240,7 +256,7 @@ SolveReport solve_k_from(const SimulationSpec& spec,
   const auto br = find_bracket(f, k0, f(k0), 0.02, lo, hi);
   if (!br)
     throw std::runtime_error("solve: no k in (-2, 2] brings the disk to s_h(T) = 0 for 2T = " +
-                             format_significant(period, 8) + " s");
+                             format_significant(period, 8) + " s" + no_solution_hint(spec, period));
   const RootResult root = br->a == br->b ? RootResult{br->a, 0.0, 0, true}
                                          : brent_root(f, br->a, br->b, br->fa, br->fb,
                                                       set.tolerance, set.max_evaluations);
@@ -285,7 +301,8 @@ SolveReport solve_d(const SimulationSpec& spec, double period, double k,
   if (!br)
     throw std::runtime_error(
         "solve: no valid hand shape d brings the disk to s_h(T) = 0 for 2T = " +
-        format_significant(period, 8) + " s, k = " + format_significant(k, 8));
+        format_significant(period, 8) + " s, k = " + format_significant(k, 8) +
+        no_solution_hint(s, period));
   const RootResult root = br->a == br->b ? RootResult{br->a, 0.0, 0, true}
                                          : brent_root(f, br->a, br->b, br->fa, br->fb,
                                                       set.tolerance * scale, set.max_evaluations);
@@ -418,7 +435,7 @@ TimeOptimalReport time_optimal(const SimulationSpec& spec, double lo, double hi,
   rep.fn_min_ratio = rep.solution.fn_min_ratio;
   rep.friction_margin = rep.solution.friction_margin;
   rep.limit = friction && rep.friction_margin < rep.fn_min_ratio ? SpeedLimit::kFriction
-                                                                  : SpeedLimit::kNormalForce;
+                                                                 : SpeedLimit::kNormalForce;
   return rep;
 }
 

@@ -1,10 +1,12 @@
 // The paper's results (section 4.3), reproduced by the design search. Reference values are the
 // paper's own numbers, with the tolerances of the acceptance criteria.
+#include "flatland/sim/format.hpp"
 #include "flatland/sim/search.hpp"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <numbers>
 #include <string>
 
 using namespace flatland::sim;
@@ -71,7 +73,7 @@ TEST(Paper, LocusFrictionMarginAgreesWithTheRequiredMu) {
   const auto points = locus(spec, 1.15, 2.5, 6);
   int slips = 0;
   for (const SolveReport& p : points) {
-    EXPECT_EQ(p.friction_margin < 0, p.mu_required > 0.15) << "2T = " << p.period;
+    EXPECT_EQ(p.friction_margin<0, p.mu_required> 0.15) << "2T = " << p.period;
     slips += p.friction_margin < 0;
   }
   EXPECT_GT(slips, 0);  // the fast end needs more than 0.15 (0.265 at 1.2 s) ...
@@ -163,4 +165,24 @@ TEST(Paper, JumpInSlowMotionIsNotReportedAsASolution) {
   const SolveReport r = solve_k(s, 5.0);
   EXPECT_LT(std::abs(r.s_T), 1e-6);
   EXPECT_GT(r.k, -2.0);
+}
+
+// The paper's 2T = 1.181 s on the air table tilted 5 degrees has no butterfly: the message says
+// what to try, and what it suggests, 1.181 s / sqrt(sin 5 deg), has the paper's solution (the
+// same k: the tilt only rescales time).
+TEST(Paper, NoSolutionSaysWhichDurationTheTiltScalesTo) {
+  SimulationSpec tilted = paper_spec();
+  tilted.tilt = 5.0 * std::numbers::pi / 180.0;
+  const double scaled = 1.181 / std::sqrt(std::sin(tilted.tilt));
+  try {
+    solve_k(tilted, 1.181);
+    FAIL() << "2T = 1.181 s at 5 deg has no solution";
+  } catch (const std::runtime_error& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("2T = " + format_significant(scaled, 4) + " s at this tilt of 5 deg"),
+              std::string::npos)
+        << what;
+    EXPECT_EQ(what.find('\n'), std::string::npos);
+  }
+  EXPECT_NEAR(solve_k(tilted, scaled).k, solve_k(paper_spec(), 1.181).k, 1e-6);
 }
