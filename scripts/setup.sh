@@ -25,6 +25,7 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   gnuplot-nox python3
   python3-dev pybind11-dev python3-numpy python3-pytest python3-matplotlib python3-scipy
+  python3-venv python3-pip
   libmujoco-dev
   libopencv-dev libavutil-dev libavcodec-dev libavformat-dev libswscale-dev libosmesa6-dev mesa-common-dev libegl-dev libegl-mesa0 ffmpeg
   libceres-dev

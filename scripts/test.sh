@@ -2,6 +2,8 @@
 # The tests, after scripts/setup.sh has built build/:
 #   1. the GoogleTest suite on the Release build (build/);
 #   2. the Python suite (pytest, python/tests) against build/python, and the examples (examples/);
+#      then `pip install .` (pyproject.toml, reusing build/) into a virtual environment, imported
+#      from another folder;
 #   3. the install: build/ installed into a temporary prefix, a downstream project built against it
 #      with find_package(flatland), and it and the installed CLI run (tests/downstream/check.sh);
 #   4. the same suite built with AddressSanitizer + UndefinedBehaviorSanitizer (build-asan/,
@@ -38,6 +40,16 @@ log "stage 2: the Python module's suite (pytest) and examples, with Debian's pyt
 python=$(sed -n 's/^Python3_EXECUTABLE:FILEPATH=//p' build/CMakeCache.txt)
 PYTHONPATH="$root/build/python" MPLBACKEND=Agg "${python:-/usr/bin/python3}" -m pytest -q \
   -p no:cacheprovider python/tests
+
+log "stage 2: pip install . into a virtual environment, and import flatland from elsewhere"
+# As a Python user installs it (README, docs/PYTHON.md): a venv that sees Debian's numpy, and pip
+# without build isolation. The backend (pyproject.toml) reuses build/: nothing is compiled again.
+venv_dir=$(mktemp -d)
+trap 'rm -rf "$venv_dir"' EXIT
+/usr/bin/python3 -m venv --system-site-packages "$venv_dir/v"
+"$venv_dir/v/bin/pip" install -q --no-build-isolation . >&2
+(cd "$venv_dir" && env -u PYTHONPATH -u FLATLAND_DATA_DIR v/bin/python -c \
+  "import flatland; flatland.solve(period=1.181); print('test: installed', flatland.__file__)" >&2)
 
 log "stage 3: install into a temporary prefix, and a find_package(flatland) project against it"
 bash tests/downstream/check.sh build

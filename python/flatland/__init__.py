@@ -27,10 +27,11 @@ from typing import Any, Dict, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-# The bundled scenes: build/share/flatland beside build/python (the build tree), unless
-# FLATLAND_DATA_DIR says otherwise.
+# The bundled scenes, unless FLATLAND_DATA_DIR says otherwise: flatland/data in an installed
+# package (pip install ., python/backend), build/share/flatland beside build/python in the
+# build tree.
 _here = _Path(__file__).resolve().parent
-for _candidate in (_here.parent.parent / "share" / "flatland",):
+for _candidate in (_here / "data", _here.parent.parent / "share" / "flatland"):
     if "FLATLAND_DATA_DIR" not in _os.environ and (_candidate / "scenes" / "butterfly.yaml").is_file():
         _os.environ["FLATLAND_DATA_DIR"] = str(_candidate)
 
