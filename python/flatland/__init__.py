@@ -41,10 +41,102 @@ from ._flatland import Model  # noqa: E402
 __all__ = [
     "Model", "load", "default_scene_path", "solve", "simulate", "Simulation", "time_optimal",
     "locus", "surface", "Renderer", "Tracker", "calibrate", "render_calibration", "experiment",
-    "Experiment", "montecarlo", "study",
+    "Experiment", "montecarlo", "study", "read_camera_file", "write_camera_file", "project",
 ]
 
 SceneLike = Union[Model, str, "_os.PathLike[str]", None]
+
+
+# Arguments are checked here, before the native module sees them, so that a wrong type is a
+# one-line ValueError naming the keyword (pybind11 would raise a TypeError listing every overload)
+# and a bool is not taken for a number (True would be a 1 s period). Values are checked by the
+# library, with the CLI's messages.
+
+def _type_name(value: Any) -> str:
+    return type(value).__name__
+
+
+def _is_bool(value: Any) -> bool:
+    return isinstance(value, (bool, np.bool_))
+
+
+def _number(name: str, value: Any, optional: bool = False) -> Optional[float]:
+    """A real number (int, float or a numpy scalar; not a bool) as float, or None if optional."""
+    if value is None and optional:
+        return None
+    if _is_bool(value) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"{name}: a number, got a {_type_name(value)}")
+    return float(value)
+
+
+def _integer(name: str, value: Any, low: int = -2**31, high: int = 2**31 - 1) -> int:
+    """An integer (not a bool, not a float) within what the library's type holds."""
+    if _is_bool(value) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"{name}: an integer, got a {_type_name(value)}")
+    if not low <= int(value) <= high:
+        raise ValueError(f"{name}: must be in [{low}, {high}], got {int(value)}")
+    return int(value)
+
+
+def _flag(name: str, value: Any) -> bool:
+    if not _is_bool(value):
+        raise ValueError(f"{name}: True or False, got a {_type_name(value)}")
+    return bool(value)
+
+
+def _text(name: str, value: Any, optional: bool = False) -> Optional[str]:
+    if value is None and optional:
+        return None
+    if not isinstance(value, str):
+        raise ValueError(f"{name}: a str, got a {_type_name(value)}")
+    return value
+
+
+def _scene(name: str, value: Any) -> Any:
+    """A Model, a path (str or os.PathLike) or None."""
+    if value is None or isinstance(value, (Model, str, _os.PathLike)):
+        return value
+    raise ValueError(f"{name}: a Model, a path or None, got a {_type_name(value)}")
+
+
+def _path(name: str, value: Any) -> str:
+    if isinstance(value, (str, _os.PathLike)):
+        path = _os.fspath(value)
+        if isinstance(path, str):
+            return path
+    raise ValueError(f"{name}: a path (str or os.PathLike), got a {_type_name(value)}")
+
+
+def _mapping(name: str, value: Any, optional: bool = False) -> Optional[Dict[Any, Any]]:
+    if value is None and optional:
+        return None
+    if not isinstance(value, dict):
+        raise ValueError(f"{name}: a dict, got a {_type_name(value)}")
+    return value
+
+
+def _texts(name: str, value: Any) -> list:
+    """A list or tuple of str (a str alone is not a list of words)."""
+    if not isinstance(value, (list, tuple)):
+        raise ValueError(f"{name}: a list of str, got a {_type_name(value)}")
+    for i, item in enumerate(value):
+        _text(f"{name}[{i}]", item)
+    return list(value)
+
+
+def _array(name: str, value: Any) -> np.ndarray:
+    if not isinstance(value, np.ndarray):
+        raise ValueError(f"{name}: a numpy array, got a {_type_name(value)}")
+    return value
+
+
+def _integrator(method: Any, rtol: Any, atol: Any, step: Any, energy_tolerance: Any,
+                formulation: Any) -> tuple:
+    """The integrator keywords every simulator call has, checked."""
+    return (_text("method", method, True), _number("rtol", rtol, True),
+            _number("atol", atol, True), _number("step", step, True),
+            _number("energy_tolerance", energy_tolerance, True),
+            _text("formulation", formulation, True))
 
 
 def load(path: Union[str, "_os.PathLike[str]", None] = None) -> Model:
@@ -53,7 +145,7 @@ def load(path: Union[str, "_os.PathLike[str]", None] = None) -> Model:
     ``None`` loads the bundled paper scene (``default_scene_path()``). A bad file raises
     ValueError naming the file, the field and the reason, as the CLI prints it.
     """
-    return _flatland.load(path)
+    return _flatland.load(_scene("path", path))
 
 
 def default_scene_path() -> str:
@@ -78,8 +170,10 @@ def solve(period: Optional[float] = None, scene: SceneLike = None, *, k: Optiona
     default to the scene's motion; ``method`` (dopri5, dop853, rk4), ``rtol``, ``atol``,
     ``step`` (rk4, s) and ``formulation`` (auto, general, reduced) override its simulator.
     """
-    return _flatland.solve(period, scene, k, solve_for, tolerance, method, rtol, atol, step,
-                           energy_tolerance, formulation)
+    return _flatland.solve(_number("period", period, True), _scene("scene", scene),
+                           _number("k", k, True), _text("solve_for", solve_for),
+                           _number("tolerance", tolerance),
+                           *_integrator(method, rtol, atol, step, energy_tolerance, formulation))
 
 
 @dataclass(frozen=True)
@@ -111,9 +205,12 @@ def simulate(scene: SceneLike = None, *, period: Optional[float] = None,
     The trajectory has one row per integrator step, or one every ``sample_dt`` s from the dense
     output.
     """
-    report, trajectory = _flatland.simulate(scene, period, k, duration, mu, model,
-                                            stop_on_contact_loss, sample_dt, method, rtol, atol,
-                                            step, energy_tolerance, formulation)
+    report, trajectory = _flatland.simulate(
+        _scene("scene", scene), _number("period", period, True), _number("k", k, True),
+        _number("duration", duration, True), _number("mu", mu, True),
+        _text("model", model, True), _flag("stop_on_contact_loss", stop_on_contact_loss),
+        _number("sample_dt", sample_dt, True),
+        *_integrator(method, rtol, atol, step, energy_tolerance, formulation))
     return Simulation(report, trajectory)
 
 
@@ -125,8 +222,11 @@ def time_optimal(scene: SceneLike = None, *, mu: Optional[float] = None, from_: 
                  formulation: Optional[str] = None) -> Dict[str, Any]:
     """The fastest butterfly in 2T in [from_, to] s that keeps contact (and, with ``mu``, does
     not slip). The keys of ``flatland time-optimal --json`` (period, k, limit, solution, ...)."""
-    return _flatland.time_optimal(scene, mu, from_, to, period_tolerance, tolerance, method, rtol,
-                                  atol, step, energy_tolerance, formulation)
+    return _flatland.time_optimal(
+        _scene("scene", scene), _number("mu", mu, True), _number("from_", from_),
+        _number("to", to), _number("period_tolerance", period_tolerance),
+        _number("tolerance", tolerance),
+        *_integrator(method, rtol, atol, step, energy_tolerance, formulation))
 
 
 def locus(scene: SceneLike = None, *, from_: float = 1.1, to: float = 3.0, n: int = 20,
@@ -137,8 +237,10 @@ def locus(scene: SceneLike = None, *, from_: float = 1.1, to: float = 3.0, n: in
     """The butterfly solutions k(2T) at ``n`` durations evenly spaced over [from_, to] s (paper
     Fig. 7). ``points`` and ``mu`` as ``flatland locus --json``; also one numpy array per field
     (period, k, fn_min_ratio, fn_apex_ratio, mu_required, friction_margin)."""
-    return _flatland.locus(scene, from_, to, n, mu, tolerance, method, rtol, atol, step,
-                           energy_tolerance, formulation)
+    return _flatland.locus(_scene("scene", scene), _number("from_", from_), _number("to", to),
+                           _integer("n", n), _number("mu", mu, True),
+                           _number("tolerance", tolerance),
+                           *_integrator(method, rtol, atol, step, energy_tolerance, formulation))
 
 
 def surface(scene: SceneLike = None, *, k_from: float = -1.6, k_to: float = -0.8, nk: int = 50,
@@ -149,8 +251,12 @@ def surface(scene: SceneLike = None, *, k_from: float = -1.6, k_to: float = -0.8
             formulation: Optional[str] = None) -> Dict[str, Any]:
     """s_h(T) on a k x 2T grid (paper Fig. 6): ``k`` (nk), ``period`` (np) and ``s_T``
     (nk x np) as numpy arrays; its zero level is the locus. ``threads``: 0 uses every core."""
-    return _flatland.surface(scene, k_from, k_to, nk, period_from, period_to, np, threads, method,
-                             rtol, atol, step, energy_tolerance, formulation)
+    return _flatland.surface(_scene("scene", scene), _number("k_from", k_from),
+                             _number("k_to", k_to), _integer("nk", nk),
+                             _number("period_from", period_from),
+                             _number("period_to", period_to), _integer("np", np),
+                             _integer("threads", threads),
+                             *_integrator(method, rtol, atol, step, energy_tolerance, formulation))
 
 
 class Renderer:
@@ -169,7 +275,8 @@ class Renderer:
         """``model``: a Model or scene with a camera section; ``backend``: osmesa or egl
         (default: the scene's render.backend); ``duration``: the run's length, s (default: the
         scene's)."""
-        self._native = _flatland.Renderer(model, backend, duration)
+        self._native = _flatland.Renderer(_scene("model", model), _text("backend", backend, True),
+                                          _number("duration", duration, True))
 
     def render(self, t: Optional[float] = None, state: Optional[Dict[str, Any]] = None
                ) -> Tuple[Optional[np.ndarray], Dict[str, Any]]:
@@ -179,15 +286,22 @@ class Renderer:
         if (t is None) == (state is None):
             raise ValueError("render: give exactly one of t and state")
         if t is not None:
-            return self._native.render_at(float(t))
+            return self._native.render_at(_number("t", t))
+        _mapping("state", state)
         unknown = set(state) - {"hand_angle", "disk_center", "disk_angle", "t"}
         if unknown:
-            raise ValueError(f"state: unknown keys {sorted(unknown)} (hand_angle, disk_center, "
-                             "disk_angle, t)")
-        return self._native.render_state(float(state.get("hand_angle", 0.0)),
-                                         tuple(state.get("disk_center", (0.0, 0.0))),
-                                         float(state.get("disk_angle", 0.0)),
-                                         float(state.get("t", 0.0)))
+            raise ValueError(f"state: unknown keys {sorted(unknown, key=str)} (hand_angle, "
+                             "disk_center, disk_angle, t)")
+        center = state.get("disk_center", (0.0, 0.0))
+        if not isinstance(center, (tuple, list, np.ndarray)) or len(center) != 2:
+            raise ValueError("state.disk_center: a pair (x, y) in m, got a "
+                             f"{_type_name(center)}")
+        return self._native.render_state(
+            _number("state.hand_angle", state.get("hand_angle", 0.0)),
+            (_number("state.disk_center[0]", center[0]),
+             _number("state.disk_center[1]", center[1])),
+            _number("state.disk_angle", state.get("disk_angle", 0.0)),
+            _number("state.t", state.get("t", 0.0)))
 
     @property
     def camera(self) -> Dict[str, Any]:
@@ -216,12 +330,12 @@ class Tracker:
     """
 
     def __init__(self, model: SceneLike = None, method: Optional[str] = None):
-        self._native = _flatland.Tracker(model, method)
+        self._native = _flatland.Tracker(_scene("model", model), _text("method", method, True))
 
     def track(self, frame: np.ndarray, theta: Optional[float] = None) -> Dict[str, Any]:
         """state (found, tracking, lost), center (u, v) px or None, radius_px, sigma_px,
         quality, edge_points, and s_h (with ``theta``, the hand angle in rad, and a model)."""
-        return self._native.track(frame, theta)
+        return self._native.track(_array("frame", frame), _number("theta", theta, True))
 
     def reset(self) -> None:
         """Forget the track: the next frame is searched whole."""
@@ -241,9 +355,23 @@ def calibrate(board: str, images: Optional[Sequence[np.ndarray]] = None, *,
     OpenCV's rational model. Returns camera (K, dist, ...), rms_px, view_rms_px, views_used,
     rejected, not_found and std (of fx fy cx cy k1 k2 p1 p2 k3).
     """
-    return _flatland.calibrate(board, None if images is None else list(images),
-                               None if corners is None else list(corners), image_size, fix,
-                               rational)
+    if images is not None:
+        if not isinstance(images, (list, tuple)):
+            raise ValueError(f"images: a list of image arrays, got a {_type_name(images)}")
+        images = [_array(f"images[{i}]", image) for i, image in enumerate(images)]
+    if corners is not None:
+        if not isinstance(corners, (list, tuple)):
+            raise ValueError("corners: a list of (image_points, object_points) pairs, got a "
+                             f"{_type_name(corners)}")
+        corners = list(corners)
+    if image_size is not None:
+        if not isinstance(image_size, (tuple, list)) or len(image_size) != 2:
+            raise ValueError(f"image_size: a pair (width, height) in px, got a "
+                             f"{_type_name(image_size)}")
+        image_size = (_integer("image_size[0]", image_size[0]),
+                      _integer("image_size[1]", image_size[1]))
+    return _flatland.calibrate(_text("board", board), images, corners, image_size,
+                               _text("fix", fix), _flag("rational", rational))
 
 
 def render_calibration(model: SceneLike = None, *, intrinsics_views: int = 16,
@@ -252,8 +380,114 @@ def render_calibration(model: SceneLike = None, *, intrinsics_views: int = 16,
     """A rendered calibration session (``flatland render-calibration``): ``images`` by path
     (intrinsics/view_00.png, table/..., joint/...), the ``board`` notation, the
     ``intrinsics_images`` paths and the true ``camera``."""
-    return _flatland.render_calibration(model, intrinsics_views, table_views, joint_views, seed,
-                                        board)
+    return _flatland.render_calibration(
+        _scene("model", model), _integer("intrinsics_views", intrinsics_views),
+        _integer("table_views", table_views), _integer("joint_views", joint_views),
+        _integer("seed", seed, 0, 2**64 - 1), _text("board", board))
+
+
+def _matrix(name: str, value: Any, shape: Tuple[int, ...]) -> np.ndarray:
+    """A finite float array of `shape` (lists, tuples and arrays of numbers; no bools)."""
+    try:
+        array = np.asarray(value)
+    except Exception:  # ragged nesting and the like
+        array = np.asarray([])
+    if array.dtype.kind not in "iuf" or array.shape != shape:
+        raise ValueError(f"{name}: {' x '.join(map(str, shape))} numbers, got "
+                         f"{_type_name(value) if array.dtype.kind not in 'iuf' else array.shape}")
+    array = array.astype(float)
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"{name}: every value must be finite")
+    return array
+
+
+def _camera(name: str, camera: Any, pose: bool) -> Dict[str, Any]:
+    """A camera dict (width, height, K, dist; R and t when `pose`; fps, exposure optional), as
+    Renderer.camera, calibrate()["camera"] and read_camera_file()["camera"] give it, checked as
+    the camera file reader checks a file (camera/src/camera_file.cpp)."""
+    if not isinstance(camera, dict):
+        raise ValueError(f"{name}: a dict (width, height, K, dist, R, t), got a "
+                         f"{_type_name(camera)}")
+    for key in ("width", "height", "K", "dist") + (("R", "t") if pose else ()):
+        if key not in camera:
+            raise ValueError(f"{name}.{key}: missing")
+    width = _integer(f"{name}.width", camera["width"], 1, 16384)
+    height = _integer(f"{name}.height", camera["height"], 1, 16384)
+    K = _matrix(f"{name}.K", camera["K"], (3, 3))
+    if not (K[0, 0] > 0 and K[1, 1] > 0):
+        raise ValueError(f"{name}.K: fx and fy must be positive")
+    if K[1, 0] != 0 or K[2, 0] != 0 or K[2, 1] != 0 or K[2, 2] != 1:
+        raise ValueError(f"{name}.K: must be upper triangular with a 1 in the corner")
+    dist = np.asarray(camera["dist"]) if isinstance(camera["dist"], (list, tuple, np.ndarray)) \
+        else None
+    if dist is None or dist.shape not in ((5,), (8,)):
+        raise ValueError(f"{name}.dist: 5 (plumb_bob) or 8 (rational_polynomial) numbers")
+    dist = _matrix(f"{name}.dist", dist, dist.shape)
+    out = {"width": width, "height": height, "K": K, "dist": dist, "R": None, "t": None,
+           "fps": _number(f"{name}.fps", camera.get("fps", 30.0)),
+           "exposure": _number(f"{name}.exposure", camera.get("exposure", 0.0))}
+    if not (out["fps"] > 0 and np.isfinite(out["fps"])):
+        raise ValueError(f"{name}.fps: must be positive and finite")
+    if not (out["exposure"] >= 0 and np.isfinite(out["exposure"])):
+        raise ValueError(f"{name}.exposure: must be finite and not negative")
+    if pose:
+        R = _matrix(f"{name}.R", camera["R"], (3, 3))
+        if not (np.allclose(R @ R.T, np.eye(3), rtol=0, atol=1e-9) and np.linalg.det(R) > 0):
+            raise ValueError(f"{name}.R: must be a rotation (orthonormal, determinant 1)")
+        out["R"], out["t"] = R, _matrix(f"{name}.t", camera["t"], (3,))
+    return out
+
+
+def read_camera_file(path: Union[str, "_os.PathLike[str]"]) -> Dict[str, Any]:
+    """A camera file (ROS camera_info YAML with flatland's extras; docs/CALIBRATION.md), as
+    ``flatland calibrate`` and ``flatland render`` write it and ``flatland track --camera``
+    read it: camera_name, camera (width, height, fps, exposure, K, dist, R, t), rational_model,
+    table_pose (whether R, t are the table's pose), joint (axis_table (x, y) m, encoder_offset rad)
+    or None, and the calibrations' reports (report, table_report, joint_report) or None. A bad
+    file raises ValueError naming the file and the field."""
+    return _flatland.read_camera_file(_path("path", path))
+
+
+def write_camera_file(path: Union[str, "_os.PathLike[str]"], camera: Dict[str, Any], *,
+                      camera_name: str = "flatland", table_pose: bool = False,
+                      joint: Optional[Dict[str, Any]] = None, force: bool = False) -> None:
+    """Write ``camera`` (a dict as ``read_camera_file()["camera"]``, ``Renderer.camera`` or
+    ``calibrate()["camera"]`` gives it) as a camera file the CLI reads. ``table_pose``: write its
+    R and t as the table's pose; ``joint``: {"axis_table": (x, y) m, "encoder_offset": rad}. The
+    file is written whole or not at all; an existing one only with ``force``."""
+    path = _path("path", path)
+    name = _text("camera_name", camera_name)
+    pose = _flag("table_pose", table_pose)
+    joint = _mapping("joint", joint, True)
+    overwrite = _flag("force", force)
+    checked = _camera("camera", camera, pose)
+    joint_values = None
+    if joint is not None:
+        if set(joint) != {"axis_table", "encoder_offset"}:
+            raise ValueError("joint: the keys axis_table and encoder_offset")
+        axis = _matrix("joint.axis_table", joint["axis_table"], (2,))
+        offset = _number("joint.encoder_offset", joint["encoder_offset"])
+        if not np.isfinite(offset):
+            raise ValueError("joint.encoder_offset: must be finite")
+        joint_values = (float(axis[0]), float(axis[1]), offset)
+    _flatland.write_camera_file(path, name, checked["width"], checked["height"], checked["K"],
+                                checked["dist"], checked["R"], checked["t"], checked["fps"],
+                                checked["exposure"], joint_values, overwrite)
+
+
+def project(camera: Dict[str, Any], points: Any) -> np.ndarray:
+    """Table-frame points (N x 3, m) through ``camera`` (a dict with its pose R, t: x_cam = R
+    x_table + t) to pixels (N x 2, OpenCV's convention, with the lens distortion): the renderer's
+    and the tracker's projection (cv::projectPoints)."""
+    checked = _camera("camera", camera, True)
+    if not isinstance(points, (list, tuple, np.ndarray)):
+        raise ValueError(f"points: an array of shape (N, 3), got a {_type_name(points)}")
+    array = np.asarray(points)
+    if array.ndim != 2 or array.shape[1] != 3:
+        raise ValueError(f"points: an array of shape (N, 3), got shape {array.shape}")
+    array = _matrix("points", array, array.shape)
+    return _flatland.project(checked["width"], checked["height"], checked["K"], checked["dist"],
+                             checked["R"], checked["t"], array)
 
 
 @dataclass(frozen=True)
@@ -274,7 +508,8 @@ def experiment(model: SceneLike = None, *, controller: Optional[str] = None) -> 
     scene (default: the bundled closed-loop air table, scenes/airtable-feedback.yaml) filmed at
     its camera's rate, the estimator and ``controller`` ("feedback" or "open-loop"; default the
     scene's) at 1 kHz."""
-    result, log = _flatland.experiment(model, controller)
+    result, log = _flatland.experiment(_scene("model", model),
+                                       _text("controller", controller, True))
     return Experiment(result, log)
 
 
@@ -285,7 +520,14 @@ def montecarlo(model: SceneLike = None, *, runs: int = 20, seed: int = 1,
     both): success counts with Wilson 95 % intervals and one record per experiment.
     ``perturbations`` overrides the spreads of ``flatland montecarlo`` (s_h, tilt_deg,
     radius_rel, noise_dn, latency, latency_jitter, drop, friction_rel, contact_rel)."""
-    return _flatland.montecarlo(model, runs, seed, list(controllers), threads, perturbations)
+    perturbations = _mapping("perturbations", perturbations, True)
+    if perturbations is not None:
+        perturbations = {_text("perturbations key", key): _number(f"perturbations.{key}", value)
+                         for key, value in perturbations.items()}
+    return _flatland.montecarlo(_scene("model", model), _integer("runs", runs),
+                                _integer("seed", seed, 0, 2**64 - 1),
+                                _texts("controllers", controllers),
+                                _integer("threads", threads, 0, 2**32 - 1), perturbations)
 
 
 def study(name: str, scene: SceneLike = None, *, quick: bool = False) -> Dict[str, np.ndarray]:
@@ -295,7 +537,7 @@ def study(name: str, scene: SceneLike = None, *, quick: bool = False) -> Dict[st
     as str). ``quick``: the CLI's --quick grid (seconds to a minute instead of minutes). The
     scene defaults to the CLI study's (the paper scene, butterfly-camera.yaml for render and
     tracker, airtable-feedback.yaml for closed-loop; calibration takes none)."""
-    text = _flatland.study(name, scene, quick)
+    text = _flatland.study(_text("name", name), _scene("scene", scene), _flag("quick", quick))
     return _csv_columns(text)
 
 

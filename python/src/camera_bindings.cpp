@@ -3,6 +3,7 @@
 #include "convert.hpp"
 
 #include "flatland/calibration/intrinsics.hpp"
+#include "flatland/camera/camera_file.hpp"
 #include "flatland/drivers/calibration_session.hpp"
 #include "flatland/model/compile.hpp"
 #include "flatland/render/renderer.hpp"
@@ -14,6 +15,7 @@
 #include <pybind11/stl.h>
 
 #include <cmath>
+#include <filesystem>
 #include <mutex>
 #include <optional>
 
@@ -297,6 +299,129 @@ py::dict render_calibration_binding(const py::object& scene, int intrinsics_view
   return out;
 }
 
+/// A camera from the arrays flatland.write_camera_file and flatland.project hand over, whose
+/// shapes and values the Python side has checked (flatland/__init__.py, _camera).
+camera::CameraModel camera_from_arrays(int width, int height, const py::array_t<double>& K,
+                                       const py::array_t<double>& dist,
+                                       const std::optional<py::array_t<double>>& R,
+                                       const std::optional<py::array_t<double>>& t, double fps,
+                                       double exposure) {
+  if (K.size() != 9 || (dist.size() != 5 && dist.size() != 8) || (R && R->size() != 9) ||
+      (t && t->size() != 3))
+    throw std::invalid_argument("camera: K 3 x 3, dist 5 or 8, R 3 x 3 and t 3 numbers");
+  camera::CameraModel m;
+  m.width = width;
+  m.height = height;
+  m.fps = fps;
+  m.exposure = exposure;
+  for (int i = 0; i < 9; ++i) m.K.val[i] = K.data()[i];
+  for (py::ssize_t i = 0; i < dist.size(); ++i) m.dist[static_cast<int>(i)] = dist.data()[i];
+  if (R)
+    for (int i = 0; i < 9; ++i) m.R.val[i] = R->data()[i];
+  if (t)
+    for (int i = 0; i < 3; ++i) m.t[i] = t->data()[i];
+  return m;
+}
+
+py::dict camera_file_to_python(const camera::CameraFile& f) {
+  py::dict d;
+  d["camera_name"] = f.camera_name;
+  d["camera"] = camera_to_python(f.camera);
+  d["rational_model"] = f.rational_model;
+  d["table_pose"] = f.has_table_pose;
+  d["joint"] = py::none();
+  if (f.joint) {
+    py::dict j;
+    j["axis_table"] = point(f.joint->axis_table);
+    j["encoder_offset"] = f.joint->encoder_offset;
+    d["joint"] = j;
+  }
+  d["report"] = py::none();
+  if (f.report) {
+    py::dict r;
+    r["rms_px"] = f.report->rms_px;
+    r["view_rms_px"] = f.report->view_rms_px;
+    r["views_used"] = f.report->views_used;
+    r["views_rejected"] = f.report->views_rejected;
+    r["std"] = f.report->std;
+    r["std_rational"] = f.report->std_rational ? py::cast(*f.report->std_rational) : py::none();
+    d["report"] = r;
+  }
+  d["table_report"] = py::none();
+  if (f.table_report) {
+    py::dict r;
+    r["rms_px"] = f.table_report->rms_px;
+    r["corners"] = f.table_report->corners;
+    r["images"] = f.table_report->images;
+    d["table_report"] = r;
+  }
+  d["joint_report"] = py::none();
+  if (f.joint_report) {
+    const camera::JointFitReport& j = *f.joint_report;
+    py::dict r;
+    r["images"] = j.images;
+    r["inliers"] = j.inliers;
+    r["center_rms_m"] = j.center_rms_m;
+    r["angle_rms_rad"] = j.angle_rms_rad;
+    r["sigma_axis_m"] = j.sigma_axis_m;
+    r["sigma_offset_rad"] = j.sigma_offset_rad;
+    d["joint_report"] = r;
+  }
+  return d;
+}
+
+void write_camera_file_binding(const std::string& path, const std::string& camera_name, int width,
+                               int height, const py::array_t<double>& K,
+                               const py::array_t<double>& dist,
+                               const std::optional<py::array_t<double>>& R,
+                               const std::optional<py::array_t<double>>& t, double fps,
+                               double exposure,
+                               std::optional<std::tuple<double, double, double>> joint,
+                               bool force) {
+  namespace fs = std::filesystem;
+  const fs::path target(path);
+  const fs::path folder = target.parent_path().empty() ? fs::path(".") : target.parent_path();
+  if (!fs::is_directory(folder)) throw std::invalid_argument("path: no folder " + folder.string());
+  if (fs::is_directory(target)) throw std::invalid_argument("path: " + path + " is a folder");
+  if (fs::exists(target) && !force)
+    throw std::invalid_argument("path: " + path +
+                                " exists (force=True overwrites it); flatland never overwrites "
+                                "an output unasked");
+  camera::CameraFile file;
+  file.camera_name = camera_name;
+  file.camera = camera_from_arrays(width, height, K, dist, R, t, fps, exposure);
+  file.rational_model = dist.size() == 8;
+  file.has_table_pose = R.has_value();
+  if (joint) {
+    camera::JointCalibration j;
+    j.axis_table = {std::get<0>(*joint), std::get<1>(*joint)};
+    j.encoder_offset = std::get<2>(*joint);
+    file.joint = j;
+  }
+  // Written whole beside its place and renamed into it (camera::write_camera_file).
+  camera::write_camera_file(path, file);
+}
+
+py::array_t<double> project_binding(int width, int height, const py::array_t<double>& K,
+                                    const py::array_t<double>& dist,
+                                    const std::optional<py::array_t<double>>& R,
+                                    const std::optional<py::array_t<double>>& t,
+                                    const py::array_t<double>& points) {
+  const camera::CameraModel m = camera_from_arrays(width, height, K, dist, R, t, 30.0, 0.0);
+  if (points.ndim() != 2 || points.shape(1) != 3)
+    throw std::invalid_argument("points: an array of shape (N, 3)");
+  std::vector<cv::Point3d> table;
+  for (py::ssize_t i = 0; i < points.shape(0); ++i)
+    table.emplace_back(points.at(i, 0), points.at(i, 1), points.at(i, 2));
+  const std::vector<cv::Point2d> px = table.empty() ? std::vector<cv::Point2d>{} : m.project(table);
+  py::array_t<double> out({static_cast<py::ssize_t>(px.size()), py::ssize_t{2}});
+  for (std::size_t i = 0; i < px.size(); ++i) {
+    out.mutable_at(i, 0) = px[i].x;
+    out.mutable_at(i, 1) = px[i].y;
+  }
+  return out;
+}
+
 }  // namespace
 
 void bind_camera(py::module_& m) {
@@ -318,6 +443,14 @@ void bind_camera(py::module_& m) {
         "fix"_a, "rational"_a);
   m.def("render_calibration", &render_calibration_binding, "scene"_a, "intrinsics_views"_a,
         "table_views"_a, "joint_views"_a, "seed"_a, "board"_a);
+  m.def(
+      "read_camera_file",
+      [](const std::string& path) { return camera_file_to_python(camera::read_camera_file(path)); },
+      "path"_a);
+  m.def("write_camera_file", &write_camera_file_binding, "path"_a, "camera_name"_a, "width"_a,
+        "height"_a, "K"_a, "dist"_a, "R"_a, "t"_a, "fps"_a, "exposure"_a, "joint"_a, "force"_a);
+  m.def("project", &project_binding, "width"_a, "height"_a, "K"_a, "dist"_a, "R"_a, "t"_a,
+        "points"_a);
 }
 
 }  // namespace flatland::python

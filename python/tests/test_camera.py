@@ -102,3 +102,86 @@ def test_calibration_from_corners_matches_an_exact_projection():
     K = r["camera"]["K"]
     assert abs(K[0, 0] - f) < 0.05 and abs(K[1, 1] - f) < 0.05
     assert abs(K[0, 2] - cx) < 0.05 and abs(K[1, 2] - cy) < 0.05
+
+
+def test_camera_files_equal_the_clis(cli, tmp_path):
+    """`flatland render` writes the scene's camera file and the truth: read from Python, the file
+    is the renderer's camera, written back from Python it is the same file byte for byte, and
+    projecting the truth's table points gives the truth's pixels."""
+    out = tmp_path / "frames"
+    run_cli("render", "--scene", CAMERA, "--duration", "0.2", "--out", out)
+    f = flatland.read_camera_file(out / "camera.yaml")
+    assert f["camera_name"] == "butterfly-camera" and f["table_pose"] and not f["rational_model"]
+    expected = flatland.Renderer(flatland.load(CAMERA)).camera
+    for key in ("width", "height", "fps", "exposure"):
+        assert f["camera"][key] == expected[key], key
+    for key in ("K", "dist", "t"):
+        np.testing.assert_array_equal(f["camera"][key], expected[key])
+    # The file keeps the rotation as a Rodrigues vector: R comes back to rounding.
+    np.testing.assert_allclose(f["camera"]["R"], expected["R"], rtol=0, atol=1e-15)
+    written = tmp_path / "python.yaml"
+    flatland.write_camera_file(written, f["camera"], camera_name=f["camera_name"],
+                               table_pose=True, joint=f["joint"])
+    assert written.read_bytes() == (out / "camera.yaml").read_bytes()
+    with open(out / "truth.csv", newline="") as fh:
+        truth = list(csv.DictReader(fh))
+    table = np.array([[float(r[c]) for c in ("disk_x", "disk_y", "disk_z")] for r in truth])
+    pixels = np.array([[float(r["disk_u"]), float(r["disk_v"])] for r in truth])
+    np.testing.assert_allclose(flatland.project(f["camera"], table), pixels, rtol=0, atol=1e-9)
+
+
+def test_projection_is_the_pinhole_and_the_lens():
+    # An independent projection: x_cam = R x + t, then OpenCV's plumb_bob distortion by hand.
+    K = np.array([[800.0, 0, 320], [0, 810.0, 240], [0, 0, 1]])
+    dist = np.array([-0.2, 0.05, 0.001, -0.002, 0.01])
+    a = 0.3
+    R = np.array([[1, 0, 0], [0, math.cos(a), -math.sin(a)], [0, math.sin(a), math.cos(a)]])
+    t = np.array([0.05, -0.02, 1.0])
+    points = np.array([[0.1, 0.05, 0.0], [-0.12, 0.2, 0.03], [0.0, 0.0, 0.0]])
+    got = flatland.project({"width": 640, "height": 480, "K": K, "dist": dist, "R": R, "t": t},
+                           points)
+    k1, k2, p1, p2, k3 = dist
+    for p, (u, v) in zip(points, got):
+        x, y, z = R @ p + t
+        x, y = x / z, y / z
+        r2 = x * x + y * y
+        radial = 1 + k1 * r2 + k2 * r2 ** 2 + k3 * r2 ** 3
+        xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+        yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+        assert abs(u - (K[0, 0] * xd + K[0, 2])) < 1e-9 and abs(v - (K[1, 1] * yd + K[1, 2])) < 1e-9
+
+
+def test_bad_camera_files_and_cameras_write_nothing(tmp_path):
+    camera = {"width": 640, "height": 480, "K": np.diag([900.0, 900.0, 1.0]), "dist": [0] * 5,
+              "R": np.eye(3), "t": [0, 0, 1]}
+    target = tmp_path / "camera.yaml"
+    bad_cameras = [
+        ({**camera, "K": np.diag([-900.0, 900.0, 1.0])}, "camera.K: fx and fy must be positive"),
+        ({**camera, "dist": [0] * 4}, "camera.dist: 5 (plumb_bob) or 8"),
+        ({**camera, "width": 0}, "camera.width: must be in [1, 16384]"),
+        ({**camera, "R": 2 * np.eye(3)}, "camera.R: must be a rotation"),
+        ({**camera, "t": [0, 0, float("nan")]}, "camera.t: every value must be finite"),
+        ({k: v for k, v in camera.items() if k != "K"}, "camera.K: missing"),
+    ]
+    for bad, message in bad_cameras:
+        with pytest.raises(ValueError, match="^" + message.replace("[", r"\[").replace("(", r"\(")
+                           .replace(")", r"\)")):
+            flatland.write_camera_file(target, bad, table_pose=True)
+        assert not list(tmp_path.iterdir())
+    with pytest.raises(ValueError, match="^path: no folder "):
+        flatland.write_camera_file(tmp_path / "none" / "camera.yaml", camera)
+    flatland.write_camera_file(target, camera)
+    before = target.read_bytes()
+    with pytest.raises(ValueError, match=r"^path: .* exists \(force=True overwrites it\)"):
+        flatland.write_camera_file(target, {**camera, "width": 320})
+    assert target.read_bytes() == before
+    flatland.write_camera_file(target, {**camera, "width": 320}, force=True)
+    assert flatland.read_camera_file(target)["camera"]["width"] == 320
+    assert not flatland.read_camera_file(target)["table_pose"]
+    with pytest.raises(ValueError, match=r"none\.yaml: \(file\): cannot read camera file"):
+        flatland.read_camera_file(tmp_path / "none.yaml")
+    (tmp_path / "bad.yaml").write_text("image_width: 640\n")
+    with pytest.raises(ValueError, match="bad.yaml: image_height"):
+        flatland.read_camera_file(tmp_path / "bad.yaml")
+    with pytest.raises(ValueError, match=r"^points: an array of shape \(N, 3\)"):
+        flatland.project(camera, np.zeros((2, 2)))

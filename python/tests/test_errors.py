@@ -78,7 +78,7 @@ def test_a_missing_scene_file(cli, tmp_path):
      "images[0]: uint8 or float32 pixels"),
     (lambda: flatland.calibrate("chessboard:9x6:0.02", corners=[]), "image_size:"),
     (lambda: flatland.Renderer(flatland.default_scene_path()), "camera"),
-    (lambda: flatland.load(123), "scene: a Model, a path or None"),
+    (lambda: flatland.load(123), "path: a Model, a path or None"),
 ])
 def test_bad_input_raises_value_error(call, message):
     with pytest.raises(ValueError) as e:
