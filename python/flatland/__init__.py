@@ -180,7 +180,7 @@ def solve(period: Optional[float] = None, scene: SceneLike = None, *, k: Optiona
 class Simulation:
     """One run: ``report`` has the keys of ``flatland simulate --json``; ``trajectory`` one
     numpy array per column of the trajectory CSV (t, theta, s_h, x, y, f_n, fn_ratio, mode, ...;
-    docs/OUTPUTS.md)."""
+    docs/CLI.md#trajectory-csv)."""
 
     report: Dict[str, Any]
     trajectory: Dict[str, np.ndarray]
@@ -494,7 +494,8 @@ def project(camera: Dict[str, Any], points: Any) -> np.ndarray:
 class Experiment:
     """A synthetic closed-loop experiment: ``result`` has the keys of ``flatland experiment
     --json`` that a synthetic run has; ``log`` one numpy array per column of its log.csv (t,
-    theta, command, stage, s_est, s_meas, s_true, mode_true, ...: docs/EXPERIMENT.md)."""
+    theta, command, stage, s_est, s_meas, s_true, mode_true, ...:
+    docs/CLI.md#flatland-experiment)."""
 
     result: Dict[str, Any]
     log: Dict[str, np.ndarray]
