@@ -38,7 +38,7 @@ log "stage 2: the Python module's suite (pytest) and examples, with Debian's pyt
 # Debian's numpy and pybind11 are /usr/bin/python3's (python/CMakeLists.txt); a pyenv or venv
 # python3 earlier on PATH would not find them.
 python=$(sed -n 's/^Python3_EXECUTABLE:FILEPATH=//p' build/CMakeCache.txt)
-PYTHONPATH="$root/build/python" MPLBACKEND=Agg "${python:-/usr/bin/python3}" -m pytest -q \
+PYTHONPATH="$root/build/python" MPLBACKEND=Agg "${python:-/usr/bin/python3}" -m pytest -q -rs \
   -p no:cacheprovider python/tests
 
 log "stage 2: pip install . into a virtual environment, and import flatland from elsewhere"
