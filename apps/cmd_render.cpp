@@ -227,24 +227,6 @@ void apply_duration_and_fps(const RenderOptions& o, std::optional<double>& durat
   }
 }
 
-/// The part of a spatial hand's chart drawn: a sphere or ellipsoid whole, a plane or an extruded
-/// hand's piece out to render.table_extent.
-sim::SurfacePatch spatial_hand_extent(const sim::SpatialSpec& spec, double extent) {
-  const double pi = std::numbers::pi;
-  switch (spec.hand.kind) {
-    case sim::SurfaceSpec::Kind::kSphere:
-    case sim::SurfaceSpec::Kind::kEllipsoid:
-      return {{-pi, -pi / 2}, {pi, pi / 2}};
-    case sim::SurfaceSpec::Kind::kExtruded: {  // along the outline, its piece (the patch)
-      const double inf = std::numeric_limits<double>::infinity();
-      return {{-inf, -extent}, {inf, extent}};
-    }
-    case sim::SurfaceSpec::Kind::kPlane:
-      break;
-  }
-  return {{-extent, -extent}, {extent, extent}};
-}
-
 /// flatland render on a spatial scene: the run sampled at the camera's rate, each sample drawn
 /// (the hand's surface and the object at their poses) through the scene's camera, with
 /// supersampling and lens distortion; the other image effects are refused (not built for space).
@@ -255,13 +237,6 @@ void run_render_spatial(const RenderOptions& o, Scene scene) {
   if (o.solve) throw UsageError("--solve: only for planar scenes");
   if (o.view_opt->count())
     throw UsageError("--view: only for planar scenes (a spatial scene is seen by its camera)");
-  const EffectsSpec& e = scene.effects;
-  if (e.blur_subframes > 1 || e.noise_read_dn > 0 || e.noise_shot_gain > 0 || e.vignetting > 0 ||
-      e.jitter_s > 0 || e.drop_probability > 0 || !e.quantize)
-    throw UsageError(scene.origin +
-                     ": effects: a spatial scene's frames have supersampling and the camera's "
-                     "distortion only (blur, noise, vignetting, jitter, drops and float images "
-                     "are not built for spatial scenes)");
   sim::SpatialSpec spec = *scene.spatial;
   api::apply_integrator_overrides(integrator_overrides(o.common), spec.integrator,
                                   api::Spelling::kCommandLine);
@@ -275,6 +250,8 @@ void run_render_spatial(const RenderOptions& o, Scene scene) {
   } catch (const std::invalid_argument& err) {
     throw UsageError(scene.origin + ": " + err.what());
   }
+  // The camera (with --fps), the bodies; effects that spatial frames do not have are refused.
+  const render::RenderSetup rs = model::spatial_render_setup(scene, setup);
   const double frames_wanted = std::floor(spec.end_time() * camera.fps) + 1;
   if (frames_wanted > kMaxRenderFrames)
     throw UsageError("--fps/--duration: " + format_number(frames_wanted) + " frames; at most " +
@@ -296,12 +273,6 @@ void run_render_spatial(const RenderOptions& o, Scene scene) {
   } else {
     check_output_directory("--out", out, o.common.force);
   }
-  render::RenderSetup rs;
-  rs.camera = model::compile_camera(camera);
-  rs.render = scene.render;
-  rs.effects = scene.effects;
-  rs.spatial = render::SpatialBodies{setup.problem.hand, setup.problem.object.surface,
-                                     spatial_hand_extent(spec, scene.render.table_extent)};
   render::Renderer renderer(rs, backend);
   const camera::CameraModel& model = renderer.camera();
   const std::string gl = renderer.gl_description();

@@ -93,35 +93,6 @@ void fail_if_broken(const sim::EnergyAudit& a) {
   if (a.broken) throw std::runtime_error(api::energy_failure_text(a));
 }
 
-/// The spatial scene with the command line's overrides, checked (UsageError naming the option).
-sim::SpatialSpec spatial_spec_with_overrides(const SimulateOptions& o, const Scene& scene) {
-  sim::SpatialSpec spec = *scene.spatial;
-  const bool butterfly = spec.motion.kind == sim::SpatialMotionSpec::Kind::kButterfly;
-  if (o.model_opt->count() && o.model != "rolling")
-    throw UsageError(
-        "--model: a spatial scene has the rolling model only (it stops where the contact is "
-        "lost or slips)");
-  if (o.period_opt->count() || o.k_opt->count()) {
-    const char* which = o.period_opt->count() ? "--period" : "--k";
-    if (!butterfly)
-      throw UsageError(std::string(which) + ": only for a scene whose motion is the butterfly");
-  }
-  if (o.period_opt->count()) {
-    require_positive("--period", o.period, "s");
-    spec.motion.period = o.period;
-  }
-  if (o.k_opt->count()) spec.motion.k = o.k;
-  if (o.duration_opt->count()) {
-    require_positive("--duration", o.duration, "s");
-    spec.duration = o.duration;
-  }
-  if (o.mu.opt->count()) api::apply_mu(o.mu.value, spec, api::Spelling::kCommandLine);
-  if (o.no_stop_on_contact_loss) spec.stop_on_contact_loss = false;
-  api::apply_integrator_overrides(integrator_overrides(o.common), spec.integrator,
-                                  api::Spelling::kCommandLine);
-  return spec;
-}
-
 /// The y range of a panel whose values `v` do not vary beyond rounding: gnuplot would spread the
 /// rounding over the whole axis and label every tick with the same number. Such a quantity is
 /// drawn on a range of +-0.1 % of itself (at least 1e-9: a flat line with distinct tick labels)
@@ -192,9 +163,11 @@ std::string spatial_plot(const std::string& title, const std::vector<sim::Spatia
          "unset multiplot\n";
 }
 
-void run_simulate_spatial(const SimulateOptions& o, const Scene& scene) {
+void run_simulate_spatial(const SimulateOptions& o, const Scene& scene,
+                          const api::SimulateRequest& request) {
   // Everything that can be bad input is checked before anything is computed or written.
-  const sim::SpatialSpec spec = spatial_spec_with_overrides(o, scene);
+  const sim::SpatialSpec spec =
+      api::prepare_spatial_simulate(scene, request, api::Spelling::kCommandLine);
   if (o.sample_dt_opt->count())
     api::require_sample_spacing("--sample-dt", o.sample_dt, spec.end_time());
   sim::SpatialSetup setup;
@@ -301,7 +274,7 @@ void run_simulate(const SimulateOptions& o) {
   // Without --out no trajectory is written: the run keeps a bounded window of it.
   request.keep_trajectory = !o.common.out.empty();
   const Scene scene = load_scene_option(o.common, SceneSpaces::kPlanarOrSpatial);
-  if (scene.spatial) return run_simulate_spatial(o, scene);
+  if (scene.spatial) return run_simulate_spatial(o, scene, request);
   const api::PreparedSimulation prepared =
       api::prepare_simulate(scene, request, api::Spelling::kCommandLine);
   const sim::SimulationSpec& spec = prepared.spec;

@@ -192,6 +192,37 @@ sim::SolveReport solve(const sim::SimulationSpec& spec, const SolveRequest& r) {
                             : sim::solve_k(spec, spec.motion.period, settings);
 }
 
+sim::SpatialSpec prepare_spatial_simulate(const Scene& scene, const SimulateRequest& r,
+                                          Spelling spelling) {
+  const auto name = [spelling](std::string_view n) { return option_name(n, spelling); };
+  if (!scene.spatial) throw std::logic_error("prepare_spatial_simulate: a planar scene");
+  sim::SpatialSpec spec = *scene.spatial;
+  if (r.model && *r.model != "rolling")
+    throw UsageError(name("model") +
+                     ": a spatial scene has the rolling model only (it stops where the contact is "
+                     "lost or slips)");
+  const bool butterfly = spec.motion.kind == sim::SpatialMotionSpec::Kind::kButterfly;
+  if ((r.period || r.k) && !butterfly)
+    throw UsageError(name(r.period ? "period" : "k") +
+                     ": only for a scene whose motion is the butterfly");
+  if (r.period) {
+    require_positive(name("period"), *r.period, "s");
+    spec.motion.period = *r.period;
+  }
+  if (r.k) {
+    require_finite(name("k"), *r.k);
+    spec.motion.k = *r.k;
+  }
+  if (r.duration) {
+    require_positive(name("duration"), *r.duration, "s");
+    spec.duration = *r.duration;
+  }
+  if (r.mu) apply_mu(*r.mu, spec, spelling);
+  if (!r.stop_on_contact_loss) spec.stop_on_contact_loss = false;
+  apply_integrator_overrides(r.integrator, spec.integrator, spelling);
+  return spec;
+}
+
 PreparedSimulation prepare_simulate(Scene scene, const SimulateRequest& r, Spelling spelling) {
   const auto name = [spelling](std::string_view n) { return option_name(n, spelling); };
   apply_integrator_overrides(r.integrator, scene, spelling);

@@ -6,6 +6,8 @@
 
 #include <algorithm>
 #include <array>
+#include <limits>
+#include <numbers>
 #include <stdexcept>
 #include <string>
 
@@ -111,6 +113,48 @@ render::RenderSetup render_setup(const Model& model) {
     throw std::invalid_argument("camera: the scene has no camera section (needed to render)");
   return {*model.camera,     model.hand,         model.boards, model.spec.sim.object,
           model.spec.render, model.spec.effects, std::nullopt};
+}
+
+namespace {
+/// The part of a spatial hand's chart drawn: a sphere or ellipsoid whole, a plane or an extruded
+/// hand's piece out to render.table_extent.
+sim::SurfacePatch spatial_hand_extent(const sim::SpatialSpec& spec, double extent) {
+  const double pi = std::numbers::pi;
+  switch (spec.hand.kind) {
+    case sim::SurfaceSpec::Kind::kSphere:
+    case sim::SurfaceSpec::Kind::kEllipsoid:
+      return {{-pi, -pi / 2}, {pi, pi / 2}};
+    case sim::SurfaceSpec::Kind::kExtruded: {  // along the outline, its piece (the patch)
+      const double inf = std::numeric_limits<double>::infinity();
+      return {{-inf, -extent}, {inf, extent}};
+    }
+    case sim::SurfaceSpec::Kind::kPlane:
+      break;
+  }
+  return {{-extent, -extent}, {extent, extent}};
+}
+}  // namespace
+
+render::RenderSetup spatial_render_setup(const Scene& scene, const sim::SpatialSetup& setup) {
+  if (!scene.spatial) throw std::logic_error("spatial_render_setup: a planar scene");
+  if (!scene.camera)
+    throw std::invalid_argument(scene.origin +
+                                ": camera: the scene has no camera section (needed to render)");
+  const EffectsSpec& e = scene.effects;
+  if (e.blur_subframes > 1 || e.noise_read_dn > 0 || e.noise_shot_gain > 0 || e.vignetting > 0 ||
+      e.jitter_s > 0 || e.drop_probability > 0 || !e.quantize)
+    throw std::invalid_argument(scene.origin +
+                                ": effects: a spatial scene's frames have supersampling and the "
+                                "camera's distortion only (blur, noise, vignetting, jitter, drops "
+                                "and float images are not built for spatial scenes)");
+  render::RenderSetup rs;
+  rs.camera = compile_camera(*scene.camera);
+  rs.render = scene.render;
+  rs.effects = scene.effects;
+  rs.spatial =
+      render::SpatialBodies{setup.problem.hand, setup.problem.object.surface,
+                            spatial_hand_extent(*scene.spatial, scene.render.table_extent)};
+  return rs;
 }
 
 vision::HandMapping hand_mapping(const Model& model, const camera::CameraModel& camera,

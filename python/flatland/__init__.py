@@ -204,6 +204,10 @@ def simulate(scene: SceneLike = None, *, period: Optional[float] = None,
     where contact is lost or the disk would slip) or "hybrid" (it slides, flies and is caught).
     The trajectory has one row per integrator step, or one every ``sample_dt`` s from the dense
     output.
+
+    A spatial scene (``space: 3d``, given as its path) runs too, as ``flatland simulate`` runs it:
+    the report of its ``--json`` and the columns of its CSV (docs/CLI.md#flatland-simulate), with
+    the rolling model only (``model`` "rolling" or None).
     """
     report, trajectory = _flatland.simulate(
         _scene("scene", scene), _number("period", period, True), _number("k", k, True),
@@ -211,6 +215,8 @@ def simulate(scene: SceneLike = None, *, period: Optional[float] = None,
         _text("model", model, True), _flag("stop_on_contact_loss", stop_on_contact_loss),
         _number("sample_dt", sample_dt, True),
         *_integrator(method, rtol, atol, step, energy_tolerance, formulation))
+    if isinstance(trajectory, str):  # a spatial scene's run: its CSV's text
+        trajectory = _csv_columns(trajectory)
     return Simulation(report, trajectory)
 
 
@@ -268,13 +274,17 @@ class Renderer:
     instant without effects. Images are H x W x 3 ``uint8`` BGR (OpenCV's order), or float32
     when the scene's effects do not quantise; the truth is a dict (t, theta, s_h, disk centre
     and marker in the table frame and in pixels, dropped).
+
+    A spatial scene (``space: 3d``, given as its path) is run at its camera's rate at the first
+    ``render(t=k / fps)`` and drawn as ``flatland render`` draws it (supersampling and the lens);
+    its truth's disk_center_table and disk_center_px are the object's centre.
     """
 
     def __init__(self, model: SceneLike = None, backend: Optional[str] = None,
                  duration: Optional[float] = None):
-        """``model``: a Model or scene with a camera section; ``backend``: osmesa or egl
-        (default: the scene's render.backend); ``duration``: the run's length, s (default: the
-        scene's)."""
+        """``model``: a Model or scene (planar or spatial) with a camera section; ``backend``:
+        osmesa or egl (default: the scene's render.backend); ``duration``: the run's length, s
+        (default: the scene's)."""
         self._native = _flatland.Renderer(_scene("model", model), _text("backend", backend, True),
                                           _number("duration", duration, True))
 

@@ -28,7 +28,8 @@ def simulate(scene: SceneArg, period: Optional[float], k: Optional[float],
              duration: Optional[float], mu: Optional[float], model: Optional[str],
              stop_on_contact_loss: bool, sample_dt: Optional[float], method: Optional[str],
              rtol: Optional[float], atol: Optional[float], step: Optional[float],
-             energy_tolerance: Optional[float], formulation: Optional[str]) -> Tuple[Dict[str, Any], Dict[str, np.ndarray]]: ...
+             energy_tolerance: Optional[float], formulation: Optional[str]
+             ) -> Tuple[Dict[str, Any], Union[Dict[str, np.ndarray], str]]: ...
 def time_optimal(scene: SceneArg, mu: Optional[float], from_: float, to: float,
                  period_tolerance: float, tolerance: float, method: Optional[str],
                  rtol: Optional[float], atol: Optional[float], step: Optional[float],

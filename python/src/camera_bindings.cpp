@@ -8,12 +8,14 @@
 #include "flatland/model/compile.hpp"
 #include "flatland/render/renderer.hpp"
 #include "flatland/sim/format.hpp"
+#include "flatland/sim/spatial_spec.hpp"
 #include "flatland/sim/spec.hpp"
 #include "flatland/vision/mapping.hpp"
 #include "flatland/vision/tracker.hpp"
 
 #include <pybind11/stl.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <mutex>
@@ -68,17 +70,38 @@ class PyRenderer {
  public:
   PyRenderer(const py::object& scene, const std::optional<std::string>& backend,
              std::optional<double> duration)
-      : model_(model_argument(scene)), duration_(duration) {
+      : duration_(duration) {
     if (duration && !(std::isfinite(*duration) && *duration > 0))
       throw std::invalid_argument("duration: must be positive and finite (s), got " +
                                   sim::format_number(*duration));
     std::optional<render::GlBackend> gl;
     if (backend) gl = render::parse_backend(*backend);
+    if (py::isinstance<PyModel>(scene)) {
+      model_ = scene.cast<const PyModel&>().model;
+    } else {
+      Scene loaded = scene_argument(scene, true, "model");
+      if (loaded.spatial) {
+        // A spatial scene: its run sampled at the camera's rate, as `flatland render` draws it.
+        sim::SpatialSpec spec = *loaded.spatial;
+        if (duration) spec.duration = *duration;
+        spatial_ = std::make_unique<SpatialRun>();
+        try {
+          spatial_->setup = sim::build_spatial(spec);
+        } catch (const std::invalid_argument& e) {
+          throw std::invalid_argument(loaded.origin + ": " + e.what());
+        }
+        renderer_ = std::make_unique<render::Renderer>(
+            model::spatial_render_setup(loaded, spatial_->setup), gl);
+        return;
+      }
+      model_ = model::compile(std::move(loaded));
+    }
     renderer_ = std::make_unique<render::Renderer>(model::render_setup(*model_), gl);
   }
 
   py::tuple render_at(double t) {
     if (!std::isfinite(t)) throw std::invalid_argument("t: must be a finite time, s");
+    if (spatial_) return render_spatial_at(t);
     render::Frame frame = run_interruptible([&] {
       const std::lock_guard<std::mutex> lock(mutex_);
       if (!run_) {
@@ -101,6 +124,10 @@ class PyRenderer {
 
   py::tuple render_state(double hand_angle, std::pair<double, double> disk_center,
                          double disk_angle, double t) {
+    if (spatial_)
+      throw std::invalid_argument(
+          "state: a planar scene's state (hand angle, disk centre); a spatial scene renders its "
+          "run's frames, render(t=k / fps)");
     render::SceneState state;
     state.t = t;
     state.hand_angle = hand_angle;
@@ -121,6 +148,8 @@ class PyRenderer {
 
   /// The run's end: the scene's (or the duration's) until the run is made, then where it stopped.
   double t_end() const {
+    if (spatial_)
+      return spatial_->frames.empty() ? spatial_->setup.options.t_end : spatial_->frames.back().t;
     if (run_) return run_->trajectory.t_end();
     return duration_ ? model_->spec.sim.initial.t0 + *duration_ : model_->spec.sim.end_time();
   }
@@ -128,7 +157,55 @@ class PyRenderer {
   py::dict camera() const { return camera_to_python(renderer_->camera()); }
 
  private:
+  /// A spatial scene's setup and, once run, its frames: the samples on the camera's frame grid
+  /// (the run's first sample, then every one at k / fps; its last, an event's time, is not one).
+  struct SpatialRun {
+    sim::SpatialSetup setup;
+    std::vector<sim::SpatialSample> frames;
+    bool ran = false;
+  };
+
+  py::tuple render_spatial_at(double t) {
+    const double fps = renderer_->camera().fps;
+    cv::Mat image;
+    render::FrameTruth truth;
+    run_interruptible([&] {
+      const std::lock_guard<std::mutex> lock(mutex_);
+      if (!spatial_->ran) {
+        sim::SpatialSetup& setup = spatial_->setup;
+        setup.options.sample_dt = 1.0 / fps;
+        setup.options.record = true;
+        setup.options.progress = [](double) { InterruptScope::check(); };
+        const sim::SpatialRunResult run = sim::run_spatial(setup);
+        for (const sim::SpatialSample& sample : run.samples)
+          if (spatial_->frames.empty() ||
+              std::abs(sample.t * fps - std::round(sample.t * fps)) <= 1e-6)
+            spatial_->frames.push_back(sample);
+        spatial_->ran = true;
+      }
+      const double index = std::round(t * fps);
+      if (std::abs(t * fps - index) > 1e-6)
+        throw std::invalid_argument("t: a spatial scene is drawn at its camera's frames, t = k / " +
+                                    sim::format_number(fps) + " s, got " + sim::format_number(t));
+      const auto& frames = spatial_->frames;
+      const auto at = std::find_if(frames.begin(), frames.end(), [&](const sim::SpatialSample& f) {
+        return std::abs(f.t * fps - index) <= 1e-6;
+      });
+      if (at == frames.end())
+        throw std::invalid_argument(
+            "t: outside the scene's run [" + sim::format_number(frames.front().t) + ", " +
+            sim::format_number(frames.back().t) + "] s, got " + sim::format_number(t));
+      const render::SceneState state =
+          render::SceneState::from_spatial_sample(*at, spatial_->setup.motion->at(at->t));
+      image = renderer_->render_8u(state);
+      truth = renderer_->truth(state);
+      return 0;
+    });
+    return py::make_tuple(image_to_numpy(image), truth_to_python(truth));
+  }
+
   std::shared_ptr<const model::Model> model_;
+  std::unique_ptr<SpatialRun> spatial_;
   std::unique_ptr<render::Renderer> renderer_;
   std::optional<double> duration_;
   std::unique_ptr<sim::RunResult> run_;
@@ -142,7 +219,7 @@ class PyTracker {
   PyTracker(const py::object& scene, const std::optional<std::string>& method) {
     vision::TrackerConfig config;
     if (!scene.is_none()) {
-      model_ = model_argument(scene);
+      model_ = model_argument(scene, "model");
       config = model_->tracker;
       mapping_ = model_->mapping;
     }
@@ -274,7 +351,7 @@ py::dict calibrate_binding(const std::string& board_text, const std::optional<py
 
 py::dict render_calibration_binding(const py::object& scene, int intrinsics_views, int table_views,
                                     int joint_views, std::uint64_t seed, const std::string& board) {
-  const auto compiled = model_argument(scene);
+  const auto compiled = model_argument(scene, "model");
   drivers::SessionOptions options;
   options.intrinsics_views = intrinsics_views;
   options.table_views = table_views;

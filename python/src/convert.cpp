@@ -42,7 +42,7 @@ py::object to_python(const api::Json& j) {
   }
 }
 
-Scene scene_argument(const py::object& scene) {
+Scene scene_argument(const py::object& scene, bool spatial_ok, const std::string& keyword) {
   if (scene.is_none()) return load_scene(default_scene_path());
   if (py::isinstance<PyModel>(scene)) return scene.cast<const PyModel&>().model->spec;
   const py::object fspath = py::module_::import("os").attr("fspath");
@@ -50,21 +50,23 @@ Scene scene_argument(const py::object& scene) {
   try {
     path = fspath(scene);
   } catch (const py::error_already_set&) {
-    throw std::invalid_argument("scene: a Model, a path or None, got a " +
+    throw std::invalid_argument(keyword + ": a Model, a path or None, got a " +
                                 std::string(py::str(py::type::of(scene).attr("__name__"))));
   }
-  if (!py::isinstance<py::str>(path)) throw std::invalid_argument("scene: a str path is needed");
+  if (!py::isinstance<py::str>(path))
+    throw std::invalid_argument(keyword + ": a str path is needed");
   Scene loaded = load_scene(path.cast<std::string>());
-  if (loaded.spatial)
-    throw std::invalid_argument("scene: " + loaded.origin +
-                                " is a spatial scene (space: 3d); the Python module runs planar "
-                                "scenes only (use `flatland simulate` for spatial ones)");
+  if (loaded.spatial && !spatial_ok)
+    throw std::invalid_argument(keyword + ": " + loaded.origin +
+                                " is a spatial scene (space: 3d); flatland.simulate and "
+                                "flatland.Renderer run those, with no Model");
   return loaded;
 }
 
-std::shared_ptr<const model::Model> model_argument(const py::object& scene) {
+std::shared_ptr<const model::Model> model_argument(const py::object& scene,
+                                                   const std::string& keyword) {
   if (py::isinstance<PyModel>(scene)) return scene.cast<const PyModel&>().model;
-  return model::compile(scene_argument(scene));
+  return model::compile(scene_argument(scene, false, keyword));
 }
 
 py::array image_to_numpy(const cv::Mat& image) {

@@ -31,10 +31,13 @@ py::object to_python(const api::Json& j);
 py::dict camera_to_python(const camera::CameraModel& camera);
 
 /// The scene a call runs on: a Model's (its spec), a file's (str or os.PathLike), or the bundled
-/// default (None).
-Scene scene_argument(const py::object& scene);
+/// default (None). A spatial scene (space: 3d) only where `spatial_ok` (simulate, Renderer);
+/// elsewhere a ValueError naming the `keyword` it came by and the scene.
+Scene scene_argument(const py::object& scene, bool spatial_ok = false,
+                     const std::string& keyword = "scene");
 /// The same compiled: a Model is used as it is.
-std::shared_ptr<const model::Model> model_argument(const py::object& scene);
+std::shared_ptr<const model::Model> model_argument(const py::object& scene,
+                                                   const std::string& keyword = "scene");
 
 /// An 8-bit (or float) OpenCV image as a numpy array that shares its pixels (no copy): H x W x C,
 /// or H x W for one channel. BGR stays BGR, as OpenCV's Python binding returns images.

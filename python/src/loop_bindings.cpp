@@ -23,7 +23,7 @@ namespace {
 
 /// The experiments' default scene, as `flatland experiment` has it: the closed-loop air table.
 Scene experiment_scene(const py::object& scene) {
-  if (!scene.is_none()) return scene_argument(scene);
+  if (!scene.is_none()) return scene_argument(scene, false, "model");
   return load_scene(data_directory() + "/scenes/airtable-feedback.yaml");
 }
 

@@ -4,6 +4,7 @@
 
 #include "flatland/api/sim_operations.hpp"
 #include "flatland/model/compile.hpp"
+#include "flatland/sim/spatial_spec.hpp"
 #include "flatland/sim/trajectory_csv.hpp"
 
 #include <pybind11/stl.h>
@@ -65,6 +66,31 @@ py::dict solve_binding(std::optional<double> period, const py::object& scene,
   return to_python(j);
 }
 
+/// A spatial scene's run, as `flatland simulate --json --out FILE.csv` has it: the report and
+/// the CSV's text (every step, or one row every sample_dt s), which flatland.simulate turns into
+/// one array per column.
+py::tuple simulate_spatial(const Scene& scene, const api::SimulateRequest& request,
+                           std::optional<double> sample_dt) {
+  const sim::SpatialSpec spec = api::prepare_spatial_simulate(scene, request, kPy);
+  if (sample_dt) api::require_sample_spacing("sample_dt", *sample_dt, spec.end_time());
+  sim::SpatialSetup setup;
+  try {
+    setup = sim::build_spatial(spec);
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(scene.origin + ": " + e.what());
+  }
+  if (sample_dt) setup.options.sample_dt = *sample_dt;
+  setup.options.record = true;
+  setup.options.progress = [](double) { InterruptScope::check(); };
+  std::string csv;
+  const sim::SpatialRunResult r = run_interruptible([&] {
+    sim::SpatialRunResult run = sim::run_spatial(setup);
+    csv = sim::spatial_samples_csv(run.samples);
+    return run;
+  });
+  return py::make_tuple(to_python(api::spatial_simulate_json(spec, r)), py::str(csv));
+}
+
 py::tuple simulate_binding(const py::object& scene, std::optional<double> period,
                            std::optional<double> k, std::optional<double> duration,
                            std::optional<double> mu, const std::optional<std::string>& model,
@@ -81,8 +107,9 @@ py::tuple simulate_binding(const py::object& scene, std::optional<double> period
   request.mu = mu;
   request.model = model;
   request.stop_on_contact_loss = stop_on_contact_loss;
-  const api::PreparedSimulation prepared =
-      api::prepare_simulate(scene_argument(scene), request, kPy);
+  Scene loaded = scene_argument(scene, true);
+  if (loaded.spatial) return simulate_spatial(loaded, request, sample_dt);
+  const api::PreparedSimulation prepared = api::prepare_simulate(std::move(loaded), request, kPy);
   if (sample_dt)
     api::require_sample_spacing("sample_dt", *sample_dt,
                                 prepared.spec.end_time() - prepared.spec.initial.t0);
@@ -205,7 +232,7 @@ void bind_sim(py::module_& m) {
       });
 
   m.def(
-      "load", [](const py::object& path) { return PyModel{model_argument(path)}; },
+      "load", [](const py::object& path) { return PyModel{model_argument(path, "path")}; },
       "path"_a = py::none());
   m.def("default_scene_path", &default_scene_path);
   m.def("data_directory", &data_directory);

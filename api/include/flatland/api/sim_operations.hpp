@@ -105,6 +105,12 @@ struct PreparedSimulation {
   bool keep_trajectory = true;
 };
 PreparedSimulation prepare_simulate(Scene scene, const SimulateRequest& request, Spelling spelling);
+/// A spatial scene (space: 3d) with the request's overrides, checked as the planar ones are
+/// (UsageError naming the option): the rolling model only, period and k for a butterfly motion
+/// only, duration, mu, stop_on_contact_loss and the integrator's method and tolerances.
+/// keep_trajectory is the caller's (sim::SpatialRunOptions::record).
+sim::SpatialSpec prepare_spatial_simulate(const Scene& scene, const SimulateRequest& request,
+                                          Spelling spelling);
 /// The run, recorded (dense output and per-step samples: every step, or with keep_trajectory
 /// false a bounded window of them and s_h at the butterfly's half period as a probe).
 sim::RunResult simulate(const PreparedSimulation& prepared);

@@ -12,6 +12,7 @@
 #include "flatland/scene/scene.hpp"
 #include "flatland/sim/curve.hpp"
 #include "flatland/sim/rolling.hpp"
+#include "flatland/sim/spatial_spec.hpp"
 #include "flatland/vision/mapping.hpp"
 #include "flatland/vision/tracker.hpp"
 
@@ -59,6 +60,13 @@ std::shared_ptr<const Model> compile(Scene scene);
 /// What a render::Renderer needs of a compiled scene: its camera, hand, boards, object, render and
 /// effects sections. std::invalid_argument naming camera unless the scene has one.
 render::RenderSetup render_setup(const Model& model);
+/// The same for a spatial scene (space: 3d) built as `setup` (sim::build_spatial of its spec):
+/// the camera, the hand's surface (the part drawn: a sphere or ellipsoid whole, a plane or an
+/// extruded hand out to render.table_extent) and the object's. std::invalid_argument naming the
+/// scene's camera unless it has one, or its effects when they ask for what spatial frames do not
+/// have (only supersampling and the lens are built for them). `flatland render` and Python's
+/// Renderer both draw a spatial scene through it.
+render::RenderSetup spatial_render_setup(const Scene& scene, const sim::SpatialSetup& setup);
 
 /// The pixel -> s_h mapping of a compiled scene's hand and disk seen by `camera` (the scene's, or
 /// a calibrated camera file's), the joint axis at `axis_table`. std::invalid_argument naming
