@@ -9,8 +9,9 @@ built installs in seconds (CI), and a clean clone configures one without tests o
 
 The build directory: the config setting ``build-dir`` (``pip install --config-settings
 build-dir=DIR .``; pip 23.0 has no ``-C``), else the environment variable ``FLATLAND_BUILD_DIR``,
-else ``build/`` in the source tree; a relative path is taken from the source tree. The module is built for the interpreter that runs pip (its
-base interpreter in a virtual environment): Debian's pybind11 and numpy belong to
+else ``build/`` in the source tree; a relative path is taken from the source tree. ``jobs``: the
+build's parallel jobs (default: every core). The module is built for the interpreter that runs
+pip (its base interpreter in a virtual environment): Debian's pybind11 and numpy belong to
 ``/usr/bin/python3``.
 
 Nothing here needs anything beyond the standard library, CMake and Ninja: no setuptools, and no
@@ -69,6 +70,19 @@ def _base_interpreter() -> str:
     return os.path.realpath(getattr(sys, "_base_executable", None) or sys.executable)
 
 
+SETTINGS = ("build-dir", "jobs")
+
+
+def _check_settings(config_settings: Optional[Dict[str, str]]) -> None:
+    for key, value in (config_settings or {}).items():
+        if key not in SETTINGS:
+            raise BuildError(f"config setting {key}: unknown ({', '.join(SETTINGS)})")
+        if key == "jobs" and not (isinstance(value, str) and value.isdigit() and int(value) > 0):
+            raise BuildError(f"config setting jobs: a positive integer, got {value!r}")
+        if key == "build-dir" and not (isinstance(value, str) and value):
+            raise BuildError(f"config setting build-dir: a directory, got {value!r}")
+
+
 def _build_dir(config_settings: Optional[Dict[str, str]]) -> Path:
     chosen = (config_settings or {}).get("build-dir") or os.environ.get("FLATLAND_BUILD_DIR")
     path = Path(chosen) if chosen else Path("build")
@@ -123,6 +137,7 @@ def _check_cache(build: Path) -> None:
 
 def _build_module(config_settings: Optional[Dict[str, str]]) -> Path:
     """Configure (if needed) and build the module; the directory holding the package."""
+    _check_settings(config_settings)
     if shutil.which("cmake") is None:
         raise BuildError("cmake is not on PATH (Debian: apt-get install cmake ninja-build; "
                          "scripts/setup.sh installs every package the build needs)")

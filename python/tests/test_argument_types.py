@@ -94,9 +94,10 @@ PUBLIC = {
     "read_camera_file": (lambda: flatland.read_camera_file, {}, {"path": "path"}),
     "write_camera_file": (lambda: flatland.write_camera_file, {
         "path": "/nonexistent-dir/camera.yaml", "camera": A_CAMERA}, {
-        "path": "path", "camera": "camera", "camera_name": "text", "table_pose": "flag", "joint": "optional_dict",
-        "force": "flag"}),
-    "project": (lambda: flatland.project, {"camera": A_CAMERA, "points": np.zeros((1, 3))},
+        "path": "path", "camera": "camera", "camera_name": "text", "table_pose": "flag",
+        "joint": "optional_dict", "force": "flag"}),
+    "project": (lambda: flatland.project,
+                {"camera": A_CAMERA, "points": np.zeros((1, 3))},
                 {"camera": "camera", "points": "points"}),
 }
 

@@ -6,6 +6,7 @@ refused in one line. (scripts/test.sh installs into a virtual environment on eve
 import base64
 import hashlib
 import importlib.util
+import json
 import os
 import subprocess
 import sys
@@ -82,6 +83,23 @@ def test_a_user_site_install_imports_from_anywhere(tmp_path):
     # The same native code as the build tree's module: the same k to the last bit.
     import flatland
     assert float(k) == flatland.solve(period=1.181)["k"]
+
+
+@pytest.mark.parametrize("settings, message", [
+    ({"build_dir": "b"}, "config setting build_dir: unknown (build-dir, jobs)"),
+    ({"jobs": "two"}, "config setting jobs: a positive integer, got 'two'"),
+    ({"jobs": "0"}, "config setting jobs: a positive integer, got '0'"),
+    ({"build-dir": ""}, "config setting build-dir: a directory, got ''"),
+])
+def test_bad_config_settings_are_refused(tmp_path, settings, message):
+    script = ("import sys, json; sys.path.insert(0, sys.argv[1]); import flatland_build; "
+              "flatland_build.build_wheel(sys.argv[2], json.loads(sys.argv[3]))")
+    p = subprocess.run([sys.executable, "-c", script, str(ROOT / "python" / "backend"),
+                        str(tmp_path), json.dumps(settings)], capture_output=True, text=True,
+                       timeout=60)
+    assert p.returncode == 1
+    assert p.stderr.splitlines() == [f"flatland_build: error: {message}"]
+    assert not list(tmp_path.iterdir())
 
 
 @pytest.mark.parametrize("cache, message", [
