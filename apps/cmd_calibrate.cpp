@@ -2,11 +2,12 @@
 // or ChArUco), written as a camera file (OpenCV YAML, ROS camera_info layout).
 #include "common.hpp"
 
-#include "flatland/camera/camera_file.hpp"
 #include "flatland/calibration/intrinsics.hpp"
 #include "flatland/calibration/joint.hpp"
 #include "flatland/calibration/report.hpp"
 #include "flatland/calibration/session.hpp"
+#include "flatland/camera/camera_file.hpp"
+#include "flatland/vision/hand_pose.hpp"
 #include "flatland/vision/image_file.hpp"
 
 #include <opencv2/core/utils/logger.hpp>
@@ -14,6 +15,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdio>
 #include <iostream>
 #include <memory>
@@ -79,6 +81,37 @@ std::string board_found_nowhere(const camera::Board& board,
          "; try --board " + other->notation();
 }
 
+// The intrinsics' standard deviations (fx fy cx cy k1 k2 p1 p2 k3 [k4 k5 k6]) from the file's
+// report, for the table pose's and the joint's sigma; empty when the file has none (render's
+// camera file: the scene's exact camera).
+std::vector<double> intrinsics_std(const camera::CameraFile& file) {
+  if (!file.report) return {};
+  std::vector<double> s(file.report->std.begin(), file.report->std.end());
+  if (file.report->std_rational)
+    s.insert(s.end(), file.report->std_rational->begin(), file.report->std_rational->end());
+  return s;
+}
+
+// A section whose data do not support its result: exit 1 naming what is missing or
+// inconsistent, or with --force a warning and the mark in the camera file.
+void refuse_or_mark(const CalibrateOptions& o, const std::string& section,
+                    const std::string& option, const std::string& why, camera::CameraFile& file) {
+  if (!o.force)
+    throw std::runtime_error(option + ": " + why +
+                             "; nothing written (--force writes it anyway, marked unsupported)");
+  warn(option + ": " + why + "; written anyway (--force), marked unsupported in the camera file");
+  file.unsupported.push_back(section + ": " + why);
+}
+
+// A new fit of `section` replaces the old one's mark (and marks of what it invalidates).
+void drop_marks(camera::CameraFile& file, const std::vector<std::string>& sections) {
+  std::erase_if(file.unsupported, [&](const std::string& mark) {
+    for (const std::string& s : sections)
+      if (mark.rfind(s + ":", 0) == 0) return true;
+    return false;
+  });
+}
+
 // ---- intrinsics: --images and --board
 
 // The readable images and the views in which the board was found; the image size goes to `size`.
@@ -88,8 +121,7 @@ struct DetectedViews {
   cv::Size size;
 };
 
-DetectedViews detect_views(const std::vector<std::string>& files,
-                           const camera::Board& board) {
+DetectedViews detect_views(const std::vector<std::string>& files, const camera::Board& board) {
   DetectedViews d;
   std::string first_sized;
   std::vector<std::string> readable;
@@ -160,9 +192,8 @@ void stage_report(OutputSet& outputs, const fs::path& dir, const calibration::In
 }
 
 void intrinsics_section(const CalibrateOptions& o, const camera::Board& board,
-                        const calibration::IntrinsicsOptions& options,
-                        camera::CameraFile& file, Json& j, std::ostream& os,
-                        OutputSet& outputs) {
+                        const calibration::IntrinsicsOptions& options, camera::CameraFile& file,
+                        Json& j, std::ostream& os, OutputSet& outputs) {
   const DetectedViews d = detect_views(expand_file_patterns(o.images, "--images"), board);
   const calibration::IntrinsicsResult r = calibration::calibrate_intrinsics(d.views, options);
   file.camera = r.camera();
@@ -172,6 +203,15 @@ void intrinsics_section(const CalibrateOptions& o, const camera::Board& board,
   file.report = report;
   file.rational_model = r.rational;
   if (!o.report.empty()) stage_report(outputs, o.report, r, d.views, j);
+  std::string undetermined;
+  for (int k = 0; k < 9; ++k)
+    if (std::isnan(r.std[static_cast<std::size_t>(k)]))
+      undetermined += (undetermined.empty() ? "" : ", ") + std::string(kParamNames[k]);
+  if (!undetermined.empty())
+    refuse_or_mark(o, "intrinsics", "--images",
+                   "the views do not determine " + undetermined +
+                       " (the covariance of the intrinsics is rank deficient)",
+                   file);
 
   const std::array<double, 9> p = r.params();
   j["rms_px"] = number(r.rms_px);
@@ -232,53 +272,88 @@ cv::Mat read_listed_image(const std::string& option, const std::string& path,
   return image;
 }
 
+// The table pose from the listed images, read one at a time: each image's corners are kept and
+// the image dropped, so memory does not grow with the rows.
 void table_section(const CalibrateOptions& o, const camera::Board& board,
-                   const std::vector<calibration::TablePlacement>& rows,
-                   camera::CameraFile& file, Json& j, std::ostream& os) {
-  std::vector<cv::Mat> images;
-  std::vector<camera::PlacedBoard> boards;
-  for (const calibration::TablePlacement& p : rows) {
-    images.push_back(read_listed_image("--table", p.image, file.camera));
-    boards.push_back(p.placed(board));
-  }
+                   const std::vector<calibration::TablePlacement>& rows, camera::CameraFile& file,
+                   Json& j, std::ostream& os) {
+  calibration::TableCorners corners;
   calibration::TablePose pose;
   try {
-    pose = calibration::estimate_table_pose(images, boards, file.camera.K, file.camera.dist);
+    for (const calibration::TablePlacement& p : rows)
+      corners.add(read_listed_image("--table", p.image, file.camera), p.placed(board), p.image);
+    pose = calibration::estimate_table_pose(corners, file.camera.K, file.camera.dist,
+                                            intrinsics_std(file));
   } catch (const std::invalid_argument& e) {
+    if (dynamic_cast<const UsageError*>(&e)) throw;
     throw UsageError("--table " + o.table + ": " + e.what());
   }
   file.camera.R = pose.R;
   file.camera.t = pose.t;
   file.has_table_pose = true;
-  file.table_report =
-      camera::TablePoseReport{pose.rms_px, pose.corners, static_cast<int>(rows.size())};
+  camera::TablePoseReport report{pose.rms_px, pose.corners, static_cast<int>(rows.size()), {}, {}};
+  std::array<double, 36> cov{};
+  for (int r = 0; r < 6; ++r)
+    for (int c = 0; c < 6; ++c)
+      cov[static_cast<std::size_t>(6 * r + c)] = pose.noise_covariance(r, c);
+  report.covariance = cov;
+  for (const cv::Vec<double, 6>& g : pose.sensitivity)
+    report.sensitivity.insert(report.sensitivity.end(), g.val, g.val + 6);
+  file.table_report = report;
+  if (!pose.unsupported.empty())
+    refuse_or_mark(o, "table", "--table " + o.table, pose.unsupported, file);
   const cv::Vec3d rv = file.camera.rvec(), c = file.camera.position_in_table();
+  const cv::Vec3d sc = pose.sigma_camera_in_table();
+  Json placement_rms = Json::array();
+  for (double rms : pose.placement_rms_px) placement_rms.push_back(number(rms));
   j["table"] = {{"rms_px", number(pose.rms_px)},
                 {"corners", pose.corners},
                 {"images", rows.size()},
+                {"placement_rms_px", placement_rms},
                 {"rvec", {rv[0], rv[1], rv[2]}},
                 {"tvec", {pose.t[0], pose.t[1], pose.t[2]}},
-                {"camera_in_table", {c[0], c[1], c[2]}}};
+                {"camera_in_table", {c[0], c[1], c[2]}},
+                {"sigma_camera_in_table", {number(sc[0]), number(sc[1]), number(sc[2])}},
+                {"rcond", number(pose.rcond)},
+                {"f_statistic", number(pose.f_statistic)},
+                {"f_limit", number(pose.f_limit)},
+                {"unsupported", pose.unsupported.empty() ? Json() : Json(pose.unsupported)}};
   os << "  table pose         " << rows.size() << " placements of " << board.notation() << ", "
      << pose.corners << " corners, rms " << g6(pose.rms_px) << " px\n"
-     << "  camera centre      (" << g6(c[0]) << ", " << g6(c[1]) << ", " << g6(c[2])
-     << ") m in the table frame\n";
+     << "  camera centre      (" << g6(c[0]) << ", " << g6(c[1]) << ", " << g6(c[2]) << ") m +- ("
+     << g6(sc[0]) << ", " << g6(sc[1]) << ", " << g6(sc[2]) << ") m in the table frame\n";
+  if (!pose.unsupported.empty()) os << "  UNSUPPORTED        " << pose.unsupported << "\n";
 }
 
+// The joint from the listed images, read and measured one at a time (the hand's pose kept, the
+// image dropped).
 void joint_section(const CalibrateOptions& o, const Scene& scene,
                    const std::vector<calibration::JointImage>& rows, camera::CameraFile& file,
                    Json& j, std::ostream& os) {
-  std::vector<cv::Mat> images;
+  std::vector<vision::HandPose> poses;
   std::vector<double> encoder;
-  for (const calibration::JointImage& r : rows) {
-    images.push_back(read_listed_image("--joint", r.image, file.camera));
-    encoder.push_back(r.encoder);
+  const double plate = scene.render.hand_thickness;
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const cv::Mat image = read_listed_image("--joint", rows[i].image, file.camera);
+    try {
+      poses.push_back(vision::measure_hand_pose(image, file.camera, plate));
+    } catch (const std::invalid_argument& e) {
+      throw UsageError("--joint " + o.joint + ": calibrate_joint: image " + std::to_string(i) +
+                       ": " + e.what());
+    }
+    encoder.push_back(rows[i].encoder);
   }
+  calibration::CameraUncertainty uncertainty;
+  uncertainty.intrinsics_std = intrinsics_std(file);
+  if (file.table_report && file.table_report->covariance)
+    uncertainty.pose_noise = cv::Matx<double, 6, 6>(file.table_report->covariance->data());
+  if (file.table_report)
+    for (std::size_t k = 0; k + 6 <= file.table_report->sensitivity.size(); k += 6)
+      uncertainty.pose_sensitivity.emplace_back(file.table_report->sensitivity.data() + k);
   calibration::JointReport report;
   camera::JointCalibration joint;
   try {
-    joint = calibration::calibrate_joint(images, encoder, file.camera, scene.render.hand_thickness,
-                                         &report);
+    joint = calibration::calibrate_joint(poses, encoder, file.camera, plate, uncertainty, &report);
   } catch (const std::invalid_argument& e) {
     throw UsageError("--joint " + o.joint + ": " + e.what());
   }
@@ -291,6 +366,8 @@ void joint_section(const CalibrateOptions& o, const Scene& scene,
   fit.sigma_axis_m = report.sigma_axis;
   fit.sigma_offset_rad = report.sigma_offset;
   file.joint_report = fit;
+  if (!report.unsupported.empty())
+    refuse_or_mark(o, "joint", "--joint " + o.joint, report.unsupported, file);
   Json outliers = Json::array();
   for (std::size_t i = 0; i < rows.size(); ++i)
     if (!report.inlier[i]) outliers.push_back(rows[i].image);
@@ -302,15 +379,25 @@ void joint_section(const CalibrateOptions& o, const Scene& scene,
                 {"center_rms_m", number(fit.center_rms_m)},
                 {"angle_rms_rad", number(fit.angle_rms_rad)},
                 {"sigma_axis_m", number(fit.sigma_axis_m)},
-                {"sigma_offset_rad", number(fit.sigma_offset_rad)}};
+                {"sigma_offset_rad", number(fit.sigma_offset_rad)},
+                {"distinct_readings", report.distinct_readings},
+                {"span_rad", number(report.span_rad)},
+                {"chi2", number(report.chi2)},
+                {"dof", report.dof},
+                {"chi2_limit", number(report.chi2_limit)},
+                {"unsupported", report.unsupported.empty() ? Json() : Json(report.unsupported)}};
+  constexpr double kToDeg = 180 / std::numbers::pi;
   os << "  joint axis         (" << g6(joint.axis_table.x * 1e3) << ", "
      << g6(joint.axis_table.y * 1e3) << ") mm +- " << g6(fit.sigma_axis_m * 1e3) << " mm\n"
-     << "  encoder offset     " << g6(joint.encoder_offset * 180 / std::numbers::pi) << " deg +- "
-     << g6(fit.sigma_offset_rad * 180 / std::numbers::pi) << " deg (" << fit.inliers << " of "
-     << fit.images << " images, angle rms " << g6(fit.angle_rms_rad * 180 / std::numbers::pi)
-     << " deg)\n";
+     << "  encoder offset     " << g6(joint.encoder_offset * kToDeg) << " deg +- "
+     << g6(fit.sigma_offset_rad * kToDeg) << " deg (" << fit.inliers << " of " << fit.images
+     << " images, angle rms " << g6(fit.angle_rms_rad * kToDeg) << " deg)\n"
+     << "  joint data         " << report.distinct_readings << " distinct readings over "
+     << g6(report.span_rad * kToDeg) << " deg, chi-square " << g6(report.chi2) << " over "
+     << report.dof << " dof (limit " << g6(report.chi2_limit) << ")\n";
   for (const auto& name : outliers)
     os << "  outlier            " << name.get<std::string>() << "\n";
+  if (!report.unsupported.empty()) os << "  UNSUPPORTED        " << report.unsupported << "\n";
 }
 
 // Whether the output is the --camera file itself (then it is replaced without --force).
@@ -390,6 +477,8 @@ void run_calibrate(const CalibrateOptions& o) {
   OutputSet outputs(o.force || updates_in_place(o, out));
   if (!o.report.empty()) outputs.begin_directory(o.report);
   if (intrinsics) {
+    drop_marks(file, o.table.empty() ? std::vector<std::string>{"intrinsics", "table", "joint"}
+                                     : std::vector<std::string>{"intrinsics"});
     intrinsics_section(o, *board, intrinsics_options, file, j, os, outputs);
     sections.push_back("intrinsics");
     if (start && (start->has_table_pose || start->joint) && o.table.empty())
@@ -402,6 +491,8 @@ void run_calibrate(const CalibrateOptions& o) {
     }
   }
   if (!o.table.empty()) {
+    drop_marks(file, o.joint.empty() ? std::vector<std::string>{"table", "joint"}
+                                     : std::vector<std::string>{"table"});
     table_section(o, *table_board, table_rows, file, j, os);
     sections.push_back("table");
     if (o.joint.empty() && file.joint) {
@@ -414,6 +505,7 @@ void run_calibrate(const CalibrateOptions& o) {
     file.joint_report.reset();
   }
   if (!o.joint.empty()) {
+    drop_marks(file, {"joint"});
     joint_section(o, *scene, joint_rows, file, j, os);
     sections.push_back("joint");
   }
@@ -427,6 +519,7 @@ void run_calibrate(const CalibrateOptions& o) {
     Json head;
     head["sections"] = sections;
     head.update(j);
+    head["unsupported"] = file.unsupported;
     head["out"] = out.string();
     emit_json(head);
     return;
@@ -437,7 +530,10 @@ void run_calibrate(const CalibrateOptions& o) {
         for (const std::string& x : sections) s += (s.empty() ? "" : ", ") + x;
         return s;
       }() << "\n"
-            << os.str() << "  wrote              " << out.string() << "\n";
+            << os.str();
+  for (const std::string& mark : file.unsupported)
+    std::cout << "  marked unsupported " << mark << "\n";
+  std::cout << "  wrote              " << out.string() << "\n";
 }
 
 }  // namespace

@@ -154,6 +154,10 @@ void run_track(const TrackOptions& o) {
   const vision::TrackMethod method = vision::parse_track_method(o.method);
   const camera::CameraFile camfile = camera::read_camera_file(o.camera);
   const camera::CameraModel& camera = camfile.camera;
+  // Sections that calibrate --force wrote although their data did not support them.
+  for (const std::string& mark : camfile.unsupported)
+    std::cerr << "flatland: warning: " << o.camera << ": unsupported calibration, written with "
+              << "--force: " << mark << "\n";
   if (o.fps_opt->count()) require_positive("--fps", o.fps, "frames per s");
   if (!(o.min_quality >= 0 && o.min_quality <= 1))
     throw UsageError("--min-quality: must be in [0, 1], got " + format_number(o.min_quality));

@@ -6,6 +6,7 @@
 #include <yaml-cpp/yaml.h>
 #include <opencv2/calib3d.hpp>
 
+#include <algorithm>
 #include <cctype>
 #include <charconv>
 #include <cmath>
@@ -175,6 +176,20 @@ void read_fit_reports(const YAML::Node& fl, const Reader& rd, CameraFile& file) 
     r.rms_px = report_number(t, "rms_px", "table_report", rd);
     r.corners = report_count(t, "corners", "table_report", rd);
     r.images = report_count(t, "images", "table_report", rd);
+    if (Reader::present(t["covariance"])) {
+      const std::vector<double> c =
+          rd.numbers(t["covariance"], "flatland.table_report.covariance", 36);
+      std::array<double, 36> cov{};
+      std::copy(c.begin(), c.end(), cov.begin());
+      for (std::size_t i = 0; i < 6; ++i)
+        if (cov[i * 7] < 0) rd.fail("flatland.table_report.covariance", "negative variance");
+      r.covariance = cov;
+    }
+    if (const YAML::Node g = t["sensitivity"]; Reader::present(g)) {
+      if (!g.IsSequence() || g.size() % 6 != 0 || g.size() > 72)
+        rd.fail("flatland.table_report.sensitivity", "must be a list of 6 numbers per intrinsic");
+      r.sensitivity = rd.numbers(g, "flatland.table_report.sensitivity", g.size());
+    }
     file.table_report = r;
   }
   if (const YAML::Node j = fl["joint_report"]; Reader::present(j)) {
@@ -294,6 +309,11 @@ CameraFile read_fields(const YAML::Node& root, const Reader& rd) {
     file.report = rep;
   }
   read_fit_reports(fl, rd, file);
+  if (const YAML::Node u = fl["unsupported"]; Reader::present(u)) {
+    if (!u.IsSequence()) rd.fail("flatland.unsupported", "must be a list of strings");
+    for (std::size_t i = 0; i < u.size(); ++i)
+      file.unsupported.push_back(rd.text(u[i], "flatland.unsupported"));
+  }
   return file;
 }
 
@@ -352,7 +372,12 @@ void write_camera_file(const std::string& path, const CameraFile& file) {
     const TablePoseReport& r = *file.table_report;
     fs << "table_report"
        << "{"
-       << "rms_px" << r.rms_px << "corners" << r.corners << "images" << r.images << "}";
+       << "rms_px" << r.rms_px << "corners" << r.corners << "images" << r.images;
+    if (r.covariance)
+      write_vector(fs, "covariance",
+                   std::vector<double>(r.covariance->begin(), r.covariance->end()));
+    if (!r.sensitivity.empty()) write_vector(fs, "sensitivity", r.sensitivity);
+    fs << "}";
   }
   if (file.joint_report) {
     const JointFitReport& r = *file.joint_report;
@@ -361,6 +386,12 @@ void write_camera_file(const std::string& path, const CameraFile& file) {
        << "images" << r.images << "inliers" << r.inliers << "center_rms_m" << r.center_rms_m
        << "angle_rms_rad" << r.angle_rms_rad << "sigma_axis_m" << r.sigma_axis_m
        << "sigma_offset_rad" << r.sigma_offset_rad << "}";
+  }
+  if (!file.unsupported.empty()) {
+    fs << "unsupported"
+       << "[";
+    for (const std::string& s : file.unsupported) fs << s;
+    fs << "]";
   }
   fs << "}";
   std::string text = fs.releaseAndGetString();

@@ -1,13 +1,13 @@
 // The real-camera workflow end to end on a rendered session: render-calibration films what a lab
 // films, calibrate measures the intrinsics, the table pose and the joint from it, render films a
 // run, and track maps that run to s_h through the calibrated camera file, with no hand-written
-// file. The truth comes from the scene (camera::CameraModel::from_spec, the hand pivoting at the table
-// origin with its encoder reading the true angle), never from the code under test.
-#include "flatland/model/compile.hpp"
+// file. The truth comes from the scene (camera::CameraModel::from_spec, the hand pivoting at the
+// table origin with its encoder reading the true angle), never from the code under test.
 #include "cli_support.hpp"
+#include "flatland/model/compile.hpp"
 
-#include "flatland/camera/camera_file.hpp"
 #include "flatland/calibration/session.hpp"
+#include "flatland/camera/camera_file.hpp"
 #include "flatland/camera/camera_model.hpp"
 #include "flatland/scene/scene.hpp"
 
@@ -22,6 +22,10 @@
 #include <sstream>
 #include <string>
 #include <vector>
+
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 using flatland_test::Result;
 namespace fs = std::filesystem;
@@ -97,8 +101,7 @@ TEST_F(CalibrationChain, RenderedSessionCalibratesAndTracksToTheTrueSh) {
   // Against the scene's camera, computed by the renderer's camera model from the scene file.
   const Scene scene = load_scene(camera_scene());
   const camera::CameraModel truth = flatland::model::compile_camera(*scene.camera);
-  const camera::CameraFile cal =
-      camera::read_camera_file((dir_ / "camera.yaml").string());
+  const camera::CameraFile cal = camera::read_camera_file((dir_ / "camera.yaml").string());
   ASSERT_TRUE(cal.has_table_pose);
   ASSERT_TRUE(cal.joint.has_value());
   ASSERT_TRUE(cal.table_report.has_value());
@@ -110,6 +113,32 @@ TEST_F(CalibrationChain, RenderedSessionCalibratesAndTracksToTheTrueSh) {
   EXPECT_LT(std::hypot(cal.joint->axis_table.x, cal.joint->axis_table.y), 0.5e-3);
   EXPECT_LT(std::abs(cal.joint->encoder_offset), 0.1 * kDeg);
   EXPECT_EQ(cal.joint_report->inliers, 8);
+  EXPECT_TRUE(cal.unsupported.empty());
+  // Every figure within 3 of its reported sigma of the truth (the table pose's sigma and the
+  // joint's carry the intrinsics' and the table pose's uncertainty).
+  const double fx_sigma = j.at("std").at("fx").get<double>();
+  const nlohmann::json& table = j.at("table");
+  const nlohmann::json& joint = j.at("joint");
+  const cv::Vec3d c_true = truth.position_in_table(), centre = cal.camera.position_in_table();
+  std::printf(
+      "within sigma: fx %.2f, camera centre (%.2f, %.2f, %.2f), axis (%.2f, %.2f), "
+      "offset %.2f\n",
+      (cal.camera.K(0, 0) - truth.K(0, 0)) / fx_sigma,
+      (centre[0] - c_true[0]) / table.at("sigma_camera_in_table")[0].get<double>(),
+      (centre[1] - c_true[1]) / table.at("sigma_camera_in_table")[1].get<double>(),
+      (centre[2] - c_true[2]) / table.at("sigma_camera_in_table")[2].get<double>(),
+      cal.joint->axis_table.x / joint.at("sigma_axis_m").get<double>(),
+      cal.joint->axis_table.y / joint.at("sigma_axis_m").get<double>(),
+      cal.joint->encoder_offset / joint.at("sigma_offset_rad").get<double>());
+  EXPECT_LT(std::abs(cal.camera.K(0, 0) - truth.K(0, 0)), 3 * fx_sigma);
+  for (int k = 0; k < 3; ++k)
+    EXPECT_LT(std::abs(centre[k] - c_true[k]),
+              3 * table.at("sigma_camera_in_table")[static_cast<std::size_t>(k)].get<double>());
+  EXPECT_LT(std::abs(cal.joint->axis_table.x), 3 * joint.at("sigma_axis_m").get<double>());
+  EXPECT_LT(std::abs(cal.joint->axis_table.y), 3 * joint.at("sigma_axis_m").get<double>());
+  EXPECT_LT(std::abs(cal.joint->encoder_offset), 3 * joint.at("sigma_offset_rad").get<double>());
+  EXPECT_EQ(joint.at("unsupported"), nullptr);
+  EXPECT_EQ(table.at("unsupported"), nullptr);
 
   // A run filmed by render, tracked through the calibrated file and render's encoder log.
   const Result r =
@@ -298,8 +327,7 @@ TEST_F(CalibrationChain, RationalModelCalibratesAndTracks) {
   EXPECT_EQ(j.at("model"), "rational_polynomial");
   EXPECT_EQ(j.at("dist").size(), 8u);
   EXPECT_TRUE(j.at("std").contains("k6"));
-  const camera::CameraFile cal =
-      camera::read_camera_file((dir_ / "camera.yaml").string());
+  const camera::CameraFile cal = camera::read_camera_file((dir_ / "camera.yaml").string());
   EXPECT_TRUE(cal.rational_model);
   // Through the rational file, track still maps the run to the true s_h.
   ASSERT_EQ(run("render --scene " + scene + " --duration 0.5 --out frames").code, 0);
@@ -336,4 +364,179 @@ TEST(CalibrationSessionCsv, PathsResolveAgainstTheCsvAndZIsOptional) {
   flatland_test::write_text(dir / "e.csv", "image,encoder\n");
   EXPECT_THROW(calibration::read_joint_csv((dir / "e.csv").string()), std::invalid_argument);
   fs::remove_all(dir);
+}
+
+namespace {
+
+// Runs `flatland args` in `dir` and returns its peak resident set size (kB) from wait4's rusage:
+// flatland replaces itself with flatland-camera (execv), so the child is that process.
+long peak_rss_kb(const fs::path& dir, const std::string& args, int& code) {
+  const std::string cmd = "cd " + flatland_test::quote(dir.string()) + " && exec " +
+                          flatland_test::quote(FLATLAND_CLI_PATH) + " " + args +
+                          " > /dev/null 2> stderr.txt";
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    ::execl("/bin/sh", "sh", "-c", cmd.c_str(), static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  int status = 0;
+  rusage usage{};
+  if (pid < 0 || ::wait4(pid, &status, 0, &usage) != pid) return -1;
+  code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return usage.ru_maxrss;
+}
+
+// A CSV listing the session's rows again and again, `rows` rows in all.
+void repeat_rows(const fs::path& from, const fs::path& to, std::size_t rows) {
+  const std::vector<std::string> lines = flatland_test::lines_of(flatland_test::read_text(from));
+  std::string text = lines.at(0) + "\n";
+  for (std::size_t i = 0; i < rows; ++i) text += lines.at(1 + i % (lines.size() - 1)) + "\n";
+  flatland_test::write_text(to, text);
+}
+
+}  // namespace
+
+TEST_F(CalibrationChain, TableAndJointStreamTheirImages) {
+  render_session();
+  ASSERT_EQ(run("calibrate --images 'sess/intrinsics/*.png' --board " + board_ +
+                " --table sess/table.csv --out camera.yaml")
+                .code,
+            0);
+  // Each 640 x 480 image held would cost 0.9 MB: 380 more rows would add 350 MB.
+  repeat_rows(dir_ / "sess" / "table.csv", dir_ / "sess" / "t20.csv", 20);
+  repeat_rows(dir_ / "sess" / "table.csv", dir_ / "sess" / "t400.csv", 400);
+  int code = -1;
+  const long small = peak_rss_kb(dir_,
+                                 "calibrate --camera camera.yaml --table sess/t20.csv "
+                                 "--table-board " +
+                                     board_ + " --out t20.yaml",
+                                 code);
+  ASSERT_EQ(code, 0) << flatland_test::read_text(dir_ / "stderr.txt");
+  const long large = peak_rss_kb(dir_,
+                                 "calibrate --camera camera.yaml --table sess/t400.csv "
+                                 "--table-board " +
+                                     board_ + " --out t400.yaml",
+                                 code);
+  ASSERT_EQ(code, 0) << flatland_test::read_text(dir_ / "stderr.txt");
+  std::printf("calibrate --table peak RSS: %ld kB at 20 rows, %ld kB at 400 rows\n", small, large);
+  EXPECT_LT(large - small, 20 * 1024);
+  EXPECT_LT(large, 300 * 1024);
+
+  const std::string scene = " --scene " + flatland_test::quote(camera_scene());
+  repeat_rows(dir_ / "sess" / "joint.csv", dir_ / "sess" / "j16.csv", 16);
+  repeat_rows(dir_ / "sess" / "joint.csv", dir_ / "sess" / "j200.csv", 200);
+  const long joint_small = peak_rss_kb(
+      dir_, "calibrate --camera camera.yaml --joint sess/j16.csv --out j16.yaml" + scene, code);
+  ASSERT_EQ(code, 0) << flatland_test::read_text(dir_ / "stderr.txt");
+  const long joint_large = peak_rss_kb(
+      dir_, "calibrate --camera camera.yaml --joint sess/j200.csv --out j200.yaml" + scene, code);
+  ASSERT_EQ(code, 0) << flatland_test::read_text(dir_ / "stderr.txt");
+  std::printf("calibrate --joint peak RSS: %ld kB at 16 rows, %ld kB at 200 rows\n", joint_small,
+              joint_large);
+  EXPECT_LT(joint_large - joint_small, 20 * 1024);
+}
+
+TEST_F(CalibrationChain, JointRefusesDegenerateOrInconsistentData) {
+  render_session();
+  ASSERT_EQ(run("calibrate --images 'sess/intrinsics/*.png' --board " + board_ +
+                " --table sess/table.csv --out camera.yaml")
+                .code,
+            0);
+  const std::vector<std::string> lines =
+      flatland_test::lines_of(flatland_test::read_text(dir_ / "sess" / "joint.csv"));
+  ASSERT_EQ(lines.size(), 9u);
+  std::vector<std::string> image, encoder;
+  for (std::size_t i = 1; i < lines.size(); ++i) {
+    const auto comma = lines[i].find(',');
+    image.push_back(lines[i].substr(0, comma));
+    encoder.push_back(lines[i].substr(comma + 1));
+  }
+  std::string same = "image,encoder\n", shuffled = "image,encoder\n", two = "image,encoder\n";
+  for (std::size_t i = 0; i < 8; ++i) same += image[3] + "," + encoder[3] + "\n";
+  const std::size_t order[8] = {3, 7, 0, 5, 1, 6, 2, 4};  // no reading left in its place
+  for (std::size_t i = 0; i < 8; ++i) shuffled += image[i] + "," + encoder[order[i]] + "\n";
+  for (std::size_t i : {0, 4}) two += image[i] + "," + encoder[i] + "\n";
+  flatland_test::write_text(dir_ / "sess" / "same.csv", same);
+  flatland_test::write_text(dir_ / "sess" / "shuffled.csv", shuffled);
+  flatland_test::write_text(dir_ / "sess" / "two.csv", two);
+
+  const std::string scene = " --scene " + flatland_test::quote(camera_scene());
+  const std::string before = flatland_test::read_text(dir_ / "camera.yaml");
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"same", "1 distinct encoder reading"},
+      {"shuffled", "do not follow the encoder readings: chi-square"},
+      {"two", "only 2 images"}};
+  for (const auto& [name, needle] : cases) {
+    // Refused: exit 1, one line naming the problem, nothing written (neither --out nor in place).
+    Result r = run("calibrate --camera camera.yaml --joint sess/" + name + ".csv --out " + name +
+                   ".yaml" + scene);
+    EXPECT_EQ(r.code, 1) << name << ": " << r.err;
+    EXPECT_TRUE(one_line(r.err)) << r.err;
+    EXPECT_NE(r.err.find(needle), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(dir_ / (name + ".yaml")));
+    r = run("calibrate --camera camera.yaml --joint sess/" + name + ".csv" + scene);
+    EXPECT_EQ(r.code, 1) << r.err;
+    EXPECT_EQ(flatland_test::read_text(dir_ / "camera.yaml"), before);
+    // --force writes it, marked: the reader returns the mark and track reports it.
+    r = run("calibrate --camera camera.yaml --joint sess/" + name + ".csv --out " + name +
+            ".yaml --force --json" + scene);
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_NE(r.err.find("marked unsupported"), std::string::npos) << r.err;
+    const nlohmann::json j = nlohmann::json::parse(r.out);
+    ASSERT_EQ(j.at("unsupported").size(), 1u);
+    const camera::CameraFile forced = camera::read_camera_file((dir_ / (name + ".yaml")).string());
+    ASSERT_EQ(forced.unsupported.size(), 1u);
+    EXPECT_EQ(forced.unsupported[0].rfind("joint: ", 0), 0u) << forced.unsupported[0];
+    EXPECT_NE(forced.unsupported[0].find(needle), std::string::npos);
+  }
+  // A new joint fit on good data drops the old mark.
+  const Result again =
+      run("calibrate --camera shuffled.yaml --joint sess/joint.csv --out good.yaml" + scene);
+  ASSERT_EQ(again.code, 0) << again.err;
+  EXPECT_TRUE(camera::read_camera_file((dir_ / "good.yaml").string()).unsupported.empty());
+  // track reports a marked file.
+  ASSERT_EQ(
+      run("render --scene " + flatland_test::quote(camera_scene()) + " --duration 0.1 --out frames")
+          .code,
+      0);
+  const Result t =
+      run("track --images 'frames/*.png' --camera shuffled.yaml --encoder "
+          "frames/encoder.csv --out track.csv" +
+          scene);
+  EXPECT_NE(t.err.find("unsupported"), std::string::npos) << t.err;
+
+  // A table row that puts its board 1 cm from where it lay: refused the same way.
+  std::vector<std::string> table =
+      flatland_test::lines_of(flatland_test::read_text(dir_ / "sess" / "table.csv"));
+  const std::vector<std::string> header = [&] {
+    std::vector<std::string> h;
+    std::stringstream ss(table[0]);
+    for (std::string f; std::getline(ss, f, ',');) h.push_back(f);
+    return h;
+  }();
+  const std::size_t x_column =
+      static_cast<std::size_t>(std::find(header.begin(), header.end(), "x") - header.begin());
+  std::vector<std::string> fields;
+  {
+    std::stringstream ss(table[2]);
+    for (std::string f; std::getline(ss, f, ',');) fields.push_back(f);
+  }
+  fields.at(x_column) = std::to_string(std::stod(fields.at(x_column)) + 0.01);
+  std::string moved;
+  for (std::size_t i = 0; i < table.size(); ++i) {
+    std::string line = table[i];
+    if (i == 2) {
+      line.clear();
+      for (std::size_t k = 0; k < fields.size(); ++k) line += (k ? "," : "") + fields[k];
+    }
+    moved += line + "\n";
+  }
+  flatland_test::write_text(dir_ / "sess" / "moved.csv", moved);
+  const Result m = run("calibrate --camera camera.yaml --table sess/moved.csv --table-board " +
+                       board_ + " --out moved.yaml");
+  EXPECT_EQ(m.code, 1) << m.err;
+  EXPECT_TRUE(one_line(m.err)) << m.err;
+  EXPECT_NE(m.err.find("do not agree on one table pose"), std::string::npos) << m.err;
+  EXPECT_NE(m.err.find("board_01.png is farthest"), std::string::npos) << m.err;
+  EXPECT_FALSE(fs::exists(dir_ / "moved.yaml"));
 }

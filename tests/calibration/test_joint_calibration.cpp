@@ -12,6 +12,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <numbers>
 #include <string>
 #include <vector>
@@ -134,6 +135,130 @@ TEST(JointCalibration, AxisAndOffsetAcceptance) {
   }
 }
 
+namespace {
+
+// The brief's camera, 8 frames of the hand over a half turn at a known offset: their measured
+// poses, rendered once for the tests below.
+struct HandSeries {
+  camera::CameraModel camera;
+  double plate = 0;
+  double offset = 0.7 * kDeg;
+  std::vector<double> encoder;
+  std::vector<vision::HandPose> poses;
+};
+
+const HandSeries& hand_series() {
+  static const HandSeries series = [] {
+    HandSeries h;
+    const Scene s = joint_scene();
+    Renderer r(flatland_test::render_setup(s));
+    EffectsRng rng(21);
+    h.camera = r.camera();
+    h.plate = s.render.hand_thickness;
+    for (int i = 0; i < 8; ++i) {
+      h.encoder.push_back(0.05 + i * std::numbers::pi / 8);
+      h.poses.push_back(vision::measure_hand_pose(
+          hand_frame(r, s, h.encoder.back() + h.offset, rng), h.camera, h.plate));
+    }
+    return h;
+  }();
+  return series;
+}
+
+calibration::JointReport fit(const std::vector<vision::HandPose>& poses,
+                             const std::vector<double>& encoder,
+                             const calibration::CameraUncertainty& uncertainty = {}) {
+  const HandSeries& h = hand_series();
+  calibration::JointReport report;
+  calibration::calibrate_joint(poses, encoder, h.camera, h.plate, uncertainty, &report);
+  return report;
+}
+
+}  // namespace
+
+TEST(JointCalibration, SupportedDataPassAndTheSigmaCoversTheError) {
+  const HandSeries& h = hand_series();
+  calibration::JointReport report;
+  const camera::JointCalibration j =
+      calibration::calibrate_joint(h.poses, h.encoder, h.camera, h.plate, {}, &report);
+  EXPECT_EQ(report.unsupported, "");
+  EXPECT_EQ(report.distinct_readings, 8);
+  EXPECT_NEAR(report.span_rad, 7 * std::numbers::pi / 8, 1e-9);
+  EXPECT_EQ(report.dof, 21);
+  // chi-square's 0.999 quantile for 21 degrees of freedom, from the standard tables.
+  EXPECT_NEAR(report.chi2_limit, 46.797, 1e-3);
+  EXPECT_LT(report.chi2, report.chi2_limit);
+  // The truth: the pivot at the table origin, the offset 0.7 degrees.
+  std::printf(
+      "joint, exact camera: axis error %.2e m (sigma %.2e), offset error %.2e rad (sigma "
+      "%.2e)\n",
+      std::hypot(j.axis_table.x, j.axis_table.y), report.sigma_axis, j.encoder_offset - h.offset,
+      report.sigma_offset);
+  EXPECT_LT(std::abs(j.axis_table.x), 3 * report.sigma_axis);
+  EXPECT_LT(std::abs(j.axis_table.y), 3 * report.sigma_axis);
+  EXPECT_LT(std::abs(j.encoder_offset - h.offset), 3 * report.sigma_offset);
+  // An exact camera adds nothing: the sigma is the images' part.
+  EXPECT_EQ(report.sigma_axis, report.sigma_axis_images);
+
+  // An uncertain camera widens the axis's sigma: 1 px of principal point moves the axis by about
+  // the table distance / f, here 1 m / 900 px (the pose held: no sensitivity given).
+  calibration::CameraUncertainty cx_only;
+  cx_only.intrinsics_std = {0, 0, 1.0, 0};
+  const calibration::JointReport wide = fit(h.poses, h.encoder, cx_only);
+  const double camera_part = std::sqrt(wide.sigma_axis * wide.sigma_axis -
+                                       wide.sigma_axis_images * wide.sigma_axis_images);
+  EXPECT_NEAR(camera_part, 1.0 / 900 * (1.0 - h.plate), 0.1 * 1.0 / 900);
+}
+
+TEST(JointCalibration, RefusesWhatTheDataCannotSupport) {
+  const HandSeries& h = hand_series();
+  // Copies of one image at one reading: one angle cannot tell an offset from a stuck encoder.
+  const calibration::JointReport same =
+      fit(std::vector<vision::HandPose>(8, h.poses[3]), std::vector<double>(8, h.encoder[3]));
+  EXPECT_NE(same.unsupported.find("1 distinct encoder reading"), std::string::npos)
+      << same.unsupported;
+  EXPECT_TRUE(one_line(same.unsupported));
+  // Copies of one image at the true readings: the poses do not follow the encoder.
+  const calibration::JointReport copies =
+      fit(std::vector<vision::HandPose>(8, h.poses[3]), h.encoder);
+  EXPECT_NE(copies.unsupported.find("do not follow the encoder"), std::string::npos)
+      << copies.unsupported;
+  // Readings shuffled between the images (no reading left in its place).
+  std::vector<double> shuffled;
+  for (int k : {3, 7, 0, 5, 1, 6, 2, 4}) shuffled.push_back(h.encoder[static_cast<std::size_t>(k)]);
+  const calibration::JointReport mixed = fit(h.poses, shuffled);
+  EXPECT_NE(mixed.unsupported.find("chi-square"), std::string::npos) << mixed.unsupported;
+  EXPECT_GT(mixed.chi2, mixed.chi2_limit);
+  // Two views.
+  const calibration::JointReport two = fit({h.poses[0], h.poses[4]}, {h.encoder[0], h.encoder[4]});
+  EXPECT_NE(two.unsupported.find("only 2 images"), std::string::npos) << two.unsupported;
+  // Four distinct readings within 3 * 22.5 = 67.5 degrees pass; within 22.5 degrees they do not
+  // span enough (the frames 1 degree apart are rendered for it).
+  const calibration::JointReport four =
+      fit({h.poses[0], h.poses[1], h.poses[2], h.poses[3]},
+          {h.encoder[0], h.encoder[1], h.encoder[2], h.encoder[3]});
+  EXPECT_EQ(four.unsupported, "");
+  const Scene s = joint_scene();
+  Renderer r(flatland_test::render_setup(s));
+  EffectsRng rng(22);
+  std::vector<vision::HandPose> close;
+  std::vector<double> close_encoder;
+  for (int i = 0; i < 5; ++i) {
+    close_encoder.push_back(0.3 + i * 5 * kDeg);
+    close.push_back(vision::measure_hand_pose(
+        hand_frame(r, s, close_encoder.back() + h.offset, rng), h.camera, h.plate));
+  }
+  const calibration::JointReport narrow = fit(close, close_encoder);
+  EXPECT_NE(narrow.unsupported.find("span 20 deg"), std::string::npos) << narrow.unsupported;
+  // Readings that wrap round a half turn are one cluster, not two: 179.5 and 0.2 degrees.
+  const calibration::JointReport wrapped =
+      fit({h.poses[0], h.poses[0], h.poses[0], h.poses[0]},
+          {h.encoder[0], h.encoder[0] + std::numbers::pi, h.encoder[0] - 0.3 * kDeg,
+           h.encoder[0] + 0.3 * kDeg + std::numbers::pi});
+  EXPECT_NE(wrapped.unsupported.find("1 distinct encoder reading"), std::string::npos)
+      << wrapped.unsupported;
+}
+
 TEST(JointCalibration, RejectsMisreadEncoder) {
   const Scene s = joint_scene();
   Renderer r(flatland_test::render_setup(s));
@@ -197,9 +322,8 @@ TEST(JointCalibration, TablePoseFromBoards) {
   // docs/JOINT.md); the second placement is the board turned by a half turn, which checks that
   // its corners are matched the right way round (a wrong match would be a 180-degree error).
   for (const TargetSpec& board : {board_at(0.11, -0.09, 0.15), board_at(0.30, 0.05, 3.29)}) {
-    const calibration::TablePose pose =
-        calibration::estimate_table_pose(board_image(board, rng),
-                                         flatland::model::compile_target(board), truth.K, truth.dist);
+    const calibration::TablePose pose = calibration::estimate_table_pose(
+        board_image(board, rng), flatland::model::compile_target(board), truth.K, truth.dist);
     EXPECT_EQ(pose.corners, 40);
     EXPECT_LT(pose.rms_px, 0.25);
     EXPECT_LT(rotation_error(pose.R, truth.R), 0.4 * kDeg);
@@ -251,10 +375,7 @@ TEST(JointCalibration, BadInputThrows) {
     }
   };
   expect_one_line_throw(
-      [&] {
-        calibration::calibrate_joint({table, table}, {0.0, 1.0}, cam, 0.012);
-      },
-      "at least 3 images");
+      [&] { calibration::calibrate_joint(std::vector<cv::Mat>{}, {}, cam, 0.012); }, "no images");
   expect_one_line_throw(
       [&] {
         calibration::calibrate_joint({table, table, table}, {0.0, 1.0}, cam, 0.012);
@@ -284,4 +405,35 @@ TEST(JointCalibration, BadInputThrows) {
                                          std::vector<camera::PlacedBoard>{board}, cam.K, cam.dist);
       },
       "2 images but 1 board placements");
+}
+
+TEST(JointCalibration, TablePoseRefusesAMisplacedBoard) {
+  const camera::CameraModel truth = flatland::model::compile_camera(*joint_scene().camera);
+  EffectsRng rng(13);
+  const std::vector<TargetSpec> boards = {board_at(0.11, -0.09, 0.15), board_at(-0.30, 0.06, -0.1),
+                                          board_at(0.12, 0.10, 0.0), board_at(-0.30, -0.24, 0.05)};
+  calibration::TableCorners right, wrong;
+  for (std::size_t i = 0; i < boards.size(); ++i) {
+    const cv::Mat image = board_image(boards[i], rng);
+    camera::PlacedBoard placed = flatland::model::compile_target(boards[i]);
+    const std::string name = std::string("b") += std::to_string(i);
+    right.add(image, placed, name);
+    if (i == 2) placed.position[0] += 0.01;  // the row says 1 cm further along x
+    wrong.add(image, placed, name);
+  }
+  const calibration::TablePose good = calibration::estimate_table_pose(right, truth.K, truth.dist);
+  EXPECT_EQ(good.unsupported, "");
+  EXPECT_GT(good.rcond, calibration::kMinTableRcond);
+  ASSERT_EQ(good.placement_rms_px.size(), 4u);
+  // The residual-scaled sigma of the camera centre covers its error (the intrinsics exact here).
+  const cv::Vec3d sigma = good.sigma_camera_in_table();
+  const cv::Vec3d c_est = -(good.R.t() * good.t);
+  for (int k = 0; k < 3; ++k)
+    EXPECT_LT(std::abs(c_est[k] - truth.position_in_table()[k]), 3 * sigma[k]) << "axis " << k;
+  const calibration::TablePose bad = calibration::estimate_table_pose(wrong, truth.K, truth.dist);
+  std::printf("F good %.3g bad %.3g limit %.3g\n", good.f_statistic, bad.f_statistic, bad.f_limit);
+  std::printf("%s\n", bad.unsupported.c_str());
+  EXPECT_NE(bad.unsupported.find("b2 is farthest from the others"), std::string::npos)
+      << bad.unsupported;
+  EXPECT_TRUE(one_line(bad.unsupported));
 }

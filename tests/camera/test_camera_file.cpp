@@ -132,6 +132,35 @@ TEST_F(CameraFileTest, RoundTripsEveryField) {
   EXPECT_TRUE(std::isnan(g.report->std[8]));
 }
 
+TEST_F(CameraFileTest, UnsupportedMarksAndTheTablePoseCovarianceRoundTrip) {
+  camera::CameraFile f = full_file();
+  f.unsupported = {"joint: only 2 images; the joint needs 4", "table: F = 12 over (6, 80)"};
+  camera::TablePoseReport t;
+  t.rms_px = 0.2;
+  t.corners = 54;
+  t.images = 1;
+  std::array<double, 36> cov{};
+  for (std::size_t i = 0; i < 36; ++i)
+    cov[i] = i % 7 == 0 ? 1e-6 * static_cast<double>(i + 1) : 1e-9;
+  t.covariance = cov;
+  for (int i = 0; i < 12; ++i) t.sensitivity.push_back(0.25 * i);
+  f.table_report = t;
+  camera::write_camera_file(path("camera.yaml"), f);
+  const camera::CameraFile g = camera::read_camera_file(path("camera.yaml"));
+  EXPECT_EQ(g.unsupported, f.unsupported);
+  ASSERT_TRUE(g.table_report && g.table_report->covariance);
+  EXPECT_EQ(*g.table_report->covariance, cov);
+  EXPECT_EQ(g.table_report->sensitivity, t.sensitivity);
+  // Bad content: one line naming the field.
+  EXPECT_EQ(error_of(std::string(kMinimal) + "flatland:\n  unsupported: 3\n"),
+            path("bad.yaml") + ": flatland.unsupported: must be a list of strings");
+  EXPECT_EQ(error_of(std::string(kMinimal) +
+                     "flatland:\n  table_report: {rms_px: 0.1, corners: 4, images: 1, "
+                     "sensitivity: [1, 2, 3]}\n"),
+            path("bad.yaml") +
+                ": flatland.table_report.sensitivity: must be a list of 6 numbers per intrinsic");
+}
+
 TEST_F(CameraFileTest, RationalModelRoundTripsAsRosRationalPolynomial) {
   camera::CameraFile f = full_file();
   f.camera.dist = camera::Distortion(1.5, 0.3, 0.001, -0.0005, 0.01, 1.9, 0.6, 0.02);
@@ -211,7 +240,8 @@ TEST_F(CameraFileTest, ValidationErrorsNameTheField) {
 }
 
 TEST_F(CameraFileTest, WriteFailureIsARuntimeError) {
-  EXPECT_THROW(camera::write_camera_file(path("no/such/dir/camera.yaml"), full_file()), std::runtime_error);
+  EXPECT_THROW(camera::write_camera_file(path("no/such/dir/camera.yaml"), full_file()),
+               std::runtime_error);
 }
 
 // OpenCV 4.6's YAML reader (cv::FileStorage) loops forever on some malformed text, reads out of

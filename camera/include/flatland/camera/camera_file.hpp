@@ -11,6 +11,7 @@
 #include <array>
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace flatland::camera {
 
@@ -36,6 +37,12 @@ struct TablePoseReport {
   double rms_px = 0;  ///< reprojection RMS of the boards' inner corners
   int corners = 0;    ///< inner corners used
   int images = 0;     ///< board placements
+  /// Covariance of (table_rvec, table_tvec) (rad, m) with the intrinsics held, row-major 6 x 6,
+  /// when the fit reported one: the joint fit propagates it to the axis's sigma.
+  std::optional<std::array<double, 36>> covariance;
+  /// d(table_rvec, table_tvec) / d(intrinsic k), 6 numbers per intrinsic in the order of `std`
+  /// (fx fy cx cy k1 k2 p1 p2 k3 [k4 k5 k6]): how the fit moved the pose for a changed intrinsic.
+  std::vector<double> sensitivity;
 };
 
 /// How the joint was fitted (flatland calibrate --joint; calibrate_joint's JointReport in short).
@@ -58,6 +65,10 @@ struct CameraFile {
   std::optional<CalibrationReport> report;  ///< of the intrinsics
   std::optional<TablePoseReport> table_report;
   std::optional<JointFitReport> joint_report;
+  /// Sections written although their data did not support them (`calibrate --force`), each
+  /// "<section>: <why>" (section intrinsics, table or joint): `flatland.unsupported` in the file.
+  /// Readers of the file report them (flatland track warns); docs/CALIBRATION.md.
+  std::vector<std::string> unsupported;
 };
 
 /// Write atomically (temp file + rename). Throws std::runtime_error on I/O failure.
