@@ -3,6 +3,8 @@
 // theta(t) and s_h(t) planned vs actual, optionally a video of what the loop saw and a recording.
 #include "common.hpp"
 
+#include "flatland/render/overlay_text.hpp"
+
 #include "flatland/control/types.hpp"
 #include "flatland/drivers/experiment.hpp"
 #include "flatland/drivers/live.hpp"
@@ -103,13 +105,11 @@ void draw_overlay(cv::Mat& bgr, const KeptFrame& f, const drivers::TickLog* row)
   else
     std::snprintf(line[3], sizeof line[3], "s_h measured: %s",
                   f.track.ok() ? "disk found, not mapped" : "disk lost");
-  const double font = 1.1 * scale;
-  for (int i = 0; i < 4; ++i) {
-    const cv::Point at(static_cast<int>(8 * scale + 4), static_cast<int>((i + 1) * 32 * scale + 4));
-    const cv::Scalar fg = (i == 3 && !f.s_meas) ? red : white;
-    cv::putText(bgr, line[i], at, cv::FONT_HERSHEY_SIMPLEX, font, black, thick + 2, cv::LINE_AA);
-    cv::putText(bgr, line[i], at, cv::FONT_HERSHEY_SIMPLEX, font, fg, thick, cv::LINE_AA);
-  }
+  // The text goes in the corner farthest from the tracked disk, so that it never hides it.
+  std::vector<render::KeepClear> keep;
+  if (f.track.ok()) keep.push_back({f.track.center, f.track.radius_px});
+  render::draw_text_block(bgr, {line[0], line[1], line[2], line[3]}, 1.1 * scale, thick, keep,
+                          {white, white, white, f.s_meas ? white : red});
 }
 
 /// Turn a driver's std::invalid_argument into one naming the option (exit 2 either way).

@@ -6,6 +6,7 @@
 
 #include "flatland/model/compile.hpp"
 #include "flatland/model/model.hpp"
+#include "flatland/render/overlay_text.hpp"
 #include "flatland/render/renderer.hpp"
 #include "flatland/render/video_writer.hpp"
 #include "flatland/sim/curve.hpp"
@@ -111,7 +112,7 @@ cv::Mat to_bgr8(const cv::Mat& image) {
 /// by theta into the table frame) is drawn from the projected contact point, 0.1 m on the table per
 /// in-plane weight m g sin(tilt).
 void draw_overlay(cv::Mat& bgr, const camera::CameraModel& camera, const sim::PolynomialHand& hand,
-                  const sim::Sample& s, const render::FrameTruth& truth) {
+                  double disk_radius, const sim::Sample& s, const render::FrameTruth& truth) {
   const double c = std::cos(s.theta), sn = std::sin(s.theta);
   const auto rotate = [&](const sim::Vec2& v) {
     return sim::Vec2(c * v.x() - sn * v.y(), sn * v.x() + c * v.y());
@@ -126,7 +127,7 @@ void draw_overlay(cv::Mat& bgr, const camera::CameraModel& camera, const sim::Po
                                                     contact.y() + kMetresPerWeight * force.y(), z));
   const double scale = std::max(0.35, bgr.rows / 960.0);
   const int thick = std::max(1, static_cast<int>(std::lround(2 * scale)));
-  const cv::Scalar red(0, 0, 255), yellow(0, 220, 255), white(255, 255, 255), black(0, 0, 0);
+  const cv::Scalar red(0, 0, 255), yellow(0, 220, 255);
   if (std::isfinite(from.x) && std::isfinite(to.x)) {
     cv::circle(bgr, from, 3 * thick, yellow, thick, cv::LINE_AA);
     if (cv::norm(to - from) >= 2) cv::arrowedLine(bgr, from, to, red, thick, cv::LINE_AA, 0, 0.2);
@@ -141,12 +142,11 @@ void draw_overlay(cv::Mat& bgr, const camera::CameraModel& camera, const sim::Po
                   sim::to_string(s.mode).c_str());
   std::snprintf(line[2], sizeof line[2], "f/(m g sin tilt) = %.3f (n %+.3f, t %+.3f)", force.norm(),
                 s.fn_ratio, s.ft_ratio);
-  const double font = 1.2 * scale;
-  for (int i = 0; i < 3; ++i) {
-    const cv::Point at(static_cast<int>(8 * scale + 4), static_cast<int>((i + 1) * 34 * scale + 4));
-    cv::putText(bgr, line[i], at, cv::FONT_HERSHEY_SIMPLEX, font, black, thick + 2, cv::LINE_AA);
-    cv::putText(bgr, line[i], at, cv::FONT_HERSHEY_SIMPLEX, font, white, thick, cv::LINE_AA);
-  }
+  // The text goes in the corner farthest from the disk's image, so that it never hides it.
+  const cv::Point3d& d = truth.disk_center_table;
+  const render::KeepClear disk = render::disk_in_image(
+      truth.disk_center_px, camera.project(cv::Point3d(d.x + disk_radius, d.y, d.z)));
+  render::draw_text_block(bgr, {line[0], line[1], line[2]}, 1.2 * scale, thick, {disk});
 }
 
 Json effects_json(const EffectsSpec& e) {
@@ -438,7 +438,8 @@ void run_render(const RenderOptions& o) {
 
   // The renderer validates the camera and effects (bad input) and makes the GL context (a
   // runtime failure), both before any file exists.
-  render::Renderer renderer(model::render_setup(*compiled), backend);
+  const render::RenderSetup setup = model::render_setup(*compiled);
+  render::Renderer renderer(setup, backend);
   const camera::CameraModel& model = renderer.camera();
   const std::string gl = renderer.gl_description();
 
@@ -514,7 +515,8 @@ void run_render(const RenderOptions& o) {
                                  " camera");
       if (o.overlay) {
         if (bgr.data == frame.image.data) bgr = bgr.clone();
-        draw_overlay(bgr, model, hand, run.trajectory.sample(frame.truth.t), frame.truth);
+        draw_overlay(bgr, model, hand, setup.object.radius, run.trajectory.sample(frame.truth.t),
+                     frame.truth);
       }
       write_frame(bgr, written, mp4 ? &writer : nullptr, outputs, out, png);
       truth_csv += truth_row(written, frame.truth);
