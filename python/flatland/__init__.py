@@ -453,8 +453,10 @@ def read_camera_file(path: Union[str, "_os.PathLike[str]"]) -> Dict[str, Any]:
     ``flatland calibrate`` and ``flatland render`` write it and ``flatland track --camera``
     read it: camera_name, camera (width, height, fps, exposure, K, dist, R, t), rational_model,
     table_pose (whether R, t are the table's pose), joint (axis_table (x, y) m, encoder_offset rad)
-    or None, and the calibrations' reports (report, table_report, joint_report) or None. A bad
-    file raises ValueError naming the file and the field."""
+    or None, the calibrations' reports (report, table_report, joint_report) or None, and
+    unsupported: the sections ``calibrate --force`` wrote although their data could not support
+    them ("joint: why", docs/CALIBRATION.md; empty when none). A bad file raises ValueError naming
+    the file and the field."""
     return _flatland.read_camera_file(_path("path", path))
 
 

@@ -444,6 +444,10 @@ py::dict camera_file_to_python(const camera::CameraFile& f) {
     r["sigma_offset_rad"] = j.sigma_offset_rad;
     d["joint_report"] = r;
   }
+  // Sections written with calibrate --force although their data could not support them.
+  py::list unsupported;
+  for (const std::string& u : f.unsupported) unsupported.append(u);
+  d["unsupported"] = unsupported;
   return d;
 }
 

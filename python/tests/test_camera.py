@@ -185,3 +185,18 @@ def test_bad_camera_files_and_cameras_write_nothing(tmp_path):
         flatland.read_camera_file(tmp_path / "bad.yaml")
     with pytest.raises(ValueError, match=r"^points: an array of shape \(N, 3\)"):
         flatland.project(camera, np.zeros((2, 2)))
+
+
+def test_a_camera_file_says_which_sections_its_data_could_not_support(cli, tmp_path):
+    """`calibrate --force` marks a section its data could not support (flatland.unsupported, as
+    the camera file's reader in C++ reads it): read_camera_file lists the marks, and a file
+    without any has an empty list."""
+    out = tmp_path / "frames"
+    run_cli("render", "--scene", CAMERA, "--duration", "0.1", "--out", out)
+    assert flatland.read_camera_file(out / "camera.yaml")["unsupported"] == []
+    text = (out / "camera.yaml").read_text()
+    marked = text.replace("flatland:\n", "flatland:\n   unsupported: [ \"joint: only 2 images\" ]\n", 1)
+    assert marked != text
+    (tmp_path / "marked.yaml").write_text(marked)
+    assert flatland.read_camera_file(tmp_path / "marked.yaml")["unsupported"] == [
+        "joint: only 2 images"]
