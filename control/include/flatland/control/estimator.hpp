@@ -1,8 +1,9 @@
 // The contact estimator of the closed loop (paper section 5: "a simple estimator was used to
 // estimate the disk's position between vision data frames"): an extended Kalman filter on
 // (s_h, sdot_h). Between camera frames it propagates at the loop's rate (1 kHz) with the rolling
-// model of a disk on the hand, driven by the hand's measured angle/rate and commanded
-// acceleration; at each frame it corrects with the measured s_h. Frames arrive late (camera
+// model of a disk on the hand, driven by the hand's measured angle/rate and an acceleration held
+// over each tick (the loop's: estimated from the joint's readings, hand_input.hpp); at each frame
+// it corrects with the measured s_h. Frames arrive late (camera
 // latency); with latency compensation the filter rewinds to the capture time through its stored
 // history, corrects there and re-propagates to the present with the stored inputs.
 //

@@ -19,7 +19,8 @@ struct JointReading {
 };
 
 /// The hand's kinematics the estimator propagates with over one tick: the angle and rate read at
-/// the tick's start and the angular acceleration commanded for the tick (held over it).
+/// the tick's start and an angular acceleration held over the tick (the loop's comes from the
+/// joint's readings, or from the command where they give none: hand_input.hpp).
 struct HandInput {
   double theta = 0, theta_dot = 0, theta_ddot = 0;
 };
