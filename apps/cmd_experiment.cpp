@@ -380,6 +380,10 @@ void run_experiment(const ExperimentOptions& o) {
   j["nees_mean"] = truth ? number(synthetic->nees_mean) : Json(nullptr);
   j["measurements"] = loop.measurements;
   j["estimator_steps"] = loop.estimator_steps;
+  // The estimator propagates with what the joint did: its ticks by where the hand's acceleration
+  // came from (the read rates' change, or the command where the readings gave none).
+  j["hand_acceleration"] = {{"readings", loop.acceleration_from_readings},
+                            {"command", loop.acceleration_from_command}};
   j["ticks"] = static_cast<long>(loop.log.size());
   j["t_stage2"] = loop.t_stage2 ? number(*loop.t_stage2) : Json(nullptr);
   j["t_stage3"] = loop.t_stage3 ? number(*loop.t_stage3) : Json(nullptr);

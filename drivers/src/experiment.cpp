@@ -124,6 +124,9 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
   control::ButterflyController controller(setup.plan.plan, model.controller);
   control::SafetyMonitor safety(model.safety, t_start);
   vision::Tracker tracker(model.tracker);
+  // The estimator is driven by what the joint did (its readings), not by what was commanded: a
+  // replayed joint moves as it moved in the recording, and a real one lags its command.
+  control::HandInputFromJoint hand_input;
   AngleHistory angles;
   bool estimating = false;
   double last_capture = -std::numeric_limits<double>::infinity();
@@ -231,7 +234,11 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
     row.theta_plan = cmd.stage == control::Stage::kServo ? plan.hand(plan.time_at(est.s_h)).angle
                                                          : plan.hand(std::max(t, 0.0)).angle;
     joint.command(t, cmd.theta_ddot);
+    row.command_recorded = joint.recorded_command();
     if (options.recorder) options.recorder->add_tick(reading, cmd.theta_ddot);
+    const control::HandInputChoice hand = hand_input.next(reading, cmd.theta_ddot);
+    row.theta_ddot = hand.input.theta_ddot;
+    row.theta_ddot_source = hand.source;
     if (options.world) {
       const WorldSample w = options.world->state_at(t);
       row.s_true = w.s_h;
@@ -254,8 +261,13 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
     if (t_rest && t >= *t_rest + settle) break;
 
     const double t_next = t_start + static_cast<double>(tick + 1) * dt;
-    if (estimating) estimator.propagate(t_next, {reading.theta, reading.theta_dot, cmd.theta_ddot});
-    if (options.progress && tick % 100 == 0) options.progress(t, plan.duration() + settle);
+    if (estimating) {
+      estimator.propagate(t_next, hand.input);
+      ++(hand.source == control::AccelerationSource::kReadings ? out.acceleration_from_readings
+                                                               : out.acceleration_from_command);
+    }
+    if (options.progress && tick % 100 == 0)
+      options.progress(t, plan.duration() + settle);
     clock.sleep_until(t_next);
   }
   out.finished = controller.finished();

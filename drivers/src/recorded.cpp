@@ -563,6 +563,10 @@ control::JointReading LogJoint::read(double t) {
   return k.reading;
 }
 
+double LogJoint::recorded_command() const {
+  return next_ == 0 ? std::numeric_limits<double>::quiet_NaN() : log_[next_ - 1].theta_ddot_cmd;
+}
+
 void LogJoint::command(double t, double theta_ddot) {
   if (next_ == 0)
     throw std::runtime_error(describe() + ": command at t=" + sim::format_number(t) +

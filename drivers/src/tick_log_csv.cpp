@@ -15,6 +15,9 @@ enum Column {
   kTheta,
   kThetaDot,
   kCommand,
+  kCommandRecorded,
+  kThetaDdot,
+  kThetaDdotSource,
   kStage,
   kSEst,
   kSdotEst,
@@ -43,6 +46,9 @@ const std::vector<std::string>& tick_log_columns() {
                                              "theta[rad]",
                                              "theta_dot[rad/s]",
                                              "command[rad/s^2]",
+                                             "command_recorded[rad/s^2]",
+                                             "theta_ddot[rad/s^2]",
+                                             "theta_ddot_source",
                                              "stage",
                                              "s_est",
                                              "sdot_est[1/s]",
@@ -61,7 +67,7 @@ const std::vector<std::string>& tick_log_columns() {
                                              "mu_required",
                                              "nees",
                                              "mode_true"};
-  static_assert(kColumns == 22);
+  static_assert(kColumns == 25);
   return c;
 }
 
@@ -76,7 +82,9 @@ int tick_log_column_index(const std::string& name) {
   throw std::logic_error("no log column " + name);
 }
 
-bool tick_log_column_is_text(int column) { return column == kStage || column == kModeTrue; }
+bool tick_log_column_is_text(int column) {
+  return column == kStage || column == kModeTrue || column == kThetaDdotSource;
+}
 
 double tick_log_number(const TickLog& r, int column) {
   constexpr double nan = std::numeric_limits<double>::quiet_NaN();
@@ -89,6 +97,10 @@ double tick_log_number(const TickLog& r, int column) {
       return r.theta_dot;
     case kCommand:
       return r.command;
+    case kCommandRecorded:
+      return r.command_recorded;
+    case kThetaDdot:
+      return r.theta_ddot;
     case kSEst:
       return r.s_est;
     case kSdotEst:
@@ -129,6 +141,7 @@ double tick_log_number(const TickLog& r, int column) {
 
 std::string tick_log_text(const TickLog& r, int column) {
   if (column == kStage) return control::to_string(r.stage);
+  if (column == kThetaDdotSource) return control::to_string(r.theta_ddot_source);
   if (column == kModeTrue) return std::isfinite(r.s_true) ? sim::to_string(r.mode_true) : "";
   throw std::logic_error("log column " + std::to_string(column) + " is not text");
 }

@@ -181,9 +181,10 @@ TEST_F(CliExperimentTest, SyntheticFeedbackRunWritesTheLogResultPlotsAndVideo) {
     GTEST_SKIP() << "no MP4 encoder here: " << r.err;
   ASSERT_EQ(r.code, 0) << r.err;
   const json j = parse_json(r);
-  for (const char* k : {"success", "duration_s", "s_end", "fn_min_ratio", "mu_max", "frames",
-                        "frames_lost", "safe_stop", "stop_reason", "failure", "k", "period",
-                        "controller", "camera", "nees_mean", "measurements", "estimator_steps"})
+  for (const char* k :
+       {"success", "duration_s", "s_end", "fn_min_ratio", "mu_max", "frames", "frames_lost",
+        "safe_stop", "stop_reason", "failure", "k", "period", "controller", "camera", "nees_mean",
+        "measurements", "estimator_steps", "hand_acceleration"})
     EXPECT_TRUE(j.contains(k)) << "missing key " << k << "\n" << r.out;
   // The paper's feedback experiment succeeds on its own scene.
   EXPECT_EQ(j.value("success", false), true) << r.out;
@@ -219,6 +220,9 @@ TEST_F(CliExperimentTest, SyntheticFeedbackRunWritesTheLogResultPlotsAndVideo) {
                         "theta[rad]",
                         "theta_dot[rad/s]",
                         "command[rad/s^2]",
+                        "command_recorded[rad/s^2]",
+                        "theta_ddot[rad/s^2]",
+                        "theta_ddot_source",
                         "stage",
                         "s_est",
                         "sdot_est[1/s]",
@@ -343,6 +347,22 @@ TEST_F(CliExperimentTest, RecordThenReplayFeedback) {
   EXPECT_EQ(b.column_text("command"), a.column_text("command"))
       << "the replay commanded differently";
   EXPECT_EQ(b.column_text("stage"), a.column_text("stage"));
+  // The replay logs the recorded command beside its own; a run that records has none to show.
+  EXPECT_EQ(b.column_text("command_recorded"), a.column_text("command"));
+  const int recorded = a.column("command_recorded");
+  ASSERT_GE(recorded, 0);
+  for (const auto& row : a.rows) ASSERT_EQ(row[recorded], "nan");
+  // The estimator propagated with the readings' acceleration at every tick it ran: the result
+  // counts the ticks by source, and log.csv names the source of each.
+  for (const json* j : {&jr, &jp}) {
+    ASSERT_TRUE(j->contains("hand_acceleration")) << rep.out;
+    EXPECT_EQ((*j)["hand_acceleration"].value("command", -1), 0);
+    EXPECT_GT((*j)["hand_acceleration"].value("readings", 0), 4000);
+  }
+  const int source = b.column("theta_ddot_source");
+  ASSERT_GE(source, 0);
+  EXPECT_EQ(b.rows.front()[source], "command");  // the first tick has no reading before it
+  for (std::size_t i = 1; i < b.rows.size(); ++i) ASSERT_EQ(b.rows[i][source], "readings") << i;
 }
 
 TEST_F(CliExperimentTest, MonteCarloWritesRunsAndCounts) {

@@ -2,11 +2,13 @@
 // and Joint: each 1 kHz tick reads the joint, turns arrived frames into measurements of s_h
 // (tracker -> pixel -> table -> hand -> s_h at the hand angle of the capture time), folds them
 // into the estimator, asks the controller for an acceleration, commands the joint and propagates
-// the estimator over the tick. The same code runs synthetic, recorded and live experiments.
+// the estimator over the tick with what the joint did (control/hand_input.hpp). The same code runs
+// synthetic, recorded and live experiments.
 #pragma once
 
 #include "flatland/control/controller.hpp"
 #include "flatland/control/estimator.hpp"
+#include "flatland/control/hand_input.hpp"
 #include "flatland/drivers/interfaces.hpp"
 #include "flatland/drivers/synthetic.hpp"
 #include "flatland/model/model.hpp"
@@ -37,6 +39,14 @@ struct TickLog {
   double t = 0;
   double theta = 0, theta_dot = 0;  ///< as read
   double command = 0;               ///< rad/s^2
+  /// The hand's angular acceleration the estimator propagates with over the tick that starts
+  /// here (rad/s^2), and where it came from: the change of the read rate over the last tick, or
+  /// the command where the readings give none (control/hand_input.hpp).
+  double theta_ddot = 0;
+  control::AccelerationSource theta_ddot_source = control::AccelerationSource::kCommand;
+  /// A replay: the command the recorded run gave at this tick (Joint::recorded_command; NaN
+  /// otherwise). Where it parts from `command` is where the changed code decided differently.
+  double command_recorded = 0;
   control::Stage stage = control::Stage::kWaiting;
   double s_est = 0, sdot_est = 0, var_s = 0, var_sdot = 0;  ///< estimate at t (before the tick)
   bool estimating = false;
@@ -91,6 +101,8 @@ struct LoopResult {
   std::optional<double> t_stage2, t_stage3;
   double k = 0, period = 0;  ///< the plan used
   long estimator_steps = 0, estimator_repropagated = 0;
+  /// The estimator's propagations by where the hand's acceleration came from.
+  long acceleration_from_readings = 0, acceleration_from_command = 0;
 };
 
 /// What the loop assumes: the nominal compiled scene (its mapping, tracker, estimator,

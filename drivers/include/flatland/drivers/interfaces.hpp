@@ -9,6 +9,7 @@
 
 #include <opencv2/core.hpp>
 
+#include <limits>
 #include <optional>
 #include <string>
 
@@ -51,6 +52,10 @@ class Joint {
   virtual control::JointReading read(double t) = 0;
   virtual void command(double t, double theta_ddot) = 0;
   virtual std::string describe() const = 0;
+  /// A replayed joint: the acceleration the recorded run commanded at the tick last read (the
+  /// joint moved as that command made it move, whatever the loop commands now). NaN for a joint
+  /// that obeys the loop's commands.
+  virtual double recorded_command() const { return std::numeric_limits<double>::quiet_NaN(); }
 };
 
 }  // namespace flatland::drivers

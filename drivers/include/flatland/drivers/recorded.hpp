@@ -141,6 +141,8 @@ class LogJoint : public Joint {
   void command(double t, double theta_ddot) override;
   /// "log:<path>" with the path as given.
   std::string describe() const override;
+  /// The logged command of the tick last read (NaN before the first read).
+  double recorded_command() const override;
 
   /// Logged ticks, ticks read so far and commands given so far.
   long ticks() const { return static_cast<long>(log_.size()); }

@@ -17,13 +17,16 @@ std::string tick_log_column_name(const std::string& column);
 /// 1-based index of the column named `name` (with or without its unit), for gnuplot scripts;
 /// std::logic_error if there is none.
 int tick_log_column_index(const std::string& name);
-/// Whether the column holds text (the stage and the true contact mode) rather than numbers.
+/// Whether the column holds text (the stage, the hand acceleration's source and the true contact
+/// mode) rather than numbers.
 bool tick_log_column_is_text(int column);
 /// A numeric column's value in row r: NaN where it means nothing (s_meas, t_capture and nis at
-/// ticks that folded in no measurement; the truth columns of a run that is not synthetic).
+/// ticks that folded in no measurement; command_recorded outside a replay; the truth columns of
+/// a run that is not synthetic).
 /// Booleans are 0 or 1.
 double tick_log_number(const TickLog& r, int column);
-/// A text column's value: the stage's name, the true mode's name (empty without truth).
+/// A text column's value: the stage's name, the source's name ("readings", "command"), the true
+/// mode's name (empty without truth).
 std::string tick_log_text(const TickLog& r, int column);
 /// log.csv: a header of the columns, one row per tick; numbers in shortest round-trip form.
 std::string tick_log_csv(const std::vector<TickLog>& log);

@@ -131,8 +131,9 @@ struct EstimatorSpec {
   bool latency_compensation = true;
   /// 1/s^2 per sqrt(Hz), white noise on sddot_h: calibrated for consistency (NEES) on the
   /// air-table worlds (hybrid, with losses the estimator does not model) perturbed as in the Monte
-  /// Carlo study (docs/CLOSED_LOOP.md, docs/ESTIMATOR.md).
-  double process_noise = 0.015;
+  /// Carlo study, with the hand's acceleration estimated from the joint's readings
+  /// (docs/CLOSED_LOOP.md, docs/ESTIMATOR.md).
+  double process_noise = 0.016;
 };
 
 /// Faults injected into a synthetic experiment (section `faults`), to test the safe stop.
