@@ -1,10 +1,14 @@
 // Cost of the contact estimator per 1 kHz tick (docs/ESTIMATOR.md): one propagation step, one
 // latency-compensated update (rewind 33 ms, correct, re-propagate), and the average tick of a
-// loop with a 30 Hz camera. The budget for estimator + controller is 5 us per tick.
+// loop with a 30 Hz camera, with the hand input as the loop makes it (the joint's readings, the
+// acceleration from their change: control/hand_input.hpp) against the commanded acceleration
+// given directly (the loop before issue 24). The budget for estimator + controller is 5 us per
+// tick.
 // Run: build/bin/flatland_control_bench
 #include <benchmark/benchmark.h>
 
 #include "flatland/control/estimator.hpp"
+#include "flatland/control/hand_input.hpp"
 #include "flatland/sim/spec.hpp"
 
 #include <numbers>
@@ -35,6 +39,7 @@ struct Window {
   static constexpr int kCount = 1000;
   double t0 = 1.5;
   control::HandInput u[kCount];
+  control::JointReading readings[kCount];  ///< the motion's angle and rate at each tick
   double s_true[kCount + 1], sdot0 = 0;
   Window() {
     const sim::RunResult run = sim::run_spec(spec());
@@ -42,6 +47,7 @@ struct Window {
     for (int i = 0; i < kCount; ++i) {
       const sim::HandKinematics k = m.at(t0 + i * kDt);
       u[i] = {k.angle, k.angular_velocity, m.at(t0 + (i + 0.5) * kDt).angular_acceleration};
+      readings[i] = {t0 + i * kDt, k.angle, k.angular_velocity};
     }
     for (int i = 0; i <= kCount; ++i) s_true[i] = run.trajectory.s_h(t0 + i * kDt);
     sdot0 = run.trajectory.sample(t0).sdot_h;
@@ -102,20 +108,31 @@ void BM_EstimatorUpdateWithLatency(benchmark::State& state) {
 }
 BENCHMARK(BM_EstimatorUpdateWithLatency);
 
-// The loop's average tick: propagate every 1 ms, an update (33 ms old) every 33 ticks.
+// The loop's average tick: propagate every 1 ms, an update (33 ms old) every 33 ticks. Arg 0:
+// the hand input with the commanded acceleration, as the loop propagated before issue 24; arg 1:
+// the hand input from the joint's readings (HandInputFromJoint, as the loop does now), the command
+// passed only as its fallback. Both in the same run, so their ratio is the cost of the change.
 void BM_EstimatorTick(benchmark::State& state) {
+  const bool from_readings = state.range(0) == 1;
   control::Estimator est = warmed_up();
+  control::HandInputFromJoint hand;
   const Inputs& in = inputs();
   long i = 400, tick = 0;
+  hand.next(in.readings[i - 1], in.u[i - 1].theta_ddot);
   for (auto _ : state) {
     if (i == Inputs::kCount) {
       state.PauseTiming();
       est = warmed_up();
       i = 400;
+      hand.reset();
+      hand.next(in.readings[i - 1], in.u[i - 1].theta_ddot);
       state.ResumeTiming();
     }
     const double t1 = in.t0 + (i + 1) * kDt;
-    est.propagate(t1, in.u[i]);
+    if (from_readings)
+      est.propagate(t1, hand.next(in.readings[i], in.u[i].theta_ddot).input);
+    else
+      est.propagate(t1, in.u[i]);
     if (++tick % 33 == 0) {
       // Captured 32.5 ms ago (mid-tick): the truth there, near enough for timing.
       const control::UpdateReport r = est.update({t1 - 0.0325, t1, in.s_true[i - 32], 2e-4});
@@ -124,8 +141,9 @@ void BM_EstimatorTick(benchmark::State& state) {
     ++i;
     benchmark::DoNotOptimize(est);
   }
+  state.SetLabel(from_readings ? "hand input from readings" : "commanded acceleration");
 }
-BENCHMARK(BM_EstimatorTick);
+BENCHMARK(BM_EstimatorTick)->Arg(0)->Arg(1);
 
 }  // namespace
 
