@@ -92,11 +92,11 @@ class LossyReplay : public ::testing::Test {
         new drivers::SyntheticResult(drivers::run_synthetic(setup, model::compile(scene), opt));
     recorder.finish();
 
-    // H.264 through OpenCV's FFmpeg backend (render::open_mp4): lossy, as a real camera's
+    // H.264 through flatland's MP4 writer (render::open_mp4, a key frame a second): lossy, as a real camera's
     // recorder or a re-encode for storage would be. Its frame times go into the timestamps file.
     drivers::RecordedCamera frames(*dir_ / "rec");
     const fs::path mp4 = *dir_ / "rec.mp4";
-    cv::VideoWriter writer;
+    render::Mp4Writer writer;
     const cv::Mat first = cv::imread(frames.records().front().file.string(), cv::IMREAD_COLOR);
     codec_ = new std::string(render::open_mp4(writer, mp4.string(), 30.0, first.size(), "test"));
     std::ofstream stamps(mp4.string() + ".timestamps.csv");
@@ -140,8 +140,12 @@ TEST_F(LossyReplay, H264ReencodedRecordingReplaysToAFinishedMotion) {
   EXPECT_TRUE(r.loop.finished);
   EXPECT_FALSE(r.loop.safe_stop) << (r.loop.stop_reason ? r.loop.stop_reason->detail : "");
   EXPECT_EQ(r.ticks_read, r.ticks);
-  // Every frame measured, each within 1e-3 of the world's truth at its capture time.
-  EXPECT_EQ(r.loop.measurements, original_->loop.measurements);
+  // Every frame measured, each within 1e-3 of the world's truth at its capture time, except
+  // the few the reader flags repeated: while the disk rests before the motion, H.264 at CRF 23
+  // smooths the 2 DN sensor noise away and the frames come back identical (no new information).
+  EXPECT_EQ(r.loop.frames_damaged + r.loop.frames_unreadable, 0);
+  EXPECT_LE(r.loop.frames_repeated, 10);
+  EXPECT_EQ(r.loop.measurements + r.loop.frames_repeated, original_->loop.measurements);
   double worst = 0;
   long lossy = 0;
   for (const drivers::TickLog& row : r.loop.log) {
