@@ -96,6 +96,10 @@ py::tuple experiment_binding(const py::object& scene_arg,
   r["nees_mean"] = s.nees_mean;
   r["measurements"] = loop.measurements;
   r["estimator_steps"] = loop.estimator_steps;
+  py::dict hand_acceleration;  // where the estimator's hand acceleration came from, in ticks
+  hand_acceleration["readings"] = loop.acceleration_from_readings;
+  hand_acceleration["command"] = loop.acceleration_from_command;
+  r["hand_acceleration"] = hand_acceleration;
   r["ticks"] = static_cast<long>(loop.log.size());
   r["t_stage2"] = optional_number(loop.t_stage2);
   r["t_stage3"] = optional_number(loop.t_stage3);
