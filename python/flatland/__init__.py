@@ -462,12 +462,17 @@ def read_camera_file(path: Union[str, "_os.PathLike[str]"]) -> Dict[str, Any]:
 
 def write_camera_file(path: Union[str, "_os.PathLike[str]"], camera: Dict[str, Any], *,
                       camera_name: str = "flatland", table_pose: bool = False,
-                      joint: Optional[Dict[str, Any]] = None, force: bool = False) -> None:
+                      joint: Optional[Dict[str, Any]] = None,
+                      unsupported: Sequence[str] = (), force: bool = False) -> None:
     """Write ``camera`` (a dict as ``read_camera_file()["camera"]``, ``Renderer.camera`` or
     ``calibrate()["camera"]`` gives it) as a camera file the CLI reads. ``table_pose``: write its
-    R and t as the table's pose; ``joint``: {"axis_table": (x, y) m, "encoder_offset": rad}. The
-    file is written whole or not at all; an existing one only with ``force``."""
+    R and t as the table's pose; ``joint``: {"axis_table": (x, y) m, "encoder_offset": rad};
+    ``unsupported``: the marks of sections written against their data ("joint: why", as
+    ``read_camera_file()["unsupported"]`` lists them), kept so that a file read and written back
+    still says so. The file is written whole or not at all; an existing one only with
+    ``force``."""
     path = _path("path", path)
+    marks = _texts("unsupported", unsupported)
     name = _text("camera_name", camera_name)
     pose = _flag("table_pose", table_pose)
     joint = _mapping("joint", joint, True)
@@ -484,7 +489,7 @@ def write_camera_file(path: Union[str, "_os.PathLike[str]"], camera: Dict[str, A
         joint_values = (float(axis[0]), float(axis[1]), offset)
     _flatland.write_camera_file(path, name, checked["width"], checked["height"], checked["K"],
                                 checked["dist"], checked["R"], checked["t"], checked["fps"],
-                                checked["exposure"], joint_values, overwrite)
+                                checked["exposure"], joint_values, marks, overwrite)
 
 
 def project(camera: Dict[str, Any], points: Any) -> np.ndarray:

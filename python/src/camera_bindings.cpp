@@ -378,10 +378,14 @@ py::dict render_calibration_binding(const py::object& scene, int intrinsics_view
 
 /// A camera from the arrays flatland.write_camera_file and flatland.project hand over, whose
 /// shapes and values the Python side has checked (flatland/__init__.py, _camera).
-camera::CameraModel camera_from_arrays(int width, int height, const py::array_t<double>& K,
-                                       const py::array_t<double>& dist,
-                                       const std::optional<py::array_t<double>>& R,
-                                       const std::optional<py::array_t<double>>& t, double fps,
+
+// Row-major, as the loops below index them: a transposed (Fortran-ordered) K or R from numpy is
+// copied into C order on the way in instead of being read transposed.
+using CArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
+
+camera::CameraModel camera_from_arrays(int width, int height, const CArray& K, const CArray& dist,
+                                       const std::optional<CArray>& R,
+                                       const std::optional<CArray>& t, double fps,
                                        double exposure) {
   if (K.size() != 9 || (dist.size() != 5 && dist.size() != 8) || (R && R->size() != 9) ||
       (t && t->size() != 3))
@@ -452,13 +456,11 @@ py::dict camera_file_to_python(const camera::CameraFile& f) {
 }
 
 void write_camera_file_binding(const std::string& path, const std::string& camera_name, int width,
-                               int height, const py::array_t<double>& K,
-                               const py::array_t<double>& dist,
-                               const std::optional<py::array_t<double>>& R,
-                               const std::optional<py::array_t<double>>& t, double fps,
-                               double exposure,
+                               int height, const CArray& K, const CArray& dist,
+                               const std::optional<CArray>& R, const std::optional<CArray>& t,
+                               double fps, double exposure,
                                std::optional<std::tuple<double, double, double>> joint,
-                               bool force) {
+                               const std::vector<std::string>& unsupported, bool force) {
   namespace fs = std::filesystem;
   const fs::path target(path);
   const fs::path folder = target.parent_path().empty() ? fs::path(".") : target.parent_path();
@@ -479,15 +481,16 @@ void write_camera_file_binding(const std::string& path, const std::string& camer
     j.encoder_offset = std::get<2>(*joint);
     file.joint = j;
   }
+  // A section calibrate --force wrote against its data stays marked when the file is written
+  // again (read_camera_file's "unsupported").
+  file.unsupported = unsupported;
   // Written whole beside its place and renamed into it (camera::write_camera_file).
   camera::write_camera_file(path, file);
 }
 
-py::array_t<double> project_binding(int width, int height, const py::array_t<double>& K,
-                                    const py::array_t<double>& dist,
-                                    const std::optional<py::array_t<double>>& R,
-                                    const std::optional<py::array_t<double>>& t,
-                                    const py::array_t<double>& points) {
+py::array_t<double> project_binding(int width, int height, const CArray& K, const CArray& dist,
+                                    const std::optional<CArray>& R, const std::optional<CArray>& t,
+                                    const CArray& points) {
   const camera::CameraModel m = camera_from_arrays(width, height, K, dist, R, t, 30.0, 0.0);
   if (points.ndim() != 2 || points.shape(1) != 3)
     throw std::invalid_argument("points: an array of shape (N, 3)");
@@ -529,7 +532,8 @@ void bind_camera(py::module_& m) {
       [](const std::string& path) { return camera_file_to_python(camera::read_camera_file(path)); },
       "path"_a);
   m.def("write_camera_file", &write_camera_file_binding, "path"_a, "camera_name"_a, "width"_a,
-        "height"_a, "K"_a, "dist"_a, "R"_a, "t"_a, "fps"_a, "exposure"_a, "joint"_a, "force"_a);
+        "height"_a, "K"_a, "dist"_a, "R"_a, "t"_a, "fps"_a, "exposure"_a, "joint"_a,
+        "unsupported"_a, "force"_a);
   m.def("project", &project_binding, "width"_a, "height"_a, "K"_a, "dist"_a, "R"_a, "t"_a,
         "points"_a);
 }

@@ -95,7 +95,7 @@ PUBLIC = {
     "write_camera_file": (lambda: flatland.write_camera_file, {
         "path": "/nonexistent-dir/camera.yaml", "camera": A_CAMERA}, {
         "path": "path", "camera": "camera", "camera_name": "text", "table_pose": "flag",
-        "joint": "optional_dict", "force": "flag"}),
+        "joint": "optional_dict", "unsupported": "texts", "force": "flag"}),
     "project": (lambda: flatland.project,
                 {"camera": A_CAMERA, "points": np.zeros((1, 3))},
                 {"camera": "camera", "points": "points"}),

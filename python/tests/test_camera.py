@@ -200,3 +200,27 @@ def test_a_camera_file_says_which_sections_its_data_could_not_support(cli, tmp_p
     (tmp_path / "marked.yaml").write_text(marked)
     assert flatland.read_camera_file(tmp_path / "marked.yaml")["unsupported"] == [
         "joint: only 2 images"]
+
+
+def test_transposed_arrays_are_read_by_value_not_by_memory_order(cli, tmp_path):
+    """numpy hands over a transposed matrix in Fortran order: K and R given so must project and
+    be written exactly as their C-ordered copies (before, they were read transposed)."""
+    out = tmp_path / "frames"
+    run_cli("render", "--scene", CAMERA, "--duration", "0.1", "--out", out)
+    cam = flatland.read_camera_file(out / "camera.yaml")["camera"]
+    fortran = dict(cam, K=np.asfortranarray(cam["K"]), R=np.asfortranarray(cam["R"]))
+    assert not fortran["R"].flags.c_contiguous
+    points = np.array([[0.0, 0.1, 0.0], [0.05, -0.02, 0.006]])
+    np.testing.assert_array_equal(flatland.project(fortran, points), flatland.project(cam, points))
+    flatland.write_camera_file(tmp_path / "c.yaml", cam, table_pose=True)
+    flatland.write_camera_file(tmp_path / "f.yaml", fortran, table_pose=True)
+    assert (tmp_path / "c.yaml").read_text() == (tmp_path / "f.yaml").read_text()
+
+
+def test_marks_survive_a_read_and_write_back(cli, tmp_path):
+    out = tmp_path / "frames"
+    run_cli("render", "--scene", CAMERA, "--duration", "0.1", "--out", out)
+    f = flatland.read_camera_file(out / "camera.yaml")
+    flatland.write_camera_file(tmp_path / "m.yaml", f["camera"], table_pose=True,
+                               unsupported=["joint: only 2 images"])
+    assert flatland.read_camera_file(tmp_path / "m.yaml")["unsupported"] == ["joint: only 2 images"]
