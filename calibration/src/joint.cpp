@@ -3,6 +3,7 @@
 #include "flatland/calibration/joint.hpp"
 
 #include "flatland/camera/board.hpp"
+#include "flatland/sim/format.hpp"
 #include "flatland/vision/mapping.hpp"
 
 #include <boost/math/distributions/chi_squared.hpp>
@@ -395,7 +396,8 @@ TablePose estimate_table_pose(const TableCorners& corners, const cv::Matx33d& K,
   if (!(pose.rcond >= kMinTableRcond)) {
     pose.unsupported =
         "the boards' corners do not determine the table pose (reciprocal condition " +
-        std::to_string(pose.rcond) + " < " + std::to_string(kMinTableRcond) + ")";
+        sim::format_significant(pose.rcond, 3) + " < " +
+        sim::format_significant(kMinTableRcond, 3) + ")";
     return pose;
   }
   if (n < 2) return pose;

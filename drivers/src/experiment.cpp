@@ -104,6 +104,61 @@ void count_flagged(vision::FrameIntegrity integrity, LoopResult& out) {
   }
 }
 
+// What an intact, fresh frame measures: the tracked centre mapped to s_h at the hand angle of its
+// capture time, with the tracker's 1-sigma carried through the mapping; none when the disk is
+// not found or not mapped. What happened goes into `tr` and `flog`.
+std::optional<control::Measurement> measure_frame(const CameraFrame& frame,
+                                                  const vision::HandMapping& mapping,
+                                                  vision::Tracker& tracker,
+                                                  const AngleHistory& angles, double guess,
+                                                  vision::TrackResult& tr, FrameLog& flog) {
+  tr = tracker.track(frame.image);
+  flog.tracked = true;
+  flog.track = tr;
+  const std::optional<double> theta = angles.at(frame.t_capture);
+  if (!tr.ok() || !theta) return std::nullopt;
+  const auto c = vision::pixel_to_contact(mapping, tr.center, *theta, guess, 0.5);
+  if (!c) return std::nullopt;
+  // The tracker's 1-sigma per pixel coordinate, carried through the mapping by finite
+  // differences (a floor for what the tracker's own estimate leaves out).
+  const double sp = std::max(tr.sigma_px, 0.02);
+  const auto cx =
+      vision::pixel_to_contact(mapping, tr.center + cv::Point2d(sp, 0), *theta, c->s_h, 0.05);
+  const auto cy =
+      vision::pixel_to_contact(mapping, tr.center + cv::Point2d(0, sp), *theta, c->s_h, 0.05);
+  double sigma = 1e-4;
+  if (cx && cy) sigma = std::max(std::hypot(cx->s_h - c->s_h, cy->s_h - c->s_h), 1e-6);
+  flog.measured = true;
+  flog.s_meas = c->s_h;
+  flog.sigma_s = sigma;
+  return control::Measurement{frame.t_capture, frame.t_arrival, c->s_h, sigma};
+}
+
+// The tick's log columns of the belief.
+void fill_estimate(TickLog& row, const control::Estimate& est, bool estimating) {
+  row.estimating = estimating;
+  row.s_est = est.s_h;
+  row.sdot_est = est.sdot_h;
+  row.var_s = est.covariance(0, 0);
+  row.var_sdot = est.covariance(1, 1);
+}
+
+// The tick's truth columns: the synthetic world's state (NEES with an estimate), NaN otherwise.
+void fill_truth(TickLog& row, const SimWorld* world, double t, const control::Estimate* est) {
+  if (!world) {
+    row.s_true = row.sdot_true = row.theta_true = row.fn_ratio = row.mu_required = row.nees = kNaN;
+    return;
+  }
+  const WorldSample w = world->state_at(t);
+  row.s_true = w.s_h;
+  row.sdot_true = w.sdot_h;
+  row.theta_true = w.theta;
+  row.fn_ratio = w.fn_ratio;
+  row.mu_required = w.mu_required;
+  row.mode_true = w.mode;
+  row.nees = est ? control::nees(*est, w.s_h, w.sdot_h) : kNaN;
+}
+
 }  // namespace
 
 LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint& joint,
@@ -149,7 +204,10 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
     // Frames that have arrived: track, map to s_h, fold in.
     while (auto frame = camera.poll(t)) {
       ++out.frames;
-      if (options.recorder && !frame->image.empty()) options.recorder->add_frame(*frame);
+      // A flagged frame is not recorded: a recording's frames are replayed as intact (lossless,
+      // bit-exact), so it would be measured there; its missing index reads as a dropped frame.
+      if (options.recorder && frame->integrity == vision::FrameIntegrity::kIntact)
+        options.recorder->add_frame(*frame);
       const bool intact = frame->integrity == vision::FrameIntegrity::kIntact;
       count_flagged(frame->integrity, out);
       const bool fresh = frame->t_capture > last_capture;
@@ -164,29 +222,8 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
       flog.stale = !fresh;
       if (fresh) last_capture = frame->t_capture;
       if (fresh && intact) {
-        tr = tracker.track(frame->image);
-        flog.tracked = true;
-        flog.track = tr;
-        const std::optional<double> theta = angles.at(frame->t_capture);
-        if (tr.ok() && theta) {
-          const double guess = estimating ? estimator.estimate().s_h : scene.sim.initial.s_h;
-          const auto c = vision::pixel_to_contact(*model.mapping, tr.center, *theta, guess, 0.5);
-          if (c) {
-            // The tracker's 1-sigma per pixel coordinate, carried through the mapping by finite
-            // differences (a floor for what the tracker's own estimate leaves out).
-            const double sp = std::max(tr.sigma_px, 0.02);
-            const auto cx = vision::pixel_to_contact(*model.mapping, tr.center + cv::Point2d(sp, 0),
-                                                     *theta, c->s_h, 0.05);
-            const auto cy = vision::pixel_to_contact(*model.mapping, tr.center + cv::Point2d(0, sp),
-                                                     *theta, c->s_h, 0.05);
-            double sigma = 1e-4;
-            if (cx && cy) sigma = std::max(std::hypot(cx->s_h - c->s_h, cy->s_h - c->s_h), 1e-6);
-            z = control::Measurement{frame->t_capture, frame->t_arrival, c->s_h, sigma};
-            flog.measured = true;
-            flog.s_meas = c->s_h;
-            flog.sigma_s = sigma;
-          }
-        }
+        const double guess = estimating ? estimator.estimate().s_h : scene.sim.initial.s_h;
+        z = measure_frame(*frame, *model.mapping, tracker, angles, guess, tr, flog);
       }
       out.frame_log.push_back(flog);
       safety.frame(t, fresh, z.has_value());
@@ -223,11 +260,7 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
       est = estimator.estimate();
     else
       est.s_h = scene.sim.initial.s_h;
-    row.estimating = estimating;
-    row.s_est = est.s_h;
-    row.sdot_est = est.sdot_h;
-    row.var_s = est.covariance(0, 0);
-    row.var_sdot = est.covariance(1, 1);
+    fill_estimate(row, est, estimating);
     const control::Command cmd = controller.step(t, reading, est);
     row.command = cmd.theta_ddot;
     row.stage = cmd.stage;
@@ -239,19 +272,7 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
     const control::HandInputChoice hand = hand_input.next(reading, cmd.theta_ddot);
     row.theta_ddot = hand.input.theta_ddot;
     row.theta_ddot_source = hand.source;
-    if (options.world) {
-      const WorldSample w = options.world->state_at(t);
-      row.s_true = w.s_h;
-      row.sdot_true = w.sdot_h;
-      row.theta_true = w.theta;
-      row.fn_ratio = w.fn_ratio;
-      row.mu_required = w.mu_required;
-      row.mode_true = w.mode;
-      row.nees = estimating ? control::nees(est, w.s_h, w.sdot_h) : kNaN;
-    } else {
-      row.s_true = row.sdot_true = row.theta_true = row.fn_ratio = row.mu_required = row.nees =
-          kNaN;
-    }
+    fill_truth(row, options.world, t, estimating ? &est : nullptr);
     out.log.push_back(row);
 
     // Ending: settle after the hand has stopped (finished or safe-stopped).
@@ -266,8 +287,7 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
       ++(hand.source == control::AccelerationSource::kReadings ? out.acceleration_from_readings
                                                                : out.acceleration_from_command);
     }
-    if (options.progress && tick % 100 == 0)
-      options.progress(t, plan.duration() + settle);
+    if (options.progress && tick % 100 == 0) options.progress(t, plan.duration() + settle);
     clock.sleep_until(t_next);
   }
   out.finished = controller.finished();

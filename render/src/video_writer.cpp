@@ -123,6 +123,7 @@ std::string Mp4Writer::open(const std::string& path, double fps, cv::Size size,
   if (avformat_alloc_output_context2(&m.format, nullptr, "mp4", path.c_str()) < 0 || !m.format)
     throw std::runtime_error(what + "cannot set up an MP4 file");
   std::string fourcc;
+  const bool odd = size.width % 2 != 0 || size.height % 2 != 0;
   for (const auto& [name, tag] : {std::pair{"libx264", "avc1"}, std::pair{"mpeg4", "mp4v"}}) {
     if (const AVCodec* codec = avcodec_find_encoder_by_name(name))
       m.encoder = m.open_encoder(codec, fps);
@@ -131,15 +132,18 @@ std::string Mp4Writer::open(const std::string& path, double fps, cv::Size size,
       break;
     }
     if (fourcc.empty() && std::string(name) == "libx264")
-      std::cerr << "flatland: this FFmpeg cannot encode H.264 (libx264); falling back to MPEG-4 "
-                   "part 2 (mp4v)\n";
+      std::cerr << "flatland: cannot open an H.264 (libx264) encoder for " << size.width << "x"
+                << size.height << " frames" << (odd ? " (it needs an even width and height)" : "")
+                << "; falling back to MPEG-4 part 2 (mp4v)\n";
   }
   if (!m.encoder) {
     m.close();
-    throw std::runtime_error(what +
-                             "neither H.264 (libx264) nor MPEG-4 part 2 can be encoded by this "
-                             "FFmpeg (Debian: libavcodec59 with libx264)" +
-                             hint);
+    throw std::runtime_error(
+        what + "neither H.264 (libx264) nor MPEG-4 part 2 can be encoded by this FFmpeg" +
+        (odd ? " at " + std::to_string(size.width) + "x" + std::to_string(size.height) +
+                   " px (both need an even width and height)"
+             : std::string(" (Debian: libavcodec59 with libx264)")) +
+        hint);
   }
   m.stream = avformat_new_stream(m.format, nullptr);
   m.packet = av_packet_alloc();

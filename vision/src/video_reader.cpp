@@ -340,20 +340,43 @@ void VideoReader::Impl::scan(const std::string& path) {
                              display_pts.begin());
   };
   damaged.assign(static_cast<std::size_t>(n), false);
-  long gop_start = 0;
+  // Without presentation times a packet's place is its decode order, which differs from the
+  // order frames come out by at most the decoder's reordering (16 frames in H.264): a damage then
+  // marks that many frames on either side too.
+  const long margin = display_pts.empty() ? 16 : 0;
+  auto mark = [&](long i) {
+    for (long k = std::max(0L, i - margin); k <= std::min(n - 1, i + margin); ++k)
+      damaged[static_cast<std::size_t>(k)] = true;
+  };
+  const bool intra_only = keys == n;
+  long gop_start = 0, previous_gop_start = 0;
   bool reached = false;
+  // The last clean key frame that ended a damage: frames decoded after it but shown before it
+  // (an open GOP's leading pictures) still reference the damaged group.
+  long recovered_at = -1;
   for (long d = 0; d < n; ++d) {
-    const auto i = static_cast<std::size_t>(place(d));
-    const bool bad = packets[static_cast<std::size_t>(d)].errors > 0 || !decoded[i] || patched[i];
-    if (packets[static_cast<std::size_t>(d)].key) {
+    const Packet& p = packets[static_cast<std::size_t>(d)];
+    const long i = place(d);
+    const bool bad = p.errors > 0 || !decoded[static_cast<std::size_t>(i)] ||
+                     patched[static_cast<std::size_t>(i)];
+    if (p.key) {
+      previous_gop_start = gop_start;
       gop_start = d;
-      if (!bad) reached = false;
+      if (!bad && reached) {
+        reached = false;
+        recovered_at = i;
+      }
     }
     if (bad) {
-      for (long e = gop_start; e <= d; ++e) damaged[static_cast<std::size_t>(place(e))] = true;
+      // An error found at a key frame may belong to the group before it (the decoder notices a
+      // damage a packet late): condemn that group too, unless every frame is a key frame (an
+      // intra-only stream, MJPEG: no frame depends on another, so a damage ends with its frame).
+      const bool late = p.key && !intra_only;
+      for (long e = late ? previous_gop_start : gop_start; e <= d; ++e) mark(place(e));
       reached = true;
-    } else if (reached) {
-      damaged[i] = true;
+      recovered_at = -1;
+    } else if (reached || (recovered_at >= 0 && i < recovered_at)) {
+      mark(i);
     }
   }
 }

@@ -146,9 +146,9 @@ struct JointReport {
 /// through `camera` (with its table pose; `uncertainty`, propagated to the result's sigma). The
 /// hand's outline is symmetric under a half turn, so the offset is found modulo pi and reported in
 /// (-pi/2, pi/2]: the encoder must be zeroed to within a quarter turn. Data that do not support the
-/// result still give it, with JointReport::unsupported saying why. Throws std::invalid_argument
-/// (one line) for fewer than 3 poses, a size mismatch or non-finite angles, or fewer than 3 images
-/// that agree.
+/// result still give it, with JointReport::unsupported saying why (too few images or readings,
+/// fewer than 3 that agree, residuals inconsistent with the noise). Throws std::invalid_argument
+/// (one line) for no poses, a size mismatch or non-finite angles.
 camera::JointCalibration calibrate_joint(const std::vector<vision::HandPose>& poses,
                                          const std::vector<double>& encoder_angles,
                                          const camera::CameraModel& camera, double plate_height,

@@ -91,8 +91,8 @@ struct FrameRecord {
 /// Plays back frames: either a recording directory (DIR/frames.csv and the images it lists) or a
 /// video file with its timestamps in FILE.timestamps.csv beside it ("run.avi.timestamps.csv";
 /// "run.timestamps.csv" is taken if only that exists; columns index,t_capture,t_arrival; one row
-/// per video frame, in order). Everything that can be checked
-/// without decoding every frame is checked by the constructor, which throws a one-line
+/// per video frame, in order). Everything that can be checked before the run (a video's reader
+/// decodes it once through) is checked by the constructor, which throws a one-line
 /// std::invalid_argument naming the file and the reason. A video is read through
 /// vision::VideoReader, as `flatland track` reads it: its damaged, repeated and unreadable frames
 /// are handed out flagged (CameraFrame::integrity), in their place, and the loop measures none of
