@@ -596,6 +596,36 @@ camera::JointCalibration calibrate_joint(const std::vector<cv::Mat>& images,
                          options);
 }
 
+namespace {
+
+// Outliers (a frame where something else was bright, a mis-read encoder): far from the medians of
+// the centres (xs, ys) and of the angle differences (rel) by more than 5 robust sigmas, with floors
+// so that a perfect data set rejects nothing. Fewer than 3 images have no median to stand against:
+// all are kept; so are all when nothing agrees (the fit of all is then reported, and refused).
+std::vector<bool> joint_inliers(const std::vector<double>& xs, const std::vector<double>& ys,
+                                const std::vector<double>& rel) {
+  const std::size_t count = xs.size();
+  const cv::Point2d med(median_of(xs), median_of(ys));
+  const double med_rel = median_of(rel);
+  std::vector<double> dist_c(count), dist_a(count);
+  for (std::size_t i = 0; i < count; ++i) {
+    dist_c[i] = std::hypot(xs[i] - med.x, ys[i] - med.y);
+    dist_a[i] = std::abs(rel[i] - med_rel);
+  }
+  const double tol_c = std::max(5 * 1.4826 * median_of(dist_c), 0.5e-3);
+  const double tol_a = std::max(5 * 1.4826 * median_of(dist_a), 0.1 * kPi / 180);
+  std::vector<bool> inlier(count);
+  bool any = false;
+  for (std::size_t i = 0; i < count; ++i) {
+    inlier[i] = count < 3 || (dist_c[i] <= tol_c && dist_a[i] <= tol_a);
+    any = any || inlier[i];
+  }
+  if (!any) inlier.assign(count, true);
+  return inlier;
+}
+
+}  // namespace
+
 camera::JointCalibration calibrate_joint(const std::vector<vision::HandPose>& poses,
                                          const std::vector<double>& encoder_angles,
                                          const camera::CameraModel& camera, double plate_height,
@@ -625,29 +655,8 @@ camera::JointCalibration calibrate_joint(const std::vector<vision::HandPose>& po
   const double rough_offset = 0.5 * std::atan2(s2, c2);
   std::vector<double> rel(count);
   for (std::size_t i = 0; i < count; ++i) rel[i] = wrap_half_turn(diffs[i] - rough_offset);
-  const cv::Point2d med(median_of(xs), median_of(ys));
-  const double med_rel = median_of(rel);
-
-  // Outliers (a frame where something else was bright, a mis-read encoder): far from the medians
-  // by more than 5 robust sigmas, with floors so that a perfect data set rejects nothing. Fewer
-  // than 3 images have no median to stand against: all are kept.
-  std::vector<double> dist_c(count), dist_a(count);
-  for (std::size_t i = 0; i < count; ++i) {
-    dist_c[i] = std::hypot(xs[i] - med.x, ys[i] - med.y);
-    dist_a[i] = std::abs(rel[i] - med_rel);
-  }
-  const double tol_c = std::max(5 * 1.4826 * median_of(dist_c), 0.5e-3);
-  const double tol_a = std::max(5 * 1.4826 * median_of(dist_a), 0.1 * kPi / 180);
-  std::vector<bool> inlier(count);
-  std::size_t used = 0;
-  for (std::size_t i = 0; i < count; ++i) {
-    inlier[i] = count < 3 || (dist_c[i] <= tol_c && dist_a[i] <= tol_a);
-    used += inlier[i] ? 1 : 0;
-  }
-  if (used == 0) {  // nothing agrees: report the fit of all, refused below
-    inlier.assign(count, true);
-    used = count;
-  }
+  const std::vector<bool> inlier = joint_inliers(xs, ys, rel);
+  const auto used = static_cast<std::size_t>(std::count(inlier.begin(), inlier.end(), true));
 
   // The centroid is the axis in every image and the outline's axis is encoder + offset: both are
   // plain means over the inliers (least squares with equal weights).
