@@ -368,10 +368,21 @@ TEST(CalibrationSessionCsv, PathsResolveAgainstTheCsvAndZIsOptional) {
 
 namespace {
 
+#if defined(__SANITIZE_ADDRESS__)
+// AddressSanitizer holds freed memory back (a 256 MB quarantine, to catch use after free) and
+// adds its shadow: a peak RSS then says little about what the program keeps. The probe runs the
+// child without the quarantine and checks the growth only; the Release stage checks both bounds.
+constexpr bool kAddressSanitizer = true;
+#else
+constexpr bool kAddressSanitizer = false;
+#endif
+
 // Runs `flatland args` in `dir` and returns its peak resident set size (kB) from wait4's rusage:
 // flatland replaces itself with flatland-camera (execv), so the child is that process.
 long peak_rss_kb(const fs::path& dir, const std::string& args, int& code) {
-  const std::string cmd = "cd " + flatland_test::quote(dir.string()) + " && exec " +
+  const std::string env =
+      kAddressSanitizer ? "ASAN_OPTIONS=\"${ASAN_OPTIONS:+$ASAN_OPTIONS:}quarantine_size_mb=0\" " : "";
+  const std::string cmd = "cd " + flatland_test::quote(dir.string()) + " && " + env + "exec " +
                           flatland_test::quote(FLATLAND_CLI_PATH) + " " + args +
                           " > /dev/null 2> stderr.txt";
   const pid_t pid = ::fork();
@@ -420,7 +431,7 @@ TEST_F(CalibrationChain, TableAndJointStreamTheirImages) {
   ASSERT_EQ(code, 0) << flatland_test::read_text(dir_ / "stderr.txt");
   std::printf("calibrate --table peak RSS: %ld kB at 20 rows, %ld kB at 400 rows\n", small, large);
   EXPECT_LT(large - small, 20 * 1024);
-  EXPECT_LT(large, 300 * 1024);
+  if (!kAddressSanitizer) EXPECT_LT(large, 300 * 1024);
 
   const std::string scene = " --scene " + flatland_test::quote(camera_scene());
   repeat_rows(dir_ / "sess" / "joint.csv", dir_ / "sess" / "j16.csv", 16);
