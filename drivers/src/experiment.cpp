@@ -204,11 +204,10 @@ LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint&
     // Frames that have arrived: track, map to s_h, fold in.
     while (auto frame = camera.poll(t)) {
       ++out.frames;
+      const bool intact = frame->integrity == vision::FrameIntegrity::kIntact;
       // A flagged frame is not recorded: a recording's frames are replayed as intact (lossless,
       // bit-exact), so it would be measured there; its missing index reads as a dropped frame.
-      if (options.recorder && frame->integrity == vision::FrameIntegrity::kIntact)
-        options.recorder->add_frame(*frame);
-      const bool intact = frame->integrity == vision::FrameIntegrity::kIntact;
+      if (options.recorder && intact) options.recorder->add_frame(*frame);
       count_flagged(frame->integrity, out);
       const bool fresh = frame->t_capture > last_capture;
       vision::TrackResult tr;

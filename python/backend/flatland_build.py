@@ -237,6 +237,14 @@ def build_wheel(wheel_directory, config_settings=None, metadata_directory=None):
     return name
 
 
+def build_editable(wheel_directory, config_settings=None, metadata_directory=None):
+    """`pip install -e .` is refused in one line: the native module lives in the CMake build tree,
+    which an editable install cannot point at; PYTHONPATH=build/python is the editable form."""
+    print("flatland_build: error: editable installs (pip install -e) are not supported: put "
+          "build/python on PYTHONPATH instead (docs/PYTHON.md)", file=sys.stderr, flush=True)
+    raise SystemExit(1)
+
+
 def build_sdist(sdist_directory, config_settings=None):
     """The files git tracks (an sdist of a clean checkout), with PKG-INFO."""
     listing = subprocess.run(["git", "-C", str(SOURCE), "ls-files", "-z"], capture_output=True)

@@ -120,3 +120,15 @@ def test_a_build_dir_the_module_cannot_come_from_is_refused(tmp_path, cache, mes
     assert len(lines) == 1 and lines[0].startswith("flatland_build: error: build-dir ")
     assert message in lines[0]
     assert not list(tmp_path.glob("*.whl"))
+
+
+def test_an_editable_install_is_refused_in_one_line(tmp_path):
+    script = ("import sys; sys.path.insert(0, sys.argv[1]); import flatland_build; "
+              "flatland_build.build_editable(sys.argv[2])")
+    p = subprocess.run([sys.executable, "-c", script, str(ROOT / "python" / "backend"),
+                        str(tmp_path)], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 1
+    lines = p.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("flatland_build: error: editable installs")
+    assert "PYTHONPATH" in lines[0]
+    assert not list(tmp_path.iterdir())

@@ -431,7 +431,9 @@ TEST_F(CalibrationChain, TableAndJointStreamTheirImages) {
   ASSERT_EQ(code, 0) << flatland_test::read_text(dir_ / "stderr.txt");
   std::printf("calibrate --table peak RSS: %ld kB at 20 rows, %ld kB at 400 rows\n", small, large);
   EXPECT_LT(large - small, 20 * 1024);
-  if (!kAddressSanitizer) EXPECT_LT(large, 300 * 1024);
+  if (!kAddressSanitizer) {
+    EXPECT_LT(large, 300 * 1024);
+  }
 
   const std::string scene = " --scene " + flatland_test::quote(camera_scene());
   repeat_rows(dir_ / "sess" / "joint.csv", dir_ / "sess" / "j16.csv", 16);
