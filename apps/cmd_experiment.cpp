@@ -94,8 +94,7 @@ void draw_overlay(cv::Mat& bgr, const KeptFrame& f, const drivers::TickLog* row)
   char line[4][112];
   std::snprintf(line[0], sizeof line[0], "t = %.3f s (frame %ld captured %.3f s)",
                 row ? row->t : f.t_arrival, f.index, f.t_capture);
-  std::snprintf(line[1], sizeof line[1], "stage: %s",
-                row ? control::to_string(row->stage).c_str() : "?");
+  std::snprintf(line[1], sizeof line[1], "stage: %s", row ? row->mode.c_str() : "?");
   if (row && row->estimating)
     std::snprintf(line[2], sizeof line[2], "s_h estimated %+.4f", row->s_est);
   else

@@ -100,9 +100,9 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
   drivers::MonteCarloResult r;
   {
     ProgressBar bar("montecarlo");
-    r = drivers::run_montecarlo(*model::compile(scene), o.p, o.n,
-                                static_cast<std::uint64_t>(o.seed), o.controllers, threads,
-                                bar.callback());
+    r = drivers::run_montecarlo(
+        *model::compile(scene), o.p, o.n, static_cast<std::uint64_t>(o.seed),
+        drivers::controllers_by_name(o.controllers), threads, bar.callback());
   }
   const double per_second = r.seconds > 0 ? static_cast<double>(experiments) / r.seconds : 0;
 
@@ -206,7 +206,8 @@ Command add_montecarlo_command(CLI::App& app) {
       "Scene file (YAML, SI units; schema in docs/SCENE.md). Default: the bundled closed-loop "
       "scene, " +
       default_experiment_scene());
-  cmd->add_option("--n", o->n, "Runs (perturbed worlds) per controller (1 to 1000000). Default: 100");
+  cmd->add_option("--n", o->n,
+                  "Runs (perturbed worlds) per controller (1 to 1000000). Default: 100");
   cmd->add_option("--seed", o->seed,
                   "Seed of the draws, 0 to 2^63 - 1 (with the run number: run i is the same world "
                   "whatever N and --threads are). Default: 1");

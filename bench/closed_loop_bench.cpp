@@ -47,12 +47,15 @@ void BM_ControlTick(benchmark::State& state) {
     accel[i] = h.angular_acceleration;
   }
   const auto fresh = [&] {
-    control::Estimator e(model, su.model->estimator);
+    control::Ekf e(model, su.model->estimator.config);
     e.reset(kT0, s_plan[0], (s_plan[1] - s_plan[0]) / kDt);
-    control::ButterflyController c(su.plan.plan, su.model->controller);
-    control::Estimate dip;
-    dip.s_h = -0.5;  // past dip_until: the first step switches to the servo stage
-    (void)c.step(0.0, joint[0], dip);
+    control::PaperController c(su.model->controller.paper);
+    c.start(su.controller_context(kT0));
+    control::ControlInput dip;
+    dip.joint = joint[0];
+    dip.estimate.s_h = -0.5;  // past dip_until: the first step switches to the servo stage
+    dip.estimating = true;
+    (void)c.step(dip);
     return std::make_pair(e, c);
   };
   auto [est, ctl] = fresh();
@@ -70,7 +73,12 @@ void BM_ControlTick(benchmark::State& state) {
           est.update({t - 0.033, t, s_plan[i - 33 > 0 ? i - 33 : 0], 2.7e-4});
       benchmark::DoNotOptimize(r);
     }
-    const control::Command c = ctl.step(t, joint[i], est.estimate());
+    control::ControlInput in;
+    in.t = t;
+    in.joint = joint[i];
+    in.estimate = est.estimate();
+    in.estimating = true;
+    const control::ControlOutput c = ctl.step(in);
     // The joint follows the plan here (open-loop readings), so the estimator is driven with the
     // plan's acceleration: with the controller's command it would see a hand it does not move.
     est.propagate(t + kDt, {joint[i].theta, joint[i].theta_dot, accel[i]});

@@ -60,9 +60,9 @@ const Window& inputs() {
 using Inputs = Window;
 
 // Starts the estimator at t0 on the true state with 400 ms of history behind it.
-control::Estimator warmed_up(control::EstimatorConfig cfg = {}) {
+control::Ekf warmed_up(control::EstimatorConfig cfg = {}) {
   const Window& w = inputs();
-  control::Estimator est(model(), cfg);
+  control::Ekf est(model(), cfg);
   est.reset(w.t0, w.s_true[0], w.sdot0);
   for (int i = 0; i < 400; ++i) est.propagate(w.t0 + (i + 1) * kDt, w.u[i]);
   return est;
@@ -71,7 +71,7 @@ control::Estimator warmed_up(control::EstimatorConfig cfg = {}) {
 void BM_EstimatorPropagate(benchmark::State& state) {
   control::EstimatorConfig cfg;
   cfg.model = static_cast<control::EstimatorModel>(state.range(0));
-  control::Estimator est = warmed_up(cfg);
+  control::Ekf est = warmed_up(cfg);
   const Inputs& in = inputs();
   long i = 400;
   for (auto _ : state) {
@@ -91,10 +91,10 @@ BENCHMARK(BM_EstimatorPropagate)->Arg(0)->Arg(1);
 
 // One update captured 33 ms ago (mid-tick): rewinds through 33 stored steps.
 void BM_EstimatorUpdateWithLatency(benchmark::State& state) {
-  const control::Estimator base = warmed_up();
+  const control::Ekf base = warmed_up();
   const double now = base.estimate().t;
   const control::Measurement z{now - 0.0325, now, inputs().s_true[367] + 1e-4, 2e-4};
-  control::Estimator est = base;
+  control::Ekf est = base;
   int repropagated = 0;
   for (auto _ : state) {
     state.PauseTiming();
@@ -114,7 +114,7 @@ BENCHMARK(BM_EstimatorUpdateWithLatency);
 // passed only as its fallback. Both in the same run, so their ratio is the cost of the change.
 void BM_EstimatorTick(benchmark::State& state) {
   const bool from_readings = state.range(0) == 1;
-  control::Estimator est = warmed_up();
+  control::Ekf est = warmed_up();
   control::HandInputFromJoint hand;
   const Inputs& in = inputs();
   long i = 400, tick = 0;

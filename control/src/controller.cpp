@@ -3,9 +3,9 @@
 
 #include <algorithm>
 #include <cmath>
-#include <utility>
 #include <sstream>
 #include <stdexcept>
+#include <utility>
 
 namespace flatland::control {
 namespace {
@@ -82,9 +82,7 @@ double Plan::time_at(double s_h) const { return interpolate(s_, t_, s_h); }
 double Plan::s_h_at(double t) const { return interpolate(plan_t_, plan_s_, t); }
 double Plan::sdot_h_at(double t) const { return interpolate(plan_t_, plan_sdot_, t); }
 
-std::string to_string(ServoLaw law) {
-  return law == ServoLaw::kPaper ? "paper" : "time-scaled";
-}
+std::string to_string(ServoLaw law) { return law == ServoLaw::kPaper ? "paper" : "time-scaled"; }
 
 ServoLaw parse_servo_law(const std::string& name) {
   if (name == "paper") return ServoLaw::kPaper;
@@ -95,52 +93,59 @@ ServoLaw parse_servo_law(const std::string& name) {
 
 // ---------------------------------------------------------------------------------------------
 
-ButterflyController::ButterflyController(std::shared_ptr<const Plan> plan, ControllerConfig config)
-    : plan_(std::move(plan)), config_(config) {
-  if (!plan_) throw std::invalid_argument("controller: no plan");
-  if (!(config_.dt > 0)) throw std::invalid_argument("controller: dt must be positive");
+PaperController::PaperController(PaperConfig config) : config_(config) {}
+
+void PaperController::start(const ControllerContext& context) {
+  if (!context.plan) throw std::invalid_argument("controller: no plan");
+  if (!(context.dt > 0)) throw std::invalid_argument("controller: dt must be positive");
+  plan_ = context.plan;
+  dt_ = context.dt;
+  stage_ = Stage::kWaiting;
+  t_end_.reset();
 }
 
-double ButterflyController::plan_acceleration(double tau) const {
+double PaperController::plan_acceleration(double tau) const {
   // The joint integrates the held command over the tick; the mid-tick value makes that
   // integration second-order accurate, so open-loop playback ends on the plan's final angle.
-  return plan_->hand(tau + 0.5 * config_.dt).angular_acceleration;
+  return plan_->hand(tau + 0.5 * dt_).angular_acceleration;
 }
 
 const char* to_string(StopCause cause) {
   switch (cause) {
-    case StopCause::kJoint: return "joint";
-    case StopCause::kEstimator: return "estimator";
-    case StopCause::kCamera: return "camera";
-    case StopCause::kTracking: return "tracking";
-    case StopCause::kDisk: return "disk";
-    case StopCause::kTimeout: return "timeout";
+    case StopCause::kJoint:
+      return "joint";
+    case StopCause::kEstimator:
+      return "estimator";
+    case StopCause::kCamera:
+      return "camera";
+    case StopCause::kTracking:
+      return "tracking";
+    case StopCause::kDisk:
+      return "disk";
+    case StopCause::kTimeout:
+      return "timeout";
+    case StopCause::kController:
+      return "controller";
   }
   return "unknown";
 }
 
-void ButterflyController::safe_stop(double t, StopReason reason) {
-  if (stage_ == Stage::kSafeStop) return;
-  stage_ = Stage::kSafeStop;
-  stop_reason_ = std::move(reason);
-  t_end_.reset();
-  (void)t;
+double safe_stop_command(double theta_dot, double deceleration, double dt) {
+  const double a = std::min(deceleration, std::abs(theta_dot) / dt);
+  return theta_dot > 0 ? -a : a;
 }
 
-Command ButterflyController::step(double t, const JointReading& joint, const Estimate& estimate) {
-  Command c;
-  c.t = t;
-  const double dt = config_.dt;
+ControlOutput PaperController::step(const ControlInput& input) {
+  if (!plan_) throw std::logic_error("PaperController::step before start");
+  ControlOutput c;
+  const double t = input.t;
+  const JointReading& joint = input.joint;
+  const Estimate& estimate = input.estimate;
+  const double dt = dt_;
   const double T = plan_->duration();
 
-  if (stage_ == Stage::kSafeStop) {
-    // Decelerate at most at stop_deceleration, and to exactly zero rate within one tick at the end.
-    const double a = std::min(config_.stop_deceleration, std::abs(joint.theta_dot) / dt);
-    c.theta_ddot = joint.theta_dot > 0 ? -a : a;
-    c.stage = stage_;
-    return c;
-  }
-  if (stage_ == Stage::kWaiting && t >= 0) stage_ = config_.feedback ? Stage::kDip : Stage::kOpenLoop;
+  if (stage_ == Stage::kWaiting && t >= 0)
+    stage_ = config_.feedback ? Stage::kDip : Stage::kOpenLoop;
 
   switch (stage_) {
     case Stage::kWaiting:
@@ -157,7 +162,6 @@ Command ButterflyController::step(double t, const JointReading& joint, const Est
     case Stage::kDip:
       if (estimate.s_h > config_.dip_until) {
         stage_ = Stage::kServo;
-        t_stage2_ = t;
       } else {
         c.theta_ddot = plan_acceleration(t);
         break;
@@ -166,7 +170,6 @@ Command ButterflyController::step(double t, const JointReading& joint, const Est
     case Stage::kServo: {
       if (estimate.s_h > config_.finish_after) {
         stage_ = Stage::kFinish;
-        t_stage3_ = t;
         t3_ = t;
         tau3_ = plan_->time_at(config_.finish_after);
         const double tr = T - tau3_;
@@ -217,8 +220,12 @@ Command ButterflyController::step(double t, const JointReading& joint, const Est
     // from rounding).
     const double hold = plan_->hand(T).angle;
     c.theta_ddot = config_.kp * (hold - joint.theta) - config_.kd * joint.theta_dot;
+    c.done = true;
+    c.t_done = t_end_;
   }
-  c.stage = stage_;
+  c.mode = to_string(stage_);
+  c.theta_reference = stage_ == Stage::kServo ? plan_->hand(plan_->time_at(estimate.s_h)).angle
+                                              : plan_->hand(std::max(t, 0.0)).angle;
   return c;
 }
 

@@ -67,7 +67,7 @@ EstimatorModel parse_estimator_model(const std::string& name) {
 // ---------------------------------------------------------------------------------------------
 // Ring
 
-void Estimator::Ring::push_back(const Stored& s) {
+void Ekf::Ring::push_back(const Stored& s) {
   if (size_ == slots_.size()) {
     // Grow by re-laying the entries out oldest first; only while the history fills up.
     std::vector<Stored> bigger;
@@ -81,21 +81,21 @@ void Estimator::Ring::push_back(const Stored& s) {
   ++size_;
 }
 
-void Estimator::Ring::pop_front() {
+void Ekf::Ring::pop_front() {
   head_ = (head_ + 1) % slots_.size();
   --size_;
 }
 
-void Estimator::Ring::insert(std::size_t i, const Stored& s) {
+void Ekf::Ring::insert(std::size_t i, const Stored& s) {
   push_back(s);  // makes room (and grows if needed)
   for (std::size_t j = size_ - 1; j > i; --j) (*this)[j] = (*this)[j - 1];
   (*this)[i] = s;
 }
 
 // ---------------------------------------------------------------------------------------------
-// Estimator
+// Ekf
 
-Estimator::Estimator(std::shared_ptr<const sim::RollingProblem> model, EstimatorConfig config)
+Ekf::Ekf(std::shared_ptr<const sim::RollingProblem> model, EstimatorConfig config)
     : model_(std::move(model)), config_(config) {
   require_positive("process_noise", config_.process_noise);
   require_positive("history", config_.history);
@@ -122,7 +122,7 @@ Estimator::Estimator(std::shared_ptr<const sim::RollingProblem> model, Estimator
   reset(0.0, 0.0, 0.0);
 }
 
-void Estimator::reset(double t, double s_h, double sdot_h) {
+void Ekf::reset(double t, double s_h, double sdot_h) {
   require_finite("reset.t", t);
   require_finite("reset.s_h", s_h);
   require_finite("reset.sdot_h", sdot_h);
@@ -132,10 +132,9 @@ void Estimator::reset(double t, double s_h, double sdot_h) {
   history_.clear();
 }
 
-Estimate Estimator::estimate() const { return {t_, x_[0], x_[1], P_}; }
+Estimate Ekf::estimate() const { return {t_, x_[0], x_[1], P_}; }
 
-double Estimator::acceleration(const HandInput& u, double tau, double s, double sdot,
-                               int piece) const {
+double Ekf::acceleration(const HandInput& u, double tau, double s, double sdot, int piece) const {
   const HandInput a = advance(u, tau);
   sim::HandKinematics h;  // pivot fixed: position, velocity, acceleration zero
   h.angle = a.theta;
@@ -144,8 +143,7 @@ double Estimator::acceleration(const HandInput& u, double tau, double s, double 
   return rolling_->acceleration(h, s, sdot, piece);
 }
 
-void Estimator::rk4(const HandInput& u, double tau0, double h, int piece,
-                    Eigen::Vector2d& x) const {
+void Ekf::rk4(const HandInput& u, double tau0, double h, int piece, Eigen::Vector2d& x) const {
   const double s = x[0], v = x[1];
   const double a1 = acceleration(u, tau0, s, v, piece);
   const double s2 = s + 0.5 * h * v, v2 = v + 0.5 * h * a1;
@@ -158,8 +156,7 @@ void Estimator::rk4(const HandInput& u, double tau0, double h, int piece,
   x[1] = v + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4);
 }
 
-void Estimator::substep(double h, const HandInput& u, Eigen::Vector2d& x,
-                        Eigen::Matrix2d& P) const {
+void Ekf::substep(double h, const HandInput& u, Eigen::Vector2d& x, Eigen::Matrix2d& P) const {
   const double q2 = config_.process_noise * config_.process_noise;
   if (config_.model == EstimatorModel::kConstantVelocity) {
     // Exact: x+ = Phi x with Phi = [1 h; 0 1].
@@ -241,8 +238,8 @@ void Estimator::substep(double h, const HandInput& u, Eigen::Vector2d& x,
   P = Phi * P * Phi.transpose() + process_covariance(q2, h);
 }
 
-void Estimator::step(double t0, double t1, const HandInput& u, Eigen::Vector2d& x,
-                     Eigen::Matrix2d& P) const {
+void Ekf::step(double t0, double t1, const HandInput& u, Eigen::Vector2d& x,
+               Eigen::Matrix2d& P) const {
   const double dt = t1 - t0;
   // (The slack keeps a 2 ms step computed as a difference of times from becoming two.)
   const int n = std::max(1, static_cast<int>(std::ceil(dt / kMaxSubstep - 1e-9)));
@@ -261,19 +258,19 @@ void Estimator::step(double t0, double t1, const HandInput& u, Eigen::Vector2d& 
   }
 }
 
-void Estimator::check_finite(double t, const Eigen::Vector2d& x) const {
+void Ekf::check_finite(double t, const Eigen::Vector2d& x) const {
   if (x.allFinite()) return;
   std::ostringstream out;
   out << "estimator: non-finite state at t = " << t << ": s_h = " << x[0] << ", sdot_h = " << x[1];
   throw std::runtime_error(out.str());
 }
 
-void Estimator::prune() {
+void Ekf::prune() {
   // Keep the steps that overlap [t - history, t].
   while (!history_.empty() && history_.front().t1 <= t_ - config_.history) history_.pop_front();
 }
 
-void Estimator::propagate(double t_next, const HandInput& input) {
+void Ekf::propagate(double t_next, const HandInput& input) {
   if (!std::isfinite(t_next) || !(t_next > t_)) {
     std::ostringstream out;
     out << "estimator.propagate: t_next = " << t_next << " must be after the current time " << t_;
@@ -289,8 +286,8 @@ void Estimator::propagate(double t_next, const HandInput& input) {
   prune();
 }
 
-void Estimator::correct(const Measurement& z, Eigen::Vector2d& x, Eigen::Matrix2d& P,
-                        UpdateReport& report) const {
+void Ekf::correct(const Measurement& z, Eigen::Vector2d& x, Eigen::Matrix2d& P,
+                  UpdateReport& report) const {
   // H = [1 0]: P H^T is P's first column, H P H^T its (0, 0) entry.
   const double R = z.sigma * z.sigma;
   const double S = P(0, 0) + R;
@@ -307,7 +304,7 @@ void Estimator::correct(const Measurement& z, Eigen::Vector2d& x, Eigen::Matrix2
   report.nis = innovation * innovation / S;
 }
 
-UpdateReport Estimator::update(const Measurement& z) {
+UpdateReport Ekf::update(const Measurement& z) {
   require_finite("update.t_capture", z.t_capture);
   require_finite("update.s_h", z.s_h);
   require_positive("update.sigma", z.sigma);

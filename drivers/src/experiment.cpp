@@ -74,7 +74,14 @@ PlanInfo make_plan(const model::Model& nominal_model) {
   return info;
 }
 
-LoopSetup::LoopSetup(std::shared_ptr<const model::Model> nominal) : model(std::move(nominal)) {
+LoopSetup::LoopSetup(std::shared_ptr<const model::Model> nominal)
+    : LoopSetup(std::move(nominal), ControllerFactory{}, EstimatorFactory{}) {}
+
+LoopSetup::LoopSetup(std::shared_ptr<const model::Model> nominal, ControllerFactory controller,
+                     EstimatorFactory estimator)
+    : model(std::move(nominal)),
+      make_controller(std::move(controller)),
+      make_estimator(std::move(estimator)) {
   const Scene& scene = model->spec;
   if (!model->camera)
     throw std::invalid_argument(scene.origin +
@@ -84,6 +91,26 @@ LoopSetup::LoopSetup(std::shared_ptr<const model::Model> nominal) : model(std::m
     throw std::invalid_argument(scene.origin +
                                 ": object: the closed loop rolls a disk (object.type: disk)");
   plan = make_plan(*model);
+  if (!make_controller) {
+    const control::ControllerChoice choice = model->controller;
+    make_controller = [choice] { return control::make_controller(choice); };
+  }
+  if (!make_estimator) {
+    const control::EstimatorChoice choice = model->estimator;
+    make_estimator = [choice](std::shared_ptr<const sim::RollingProblem> nominal) {
+      return control::make_estimator(choice, std::move(nominal));
+    };
+  }
+}
+
+control::ControllerContext LoopSetup::controller_context(double t_start) const {
+  control::ControllerContext c;
+  c.plan = plan.plan;
+  c.model = model->paper_plant;
+  c.dt = model->control_dt;
+  c.t_start = t_start;
+  c.s_h_start = model->spec.sim.initial.s_h;
+  return c;
 }
 
 namespace {
@@ -161,143 +188,281 @@ void fill_truth(TickLog& row, const SimWorld* world, double t, const control::Es
 
 }  // namespace
 
-LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint& joint,
-                    const LoopOptions& options) {
-  const model::Model& model = *setup.model;
-  const Scene& scene = model.spec;
-  const double dt = 1.0 / scene.joint.rate;
-  const double t_start = options.t_start;
-  const control::Plan& plan = *setup.plan.plan;
-  const double t_limit = 2.0 * plan.duration() + 2.0;  // a stalled stage 2 ends in a safe stop
+struct Loop::State {
+  State(const LoopSetup& setup_, Clock& clock_, Camera& camera_, Joint& joint_,
+        const LoopOptions& options_, std::unique_ptr<control::Controller> controller_,
+        std::unique_ptr<control::Estimator> estimator_)
+      : setup(setup_),
+        model(*setup_.model),
+        scene(model.spec),
+        plan(*setup_.plan.plan),
+        clock(clock_),
+        camera(camera_),
+        joint(joint_),
+        options(options_),
+        controller(std::move(controller_)),
+        estimator(std::move(estimator_)),
+        safety(model.safety, options_.t_start),
+        tracker(model.tracker),
+        dt(1.0 / scene.joint.rate),
+        t_limit(2.0 * plan.duration() + 2.0),  // a stalled stage 2 ends in a safe stop
+        settle(scene.controller.settle) {}
 
-  LoopResult out;
-  out.k = setup.plan.k;
-  out.period = setup.plan.period;
-  out.duration_s = kNaN;
-  // The estimator knows what the planner knew: the paper's rolling model, without losses.
-  control::Estimator estimator(model.paper_plant, model.estimator);
-  control::ButterflyController controller(setup.plan.plan, model.controller);
-  control::SafetyMonitor safety(model.safety, t_start);
-  vision::Tracker tracker(model.tracker);
+  const LoopSetup& setup;
+  const model::Model& model;
+  const Scene& scene;
+  const control::Plan& plan;
+  Clock& clock;
+  Camera& camera;
+  Joint& joint;
+  const LoopOptions& options;
+  std::unique_ptr<control::Controller> controller;
+  std::unique_ptr<control::Estimator> estimator;
+  control::SafetyMonitor safety;
+  vision::Tracker tracker;
   // The estimator is driven by what the joint did (its readings), not by what was commanded: a
   // replayed joint moves as it moved in the recording, and a real one lags its command.
   control::HandInputFromJoint hand_input;
   AngleHistory angles;
-  bool estimating = false;
+  const double dt, t_limit, settle;
+
+  LoopResult out;
+  long tick = -1;
+  bool in_tick = false, ended = false, estimating = false;
   double last_capture = -std::numeric_limits<double>::infinity();
   std::optional<double> t_rest;  // when the hand came to rest after finishing or stopping
-  const double settle = scene.controller.settle;
-  out.log.reserve(static_cast<std::size_t>((t_limit - t_start + settle) * scene.joint.rate) + 16);
+  std::optional<control::StopReason> stop;
+  bool done = false;
+  std::optional<double> t_done;
+  control::ControlInput input;
+  TickLog row;
 
-  for (long tick = 0;; ++tick) {
-    if (options.max_ticks && tick >= *options.max_ticks) break;
+  double time_of(long i) const {
     // Integer tick arithmetic: a replay computes the very same times.
-    const double t = t_start + static_cast<double>(tick) * dt;
-    TickLog row;
-    row.t = t;
-    const control::JointReading reading = joint.read(t);
-    row.theta = reading.theta;
-    row.theta_dot = reading.theta_dot;
-    angles.add(t, reading.theta);
-    if (auto why = safety.check_joint(reading)) controller.safe_stop(t, *why);
-
-    // Frames that have arrived: track, map to s_h, fold in.
-    while (auto frame = camera.poll(t)) {
-      ++out.frames;
-      const bool intact = frame->integrity == vision::FrameIntegrity::kIntact;
-      // A flagged frame is not recorded: a recording's frames are replayed as intact (lossless,
-      // bit-exact), so it would be measured there; its missing index reads as a dropped frame.
-      if (options.recorder && intact) options.recorder->add_frame(*frame);
-      count_flagged(frame->integrity, out);
-      const bool fresh = frame->t_capture > last_capture;
-      vision::TrackResult tr;
-      std::optional<control::Measurement> z;
-      FrameLog flog;
-      flog.index = frame->index;
-      flog.t_capture = frame->t_capture;
-      flog.t_arrival = frame->t_arrival;
-      flog.t_received = t;
-      flog.integrity = frame->integrity;
-      flog.stale = !fresh;
-      if (fresh) last_capture = frame->t_capture;
-      if (fresh && intact) {
-        const double guess = estimating ? estimator.estimate().s_h : scene.sim.initial.s_h;
-        z = measure_frame(*frame, *model.mapping, tracker, angles, guess, tr, flog);
-      }
-      out.frame_log.push_back(flog);
-      safety.frame(t, fresh, z.has_value());
-      if (z) {
-        ++out.measurements;
-        if (!estimating) {
-          estimator.reset(t, z->s_h, 0.0);
-          estimating = true;
-        } else {
-          const control::UpdateReport u = estimator.update(*z);
-          row.nis = u.nis;
-          if (auto why = safety.innovation(u.nis)) controller.safe_stop(t, *why);
-        }
-        row.measured = true;
-        row.s_meas = z->s_h;
-        row.t_capture = z->t_capture;
-      } else {
-        ++out.frames_lost;
-      }
-      if (options.on_frame) options.on_frame(*frame, tr, z);
-    }
-    if (auto why = safety.check_time(t)) controller.safe_stop(t, *why);
-    // Synthetic runs: the disk has left the hand's reach for good; stop the hand safely.
-    if (options.world && options.world->failure())
-      controller.safe_stop(t,
-                           {control::StopCause::kDisk, "disk: " + options.world->failure_detail()});
-    if (t > t_limit)
-      controller.safe_stop(
-          t, {control::StopCause::kTimeout, "timeout: the motion did not finish by t = " +
-                                                sim::format_significant(t_limit, 5) + " s"});
-
-    control::Estimate est;
-    if (estimating)
-      est = estimator.estimate();
-    else
-      est.s_h = scene.sim.initial.s_h;
-    fill_estimate(row, est, estimating);
-    const control::Command cmd = controller.step(t, reading, est);
-    row.command = cmd.theta_ddot;
-    row.stage = cmd.stage;
-    row.theta_plan = cmd.stage == control::Stage::kServo ? plan.hand(plan.time_at(est.s_h)).angle
-                                                         : plan.hand(std::max(t, 0.0)).angle;
-    joint.command(t, cmd.theta_ddot);
-    row.command_recorded = joint.recorded_command();
-    if (options.recorder) options.recorder->add_tick(reading, cmd.theta_ddot);
-    const control::HandInputChoice hand = hand_input.next(reading, cmd.theta_ddot);
-    row.theta_ddot = hand.input.theta_ddot;
-    row.theta_ddot_source = hand.source;
-    fill_truth(row, options.world, t, estimating ? &est : nullptr);
-    out.log.push_back(row);
-
-    // Ending: settle after the hand has stopped (finished or safe-stopped).
-    if ((controller.finished() || controller.stopped_safely()) && !t_rest &&
-        std::abs(reading.theta_dot) < 1e-3)
-      t_rest = t;
-    if (t_rest && t >= *t_rest + settle) break;
-
-    const double t_next = t_start + static_cast<double>(tick + 1) * dt;
-    if (estimating) {
-      estimator.propagate(t_next, hand.input);
-      ++(hand.source == control::AccelerationSource::kReadings ? out.acceleration_from_readings
-                                                               : out.acceleration_from_command);
-    }
-    if (options.progress && tick % 100 == 0) options.progress(t, plan.duration() + settle);
-    clock.sleep_until(t_next);
+    return options.t_start + static_cast<double>(i) * dt;
   }
-  out.finished = controller.finished();
-  out.safe_stop = controller.stopped_safely();
-  out.stop_reason = controller.stop_reason();
-  if (controller.t_motion_end()) out.duration_s = *controller.t_motion_end();
-  out.t_stage2 = controller.t_stage2();
-  out.t_stage3 = controller.t_stage3();
-  out.estimator_steps = estimator.steps();
-  out.estimator_repropagated = estimator.repropagated_steps();
+  void safe_stop(control::StopReason why) {
+    if (!stop) stop = std::move(why);
+  }
+  void take_frames(double t);
+};
+
+// Frames that have arrived by t: track, map to s_h, fold in.
+void Loop::State::take_frames(double t) {
+  while (auto frame = camera.poll(t)) {
+    ++out.frames;
+    const bool intact = frame->integrity == vision::FrameIntegrity::kIntact;
+    // A flagged frame is not recorded: a recording's frames are replayed as intact (lossless,
+    // bit-exact), so it would be measured there; its missing index reads as a dropped frame.
+    if (options.recorder && intact) options.recorder->add_frame(*frame);
+    count_flagged(frame->integrity, out);
+    const bool fresh = frame->t_capture > last_capture;
+    vision::TrackResult tr;
+    std::optional<control::Measurement> z;
+    FrameLog flog;
+    flog.index = frame->index;
+    flog.t_capture = frame->t_capture;
+    flog.t_arrival = frame->t_arrival;
+    flog.t_received = t;
+    flog.integrity = frame->integrity;
+    flog.stale = !fresh;
+    if (fresh) last_capture = frame->t_capture;
+    if (fresh && intact) {
+      const double guess = estimating ? estimator->estimate().s_h : scene.sim.initial.s_h;
+      z = measure_frame(*frame, *model.mapping, tracker, angles, guess, tr, flog);
+    }
+    out.frame_log.push_back(flog);
+    safety.frame(t, fresh, z.has_value());
+    if (z) {
+      ++out.measurements;
+      if (!estimating) {
+        estimator->reset(t, z->s_h, 0.0);
+        estimating = true;
+      } else {
+        const control::UpdateReport u = estimator->update(*z);
+        row.nis = u.nis;
+        if (auto why = safety.innovation(u.nis)) safe_stop(*why);
+      }
+      row.measured = true;
+      row.s_meas = z->s_h;
+      row.t_capture = z->t_capture;
+      input.measurement = z;
+    } else {
+      ++out.frames_lost;
+    }
+    if (options.on_frame) options.on_frame(*frame, tr, z);
+  }
+}
+
+Loop::Loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint& joint,
+           const LoopOptions& options, std::unique_ptr<control::Controller> controller,
+           std::unique_ptr<control::Estimator> estimator)
+    : s_(std::make_unique<State>(setup, clock, camera, joint, options, std::move(controller),
+                                 std::move(estimator))) {
+  if (!s_->estimator) throw std::invalid_argument("loop: no estimator");
+  State& s = *s_;
+  s.out.k = setup.plan.k;
+  s.out.period = setup.plan.period;
+  s.out.duration_s = kNaN;
+  s.out.estimator = s.estimator->name();
+  if (s.controller) {
+    s.out.controller = s.controller->name();
+    s.controller->start(setup.controller_context(options.t_start));
+  }
+  s.out.log.reserve(
+      static_cast<std::size_t>((s.t_limit - options.t_start + s.settle) * s.scene.joint.rate) + 16);
+}
+
+Loop::~Loop() = default;
+
+const control::ControlInput* Loop::sense() {
+  State& s = *s_;
+  if (s.in_tick) throw std::logic_error("Loop::sense: the tick before was not finished (act)");
+  if (s.ended) return nullptr;
+  const long tick = s.tick + 1;
+  if (s.options.max_ticks && tick >= *s.options.max_ticks) {
+    s.ended = true;
+    return nullptr;
+  }
+  s.tick = tick;
+  s.in_tick = true;
+  const double t = s.time_of(tick);
+  s.row = TickLog{};
+  s.row.t = t;
+  s.input = control::ControlInput{};
+  s.input.t = t;
+  const control::JointReading reading = s.joint.read(t);
+  s.input.joint = reading;
+  s.row.theta = reading.theta;
+  s.row.theta_dot = reading.theta_dot;
+  s.angles.add(t, reading.theta);
+  if (auto why = s.safety.check_joint(reading)) s.safe_stop(*why);
+  s.take_frames(t);
+  if (auto why = s.safety.check_time(t)) s.safe_stop(*why);
+  // Synthetic runs: the disk has left the hand's reach for good; stop the hand safely.
+  if (s.options.world && s.options.world->failure())
+    s.safe_stop({control::StopCause::kDisk, "disk: " + s.options.world->failure_detail()});
+  if (t > s.t_limit)
+    s.safe_stop({control::StopCause::kTimeout, "timeout: the motion did not finish by t = " +
+                                                   sim::format_significant(s.t_limit, 5) + " s"});
+  control::Estimate est;
+  if (s.estimating)
+    est = s.estimator->estimate();
+  else
+    est.s_h = s.scene.sim.initial.s_h;
+  fill_estimate(s.row, est, s.estimating);
+  s.input.estimate = est;
+  s.input.estimating = s.estimating;
+  return &s.input;
+}
+
+control::ControlOutput Loop::decide() {
+  State& s = *s_;
+  if (!s.in_tick) throw std::logic_error("Loop::decide: no tick begun (sense)");
+  if (!s.controller) throw std::logic_error("Loop::decide: the loop has no controller");
+  if (s.stop) return {};
+  try {
+    control::ControlOutput out = s.controller->step(s.input);
+    if (out.stop) s.safe_stop({control::StopCause::kController, out.stop->detail});
+    return out;
+  } catch (const std::invalid_argument&) {
+    throw;
+  } catch (const std::exception& e) {
+    s.safe_stop({control::StopCause::kController, std::string("controller: ") + e.what()});
+    return {};
+  }
+}
+
+void Loop::act(const control::ControlOutput& output) {
+  State& s = *s_;
+  if (!s.in_tick) throw std::logic_error("Loop::act: no tick begun (sense)");
+  const double t = s.input.t;
+  const control::JointReading& reading = s.input.joint;
+  TickLog& row = s.row;
+  double command;
+  if (s.stop) {
+    command = control::safe_stop_command(reading.theta_dot, s.model.safety.stop_deceleration, s.dt);
+    row.mode = "safe-stop";
+    row.theta_plan = s.plan.hand(std::max(t, 0.0)).angle;
+  } else {
+    if (!std::isfinite(output.theta_ddot))
+      throw std::invalid_argument(
+          "controller" + (s.out.controller.empty() ? "" : " '" + s.out.controller + "'") +
+          ": returned a non-finite acceleration (" + sim::format_significant(output.theta_ddot) +
+          ") at t = " + sim::format_significant(t, 6) + " s");
+    command = output.theta_ddot;
+    row.mode = output.mode;
+    row.theta_plan = output.theta_reference;
+    if (output.done && !s.done) {
+      s.done = true;
+      s.t_done = output.t_done ? *output.t_done : t;
+    }
+  }
+  if (s.out.mode_starts.empty() || s.out.mode_starts.back().second != row.mode)
+    s.out.mode_starts.emplace_back(t, row.mode);
+  row.command = command;
+  s.joint.command(t, command);
+  row.command_recorded = s.joint.recorded_command();
+  if (s.options.recorder) s.options.recorder->add_tick(reading, command);
+  const control::HandInputChoice hand = s.hand_input.next(reading, command);
+  row.theta_ddot = hand.input.theta_ddot;
+  row.theta_ddot_source = hand.source;
+  fill_truth(row, s.options.world, t, s.estimating ? &s.input.estimate : nullptr);
+  s.out.log.push_back(row);
+  s.in_tick = false;
+
+  // Ending: settle after the hand has stopped (finished or safe-stopped).
+  if ((s.done || s.stop) && !s.t_rest && std::abs(reading.theta_dot) < 1e-3) s.t_rest = t;
+  if (s.t_rest && t >= *s.t_rest + s.settle) {
+    s.ended = true;
+    return;
+  }
+  const double t_next = s.time_of(s.tick + 1);
+  if (s.estimating) {
+    s.estimator->propagate(t_next, hand.input);
+    ++(hand.source == control::AccelerationSource::kReadings ? s.out.acceleration_from_readings
+                                                             : s.out.acceleration_from_command);
+  }
+  if (s.options.progress && s.tick % 100 == 0) s.options.progress(t, s.plan.duration() + s.settle);
+  s.clock.sleep_until(t_next);
+}
+
+bool Loop::tick() {
+  if (!sense()) return false;
+  act(decide());
+  return !s_->ended;
+}
+
+bool Loop::stopping() const { return s_->stop.has_value(); }
+bool Loop::done() const { return s_->done; }
+double Loop::t() const { return s_->time_of(std::max(s_->tick, 0L)); }
+const LoopResult& Loop::result() const { return s_->out; }
+
+LoopResult Loop::finish() {
+  State& s = *s_;
+  LoopResult out = s.out;
+  out.finished = s.done && !s.stop;
+  out.safe_stop = s.stop.has_value();
+  out.stop_reason = s.stop;
+  if (out.finished && s.t_done) out.duration_s = *s.t_done;
+  for (const auto& [t, mode] : out.mode_starts) {
+    if (mode == "servo" && !out.t_stage2) out.t_stage2 = t;
+    if (mode == "finish" && !out.t_stage3) out.t_stage3 = t;
+  }
+  const control::EstimatorCounts counts = s.estimator->counts();
+  out.estimator_steps = counts.steps;
+  out.estimator_repropagated = counts.repropagated;
+  out.estimator_updates = counts.updates;
   return out;
+}
+
+LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint& joint,
+                    const LoopOptions& options) {
+  Loop loop(setup, clock, camera, joint, options, setup.make_controller(),
+            setup.make_estimator(setup.model->paper_plant));
+  while (loop.tick()) {
+  }
+  return loop.finish();
 }
 
 SyntheticResult run_synthetic(const LoopSetup& setup, std::shared_ptr<const model::Model> truth,

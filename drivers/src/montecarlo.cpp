@@ -109,8 +109,35 @@ Interval wilson_interval(long k, long n, double z) {
   return {std::max(0.0, centre - half), std::min(1.0, centre + half)};
 }
 
+Scene scene_for_controller(const Scene& nominal, const std::string& name,
+                           const std::string& field) {
+  Scene assumed = nominal;
+  if (name == "open-loop") {
+    assumed.controller.type = "paper";
+    assumed.controller.mode = "open-loop";
+    return assumed;
+  }
+  assumed.controller.mode = "feedback";
+  if (name == "feedback") return assumed;
+  const auto& types = control::controller_types();
+  if (std::find(types.begin(), types.end(), name) == types.end()) {
+    std::vector<std::string> known{"open-loop", "feedback"};
+    known.insert(known.end(), types.begin(), types.end());
+    throw std::invalid_argument(control::unknown_type_message(field, name, known));
+  }
+  assumed.controller.type = name;
+  return assumed;
+}
+
+std::vector<MonteCarloController> controllers_by_name(const std::vector<std::string>& names) {
+  std::vector<MonteCarloController> controllers;
+  for (const std::string& name : names) controllers.emplace_back(name);
+  return controllers;
+}
+
 MonteCarloResult run_montecarlo(const model::Model& nominal_model, const Perturbations& p, int n,
-                                std::uint64_t seed, const std::vector<std::string>& controllers,
+                                std::uint64_t seed,
+                                const std::vector<MonteCarloController>& controllers,
                                 unsigned threads, const MonteCarloProgress& progress,
                                 const WorldEdit& edit) {
   const Scene& nominal = nominal_model.spec;
@@ -118,12 +145,11 @@ MonteCarloResult run_montecarlo(const model::Model& nominal_model, const Perturb
   if (n < 1) throw std::invalid_argument("run_montecarlo: n must be >= 1");
   if (controllers.empty()) throw std::invalid_argument("run_montecarlo: no controller given");
   for (std::size_t i = 0; i < controllers.size(); ++i) {
-    if (controllers[i] != "open-loop" && controllers[i] != "feedback")
-      throw std::invalid_argument("controller: unknown controller '" + controllers[i] +
-                                  "' (open-loop or feedback)");
+    if (controllers[i].name.empty())
+      throw std::invalid_argument("controller: a controller without a name");
     for (std::size_t j = 0; j < i; ++j)
-      if (controllers[j] == controllers[i])
-        throw std::invalid_argument("controller: '" + controllers[i] + "' given twice");
+      if (controllers[j].name == controllers[i].name)
+        throw std::invalid_argument("controller: '" + controllers[i].name + "' given twice");
   }
   // Bad perturbations or scenes fail here, before any thread starts.
   perturb(nominal, p, seed, 0);
@@ -131,10 +157,10 @@ MonteCarloResult run_montecarlo(const model::Model& nominal_model, const Perturb
 
   // One setup per controller, shared read-only by the workers (the plan is simulated once).
   std::vector<std::unique_ptr<const LoopSetup>> setups;
-  for (const std::string& c : controllers) {
-    Scene assumed = nominal;
-    assumed.controller.mode = c;
-    setups.push_back(std::make_unique<const LoopSetup>(model::compile(std::move(assumed))));
+  for (const MonteCarloController& c : controllers) {
+    Scene assumed = c.make ? nominal : scene_for_controller(nominal, c.name);
+    setups.push_back(
+        std::make_unique<const LoopSetup>(model::compile(std::move(assumed)), c.make, c.estimator));
   }
 
   const std::size_t nc = controllers.size();
@@ -153,7 +179,7 @@ MonteCarloResult run_montecarlo(const model::Model& nominal_model, const Perturb
         RunRecord rec;
         rec.run = run;
         rec.seed = seed;
-        rec.controller = controllers[ci];
+        rec.controller = controllers[ci].name;
         // Each world is its perturbed scene compiled anew (as MuJoCo edits a spec and recompiles).
         Scene world = perturb(nominal, p, seed, run, &rec.drawn);
         if (edit) edit(world, run);
@@ -188,23 +214,26 @@ MonteCarloResult run_montecarlo(const model::Model& nominal_model, const Perturb
       });
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
-  int ok_open = 0, ok_feedback = 0, failed_open = 0, failed_feedback = 0;
-  for (const RunRecord& r : out.records) {
-    const bool open = r.controller == "open-loop";
-    if (r.outcome == Outcome::kNumericalFailure) (open ? failed_open : failed_feedback)++;
-    if (r.success) (open ? ok_open : ok_feedback)++;
-  }
   // A world that failed numerically has no physical outcome: the rates are over the others.
-  for (const std::string& c : controllers) {
-    if (c == "open-loop") {
-      out.success_open_loop = ok_open;
-      out.numerical_failures_open_loop = failed_open;
-      out.ci_open_loop = wilson_interval(ok_open, n - failed_open);
-    } else {
-      out.success_feedback = ok_feedback;
-      out.numerical_failures_feedback = failed_feedback;
-      out.ci_feedback = wilson_interval(ok_feedback, n - failed_feedback);
+  for (const MonteCarloController& c : controllers) {
+    ControllerSummary sum;
+    sum.name = c.name;
+    for (const RunRecord& r : out.records) {
+      if (r.controller != c.name) continue;
+      sum.numerical_failures += r.outcome == Outcome::kNumericalFailure;
+      sum.successes += r.success;
     }
+    sum.ci = wilson_interval(sum.successes, n - sum.numerical_failures);
+    if (c.name == "open-loop") {
+      out.success_open_loop = sum.successes;
+      out.numerical_failures_open_loop = sum.numerical_failures;
+      out.ci_open_loop = sum.ci;
+    } else if (c.name == "feedback") {
+      out.success_feedback = sum.successes;
+      out.numerical_failures_feedback = sum.numerical_failures;
+      out.ci_feedback = sum.ci;
+    }
+    out.summaries.push_back(std::move(sum));
   }
   return out;
 }

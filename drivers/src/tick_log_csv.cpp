@@ -140,7 +140,7 @@ double tick_log_number(const TickLog& r, int column) {
 }
 
 std::string tick_log_text(const TickLog& r, int column) {
-  if (column == kStage) return control::to_string(r.stage);
+  if (column == kStage) return r.mode;
   if (column == kThetaDdotSource) return control::to_string(r.theta_ddot_source);
   if (column == kModeTrue) return std::isfinite(r.s_true) ? sim::to_string(r.mode_true) : "";
   throw std::logic_error("log column " + std::to_string(column) + " is not text");

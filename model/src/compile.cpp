@@ -72,25 +72,38 @@ namespace {
 void compile_loop(Model& m) {
   const Scene& scene = m.spec;
   const EstimatorSpec& e = scene.estimator;
-  m.estimator.model = control::parse_estimator_model(e.model);
-  m.estimator.latency_compensation = e.latency_compensation;
-  m.estimator.process_noise = e.process_noise;
+  control::EstimatorConfig& ec = m.estimator.config;
+  m.estimator.type = e.type;
+  ec.model = control::parse_estimator_model(e.model);
+  ec.latency_compensation = e.latency_compensation;
+  ec.process_noise = e.process_noise;
   // The estimator re-propagates from the capture time of a late frame: its history must reach
   // back past the worst latency and a frame or two.
   if (scene.camera)
-    m.estimator.history =
-        std::max(m.estimator.history, 3.0 * (scene.camera->latency + scene.camera->latency_jitter) +
+    ec.history = std::max(ec.history, 3.0 * (scene.camera->latency + scene.camera->latency_jitter) +
                                           2.0 / scene.camera->fps);
+  const auto& known_estimators = control::estimator_types();
+  if (std::find(known_estimators.begin(), known_estimators.end(), e.type) == known_estimators.end())
+    throw std::invalid_argument(
+        scene.origin + ": " +
+        control::unknown_type_message("estimator.type", e.type, known_estimators));
 
   const ControllerSpec& c = scene.controller;
-  m.controller.feedback = c.mode == "feedback";
-  m.controller.law = control::parse_servo_law(c.law);
-  m.controller.kp = c.kp;
-  m.controller.kd = c.kd;
-  m.controller.dip_until = c.dip_until;
-  m.controller.finish_after = c.finish_after;
-  m.controller.stop_deceleration = c.stop_deceleration;
-  m.controller.dt = 1.0 / scene.joint.rate;
+  m.controller.type = c.type;
+  m.controller.paper.feedback = c.mode == "feedback";
+  m.controller.paper.law = control::parse_servo_law(c.law);
+  m.controller.paper.kp = c.kp;
+  m.controller.paper.kd = c.kd;
+  m.controller.paper.dip_until = c.dip_until;
+  m.controller.paper.finish_after = c.finish_after;
+  const auto& known_controllers = control::controller_types();
+  if (std::find(known_controllers.begin(), known_controllers.end(), c.type) ==
+      known_controllers.end())
+    throw std::invalid_argument(
+        scene.origin + ": " +
+        control::unknown_type_message("controller.type", c.type, known_controllers));
+  m.control_dt = 1.0 / scene.joint.rate;
+  m.safety.stop_deceleration = c.stop_deceleration;
   m.safety.lost_timeout = c.lost_timeout;
   m.safety.innovation_gate = c.innovation_gate;
   m.safety.innovation_strikes = c.innovation_strikes;

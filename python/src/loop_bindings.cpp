@@ -154,7 +154,8 @@ py::dict montecarlo_binding(const py::object& scene, int runs, std::uint64_t see
   }
   drivers::validate(p);
   const drivers::MonteCarloResult r = run_interruptible([&] {
-    return drivers::run_montecarlo(*nominal, p, runs, seed, controllers, threads,
+    return drivers::run_montecarlo(*nominal, p, runs, seed,
+                                   drivers::controllers_by_name(controllers), threads,
                                    InterruptScope::progress());
   });
   py::dict out;

@@ -313,10 +313,12 @@ void read_joint(const MapReader& root, Scene& scene) {
 void read_controller(const MapReader& root, Scene& scene) {
   const auto c = root.optional_section(
       "controller",
-      {"mode", "plan", "law", "kp", "kd", "dip_until", "finish_after", "lost_timeout",
+      {"type", "mode", "plan", "law", "kp", "kd", "dip_until", "finish_after", "lost_timeout",
        "innovation_gate", "innovation_strikes", "max_joint_jump", "stop_deceleration", "settle"});
   if (!c) return;
   ControllerSpec& cs = scene.controller;
+  // The type names a law compiled from the registry of control (model::compile checks it).
+  if (c->has("type")) cs.type = c->text("type");
   cs.mode = c->choice_or("mode", {"feedback", "open-loop"}, cs.mode.c_str());
   cs.plan = c->choice_or("plan", {"scene", "solve"}, cs.plan.c_str());
   cs.law = c->choice_or("law", {"paper", "time-scaled"}, cs.law.c_str());
@@ -338,10 +340,11 @@ void read_controller(const MapReader& root, Scene& scene) {
 }
 
 void read_estimator(const MapReader& root, Scene& scene) {
-  const auto e =
-      root.optional_section("estimator", {"model", "latency_compensation", "process_noise"});
+  const auto e = root.optional_section("estimator",
+                                       {"type", "model", "latency_compensation", "process_noise"});
   if (!e) return;
   EstimatorSpec& es = scene.estimator;
+  if (e->has("type")) es.type = e->text("type");
   es.model = e->choice_or("model", {"rolling", "constant-velocity"}, es.model.c_str());
   es.latency_compensation = e->boolean_or("latency_compensation", es.latency_compensation);
   es.process_noise = e->positive_or("process_noise", es.process_noise);

@@ -72,8 +72,7 @@ ServoStats servo_stats(const drivers::LoopResult& loop) {
   double sum = 0, nees = 0;
   long n = 0, m = 0;
   for (const drivers::TickLog& row : loop.log) {
-    if (row.stage != control::Stage::kServo || !row.estimating || !std::isfinite(row.s_true))
-      continue;
+    if (row.mode != "servo" || !row.estimating || !std::isfinite(row.s_true)) continue;
     const double e = row.s_est - row.s_true;
     sum += e * e;
     ++n;

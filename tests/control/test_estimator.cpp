@@ -19,7 +19,7 @@
 #include <vector>
 
 using namespace flatland;
-using control::Estimator;
+using Estimator = control::Ekf;
 using control::EstimatorConfig;
 using control::EstimatorModel;
 using control::HandInput;
@@ -478,7 +478,7 @@ TEST(Estimator, RejectsTimeGoingBackAndFutureCaptures) {
   est.propagate(1.001, {});
   EXPECT_THROW(est.update({1.01, 1.01, -1.0, kSigmaZ}), std::invalid_argument);
   EXPECT_THROW(est.update({1.0, 1.001, -1.0, 0.0}), std::invalid_argument);
-  EXPECT_EQ(est.steps(), 1);
+  EXPECT_EQ(est.counts().steps, 1);
 }
 
 // A capture older than the stored history cannot be applied (the loop logs and drops it); one
@@ -492,14 +492,14 @@ TEST(Estimator, CaptureOlderThanHistoryIsNotApplied) {
   const control::Estimate before = est.estimate();
   const control::UpdateReport old = est.update({0.1, 0.2, -1.0, kSigmaZ});
   EXPECT_FALSE(old.applied);
-  EXPECT_EQ(est.updates(), 0);
+  EXPECT_EQ(est.counts().updates, 0);
   EXPECT_EQ(est.estimate().s_h, before.s_h);
   EXPECT_TRUE(est.estimate().covariance == before.covariance);
   // Inside the step [0.170, 0.171): that step and the 29 after it are redone.
   const control::UpdateReport recent = est.update({0.1705, 0.2, -1.0, kSigmaZ});
   EXPECT_TRUE(recent.applied);
   EXPECT_EQ(recent.repropagated_steps, 30);
-  EXPECT_EQ(est.repropagated_steps(), 30);
+  EXPECT_EQ(est.counts().repropagated, 30);
   EXPECT_LT(est.estimate().covariance(0, 0), before.covariance(0, 0));
 }
 

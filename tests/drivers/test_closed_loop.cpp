@@ -40,7 +40,8 @@ std::pair<double, double> mean_chi2_bounds(long n, int dof) {
     const double c = 2.0 / (9.0 * k);
     return k * std::pow(1.0 - c + z * std::sqrt(c), 3.0);
   };
-  return {quantile(-1.959964) / static_cast<double>(n), quantile(1.959964) / static_cast<double>(n)};
+  return {quantile(-1.959964) / static_cast<double>(n),
+          quantile(1.959964) / static_cast<double>(n)};
 }
 
 struct TempDir {
@@ -56,7 +57,6 @@ struct TempDir {
     fs::remove_all(path, ec);
   }
 };
-
 
 /// The apex time (s_h rising through 0) and the worst asymmetry of theta and s_h about it over
 /// +-1.5 s: theta(t_a + tau) + theta(t_a - tau) = 2 theta(t_a) and s_h(t_a + tau) = -s_h(t_a - tau)
@@ -78,8 +78,9 @@ Symmetry symmetry(const std::vector<drivers::TickLog>& log) {
   out.theta_apex = at(log, out.t_apex, theta);
   out.theta = out.s = 0;
   for (double tau = 0.1; tau <= 1.5; tau += 0.1) {
-    out.theta = std::max(out.theta, std::abs(at(log, out.t_apex + tau, theta) +
-                                             at(log, out.t_apex - tau, theta) - 2 * out.theta_apex));
+    out.theta =
+        std::max(out.theta, std::abs(at(log, out.t_apex + tau, theta) +
+                                     at(log, out.t_apex - tau, theta) - 2 * out.theta_apex));
     out.s = std::max(out.s, std::abs(at(log, out.t_apex + tau, s) + at(log, out.t_apex - tau, s)));
   }
   return out;
@@ -302,24 +303,24 @@ TEST_P(ClosedLoopFault, SafeStop) {
   EXPECT_NE(r.loop.stop_reason->detail.find(expected_reason), std::string::npos)
       << r.loop.stop_reason->detail;
   // The sentence starts with the cause's name, as the CLI and the logs print it.
-  EXPECT_EQ(r.loop.stop_reason->detail.rfind(std::string(control::to_string(expected_cause)) + ":",
-                                             0),
-            0u)
+  EXPECT_EQ(
+      r.loop.stop_reason->detail.rfind(std::string(control::to_string(expected_cause)) + ":", 0),
+      0u)
       << r.loop.stop_reason->detail;
   ASSERT_FALSE(r.loop.log.empty());
   const drivers::TickLog& last = r.loop.log.back();
-  EXPECT_EQ(last.stage, control::Stage::kSafeStop);
+  EXPECT_EQ(last.mode, "safe-stop");
   // The hand comes to rest; the disk, thrown by the stopping hand, may fall back on it later and
   // knock it (the drive holds it: it stays within a few mrad/s).
   bool rested = false;
   for (const auto& row : r.loop.log)
-    rested = rested || (row.stage == control::Stage::kSafeStop && std::abs(row.theta_dot) < 1e-3);
+    rested = rested || (row.mode == "safe-stop" && std::abs(row.theta_dot) < 1e-3);
   EXPECT_TRUE(rested) << "the hand never came to rest";
   EXPECT_LT(std::abs(last.theta_dot), 0.05) << "the hand is not held";
   // Within the drive's limits: the safe stop decelerates at controller.stop_deceleration.
   double worst = 0;
   for (const auto& row : r.loop.log)
-    if (row.stage == control::Stage::kSafeStop) worst = std::max(worst, std::abs(row.command));
+    if (row.mode == "safe-stop") worst = std::max(worst, std::abs(row.command));
   EXPECT_LE(worst, scene.controller.stop_deceleration + 1e-9);
   std::fprintf(stderr, "[ fault %s ] %s\n", fault, r.loop.stop_reason->detail.c_str());
 }

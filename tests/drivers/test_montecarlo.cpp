@@ -175,14 +175,15 @@ TEST(MonteCarloRun, RejectsBadArguments) {
   EXPECT_THROW(
       drivers::run_montecarlo(*flatland::model::compile(s0), {}, 1, 1, {"feedback", "feedback"}),
       std::invalid_argument);
-  EXPECT_THROW(drivers::run_montecarlo(*flatland::model::compile(s0), {}, 1, 1, {}),
+  EXPECT_THROW(drivers::run_montecarlo(*flatland::model::compile(s0), {}, 1, 1,
+                                       std::vector<drivers::MonteCarloController>{}),
                std::invalid_argument);
 }
 
 TEST(MonteCarloRun, ResultsDoNotDependOnTheThreadCount) {
   const Scene s0 = nominal();
   const drivers::Perturbations p;
-  const std::vector<std::string> controllers = {"open-loop", "feedback"};
+  const std::vector<drivers::MonteCarloController> controllers = {"open-loop", "feedback"};
   // Four worlds (two in the sanitizer stage), each run by both controllers.
   const int runs = flatland::test::short_tests() ? 2 : 4;
   const long records = 2L * runs;
@@ -208,7 +209,7 @@ TEST(MonteCarloRun, ResultsDoNotDependOnTheThreadCount) {
     SCOPED_TRACE("record " + std::to_string(i));
     // Ordered by run, then controller, whoever ran it.
     EXPECT_EQ(a.run, static_cast<int>(i / 2));
-    EXPECT_EQ(a.controller, controllers[i % 2]);
+    EXPECT_EQ(a.controller, controllers[i % 2].name);
     EXPECT_EQ(b.run, a.run);
     EXPECT_EQ(b.controller, a.controller);
     EXPECT_EQ(b.success, a.success);

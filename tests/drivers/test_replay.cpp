@@ -92,8 +92,9 @@ class LossyReplay : public ::testing::Test {
         new drivers::SyntheticResult(drivers::run_synthetic(setup, model::compile(scene), opt));
     recorder.finish();
 
-    // H.264 through flatland's MP4 writer (render::open_mp4, a key frame a second): lossy, as a real camera's
-    // recorder or a re-encode for storage would be. Its frame times go into the timestamps file.
+    // H.264 through flatland's MP4 writer (render::open_mp4, a key frame a second): lossy, as a
+    // real camera's recorder or a re-encode for storage would be. Its frame times go into the
+    // timestamps file.
     drivers::RecordedCamera frames(*dir_ / "rec");
     const fs::path mp4 = *dir_ / "rec.mp4";
     render::Mp4Writer writer;
@@ -198,8 +199,7 @@ TEST_F(LossyReplay, ChangedGainRunsToTheEndAndLogsWhereTheCommandsPart) {
     ASSERT_EQ(row.sdot_est, was[i].sdot_est) << "tick " << i;
     // The log carries the recorded command beside the new one.
     ASSERT_EQ(row.command_recorded, was[i].command) << "tick " << i;
-    if (first_servo < 0 && was[i].stage == control::Stage::kServo)
-      first_servo = static_cast<long>(i);
+    if (first_servo < 0 && was[i].mode == "servo") first_servo = static_cast<long>(i);
     if (row.command != row.command_recorded) {
       ++parted;
       if (first_parted < 0) first_parted = static_cast<long>(i);

@@ -68,15 +68,18 @@ TEST(Model, CompilesEveryPartOfTheAirTableScene) {
   EXPECT_EQ(m->tracker.plane_z, scene.render.disk_thickness);
 
   // The loop's configs carry the scene's values.
-  EXPECT_EQ(m->controller.feedback, scene.controller.mode == "feedback");
-  EXPECT_EQ(m->controller.kp, scene.controller.kp);
-  EXPECT_EQ(m->controller.kd, scene.controller.kd);
-  EXPECT_DOUBLE_EQ(m->controller.dt, 1.0 / scene.joint.rate);
+  EXPECT_EQ(m->controller.type, scene.controller.type);
+  EXPECT_EQ(m->controller.paper.feedback, scene.controller.mode == "feedback");
+  EXPECT_EQ(m->controller.paper.kp, scene.controller.kp);
+  EXPECT_EQ(m->controller.paper.kd, scene.controller.kd);
+  EXPECT_DOUBLE_EQ(m->control_dt, 1.0 / scene.joint.rate);
+  EXPECT_EQ(m->safety.stop_deceleration, scene.controller.stop_deceleration);
+  EXPECT_EQ(m->estimator.type, scene.estimator.type);
   EXPECT_EQ(m->safety.lost_timeout, scene.controller.lost_timeout);
   EXPECT_EQ(m->safety.innovation_strikes, scene.controller.innovation_strikes);
-  EXPECT_EQ(m->estimator.process_noise, scene.estimator.process_noise);
+  EXPECT_EQ(m->estimator.config.process_noise, scene.estimator.process_noise);
   // The estimator's history reaches past the worst latency and two frames.
-  EXPECT_GE(m->estimator.history,
+  EXPECT_GE(m->estimator.config.history,
             3 * (scene.camera->latency + scene.camera->latency_jitter) + 2 / scene.camera->fps);
 }
 

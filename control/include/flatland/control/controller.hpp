@@ -7,9 +7,11 @@
 //     time at which s_h = finish_after, plus a cubic that removes, by the plan's end, the angle and
 //     rate offsets the hand had when stage 3 began (so it stops at rest on the plan's end).
 // The commanded acceleration is integrated by the joint into a reference that its PD torque loop
-// tracks. Open-loop mode plays the plan's acceleration from t = 0.
+// tracks. Open-loop mode plays the plan's acceleration from t = 0. The safe stop is the loop's
+// (safe_stop_command): a controller only asks for one.
 #pragma once
 
+#include "flatland/control/interfaces.hpp"
 #include "flatland/control/types.hpp"
 #include "flatland/sim/motion.hpp"
 #include "flatland/sim/simulate.hpp"
@@ -44,7 +46,7 @@ class Plan {
  private:
   std::shared_ptr<const sim::HandMotion> motion_;
   double duration_;
-  std::vector<double> s_, t_;          ///< lookup table, s increasing
+  std::vector<double> s_, t_;                        ///< lookup table, s increasing
   std::vector<double> plan_t_, plan_s_, plan_sdot_;  ///< s_h(t) and its rate at fine steps
 };
 
@@ -61,65 +63,46 @@ enum class ServoLaw {
 std::string to_string(ServoLaw law);  ///< "paper", "time-scaled"
 ServoLaw parse_servo_law(const std::string& name);
 
-struct ControllerConfig {
+/// The paper controller's parameters (scene section `controller`).
+struct PaperConfig {
   bool feedback = true;  ///< false: open-loop playback of the plan
   ServoLaw law = ServoLaw::kPaper;
   double kp = 900.0, kd = 120.0;
   double dip_until = -0.9, finish_after = 0.9;
-  double stop_deceleration = 20.0;  ///< rad/s^2
-  double dt = 1e-3;                 ///< s, the control period
 };
 
-/// What made the loop stop safely: a value to count and compare, with the sentence for people.
-enum class StopCause {
-  kJoint,      ///< an implausible joint reading (non-finite, an encoder glitch)
-  kEstimator,  ///< too many implausible innovations in a row
-  kCamera,     ///< no frames, or frames that stopped changing
-  kTracking,   ///< frames, but no disk measured in them for too long
-  kDisk,       ///< the world's disk failed (dropped, slid off)
-  kTimeout,    ///< the motion did not finish in time
-};
-/// "joint", "estimator", "camera", "tracking", "disk", "timeout".
-const char* to_string(StopCause cause);
-
-struct StopReason {
-  StopCause cause = StopCause::kTimeout;
-  std::string detail;  ///< one sentence, starting with to_string(cause) and a colon
-};
-
-class ButterflyController {
+/// The paper's controller (type `paper`): section 5's three stages in feedback mode, the plan's
+/// playback in open-loop mode. Its modes: "waiting", "dip", "servo", "finish", "open-loop", "done".
+class PaperController final : public Controller {
  public:
-  ButterflyController(std::shared_ptr<const Plan> plan, ControllerConfig config);
-  /// The command for the tick starting at t. `estimate` is ignored in open-loop mode.
-  Command step(double t, const JointReading& joint, const Estimate& estimate);
-  /// Switch to the safe stop (stays there). `reason` is kept for the log; the first one counts.
-  void safe_stop(double t, StopReason reason);
+  explicit PaperController(PaperConfig config);
+  void start(const ControllerContext& context) override;
+  ControlOutput step(const ControlInput& input) override;
+  std::string name() const override { return "paper"; }
   Stage stage() const { return stage_; }
-  bool finished() const { return stage_ == Stage::kDone; }
-  bool stopped_safely() const { return stage_ == Stage::kSafeStop; }
-  /// Why it stopped safely (nullopt unless stopped_safely()).
-  const std::optional<StopReason>& stop_reason() const { return stop_reason_; }
-  std::optional<double> t_motion_end() const { return t_end_; }  ///< when the hand stopped
-  std::optional<double> t_stage2() const { return t_stage2_; }
-  std::optional<double> t_stage3() const { return t_stage3_; }
 
  private:
   double plan_acceleration(double tau) const;  ///< mid-tick value for a 2nd-order reference
   std::shared_ptr<const Plan> plan_;
-  ControllerConfig config_;
+  PaperConfig config_;
+  double dt_ = 1e-3;
   Stage stage_ = Stage::kWaiting;
-  std::optional<StopReason> stop_reason_;
-  std::optional<double> t_end_, t_stage2_, t_stage3_;
+  std::optional<double> t_end_;
   // Stage 3: plan time at its start and the cubic correction's coefficients.
   double tau3_ = 0, t3_ = 0, c2_ = 0, c3_ = 0;
 };
 
+/// The safe stop: decelerate at most at `deceleration` (rad/s^2), and to exactly zero rate within
+/// one tick at the end.
+double safe_stop_command(double theta_dot, double deceleration, double dt);
+
 /// Watches the loop's inputs for faults that call for a safe stop.
 struct SafetyConfig {
-  double lost_timeout = 0.25;      ///< s without a new measurement
-  double innovation_gate = 50.0;   ///< NIS beyond this is implausible
-  int innovation_strikes = 3;      ///< consecutive implausible innovations
-  double max_joint_jump = 0.05;    ///< rad, reading vs. prediction from the previous reading
+  double lost_timeout = 0.25;       ///< s without a new measurement
+  double innovation_gate = 50.0;    ///< NIS beyond this is implausible
+  int innovation_strikes = 3;       ///< consecutive implausible innovations
+  double max_joint_jump = 0.05;     ///< rad, reading vs. prediction from the previous reading
+  double stop_deceleration = 20.0;  ///< rad/s^2, the safe stop's
 };
 
 class SafetyMonitor {

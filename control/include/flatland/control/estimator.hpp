@@ -10,6 +10,7 @@
 // A constant-velocity model (sddot_h = 0) is the measured baseline.
 #pragma once
 
+#include "flatland/control/interfaces.hpp"
 #include "flatland/control/types.hpp"
 #include "flatland/sim/rolling.hpp"
 
@@ -42,37 +43,31 @@ struct EstimatorConfig {
   double initial_sigma_sdot = 0.02;  ///< 1/s, of the initial sdot_h
 };
 
-/// What one measurement update did (for logs, consistency tests and fault detection).
-struct UpdateReport {
-  bool applied = false;         ///< false if the capture time is older than the stored history
-  double innovation = 0;        ///< z - predicted s_h at the capture time
-  double innovation_sigma = 0;  ///< sqrt(H P H^T + R)
-  double nis = 0;               ///< normalised innovation squared (chi-square, 1 dof)
-  int repropagated_steps = 0;
-};
-
-class Estimator {
+/// The extended Kalman filter (type `ekf`).
+class Ekf final : public Estimator {
  public:
   /// `model`: the nominal hand, disk and in-plane gravity (its motion is not used: the hand's
   /// kinematics come from HandInput). Throws std::invalid_argument if the object is not a disk
   /// or a config field is invalid (the message names the field, e.g. "estimator.history: ...").
   /// The belief starts at t = 0, (0, 0) with the initial covariance; call reset().
-  Estimator(std::shared_ptr<const sim::RollingProblem> model, EstimatorConfig config);
+  Ekf(std::shared_ptr<const sim::RollingProblem> model, EstimatorConfig config);
 
   /// Start at time t from (s_h, sdot_h) with the configured initial covariance; clears history.
-  void reset(double t, double s_h, double sdot_h);
+  void reset(double t, double s_h, double sdot_h) override;
   /// Advance the belief from its current time to t_next (> current time) with the hand input
   /// held over the interval (angle and rate at the start, acceleration constant). Stored for
   /// re-propagation. Throws std::invalid_argument if t_next is not after the current time (or
   /// anything is non-finite), std::runtime_error if the state becomes non-finite (the estimator
   /// must then be reset).
-  void propagate(double t_next, const HandInput& input);
+  void propagate(double t_next, const HandInput& input) override;
   /// Fold in a measurement. z.t_capture <= the current time. With latency compensation the
   /// update is made at t_capture (rewind + re-propagate); without, at the current time. A
   /// capture older than the stored history is not applied (report.applied = false). Throws
   /// std::invalid_argument for a capture after the current time, sigma <= 0 or non-finite data.
-  UpdateReport update(const Measurement& z);
-  Estimate estimate() const;
+  UpdateReport update(const Measurement& z) override;
+  Estimate estimate() const override;
+  EstimatorCounts counts() const override { return {steps_, repropagated_, updates_}; }
+  std::string name() const override { return "ekf"; }
   const EstimatorConfig& config() const { return config_; }
 
   long steps() const { return steps_; }                      ///< propagation steps taken

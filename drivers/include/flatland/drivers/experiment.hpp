@@ -1,11 +1,13 @@
 // The closed loop of one butterfly experiment (paper section 5), run against any Clock, Camera
-// and Joint: each 1 kHz tick reads the joint, turns arrived frames into measurements of s_h
-// (tracker -> pixel -> table -> hand -> s_h at the hand angle of the capture time), folds them
-// into the estimator, asks the controller for an acceleration, commands the joint and propagates
-// the estimator over the tick with what the joint did (control/hand_input.hpp). The same code runs
-// synthetic, recorded and live experiments.
+// and Joint, with any controller and estimator (control/interfaces.hpp): each 1 kHz tick reads the
+// joint, turns arrived frames into measurements of s_h (tracker -> pixel -> table -> hand -> s_h
+// at the hand angle of the capture time), folds them into the estimator, asks the controller for
+// an acceleration, commands the joint and propagates the estimator over the tick with what the
+// joint did (control/hand_input.hpp). The same code runs synthetic, recorded and live experiments.
+// The loop owns the safety monitor and the safe stop: a controller only asks for one.
 #pragma once
 
+#include "flatland/control/choice.hpp"
 #include "flatland/control/controller.hpp"
 #include "flatland/control/estimator.hpp"
 #include "flatland/control/hand_input.hpp"
@@ -47,13 +49,17 @@ struct TickLog {
   /// A replay: the command the recorded run gave at this tick (Joint::recorded_command; NaN
   /// otherwise). Where it parts from `command` is where the changed code decided differently.
   double command_recorded = 0;
-  control::Stage stage = control::Stage::kWaiting;
+  /// The controller's mode ("dip", "servo", ...) or the loop's own: "safe-stop".
+  std::string mode;
   double s_est = 0, sdot_est = 0, var_s = 0, var_sdot = 0;  ///< estimate at t (before the tick)
   bool estimating = false;
   bool measured = false;  ///< a measurement was folded in at this tick
   double s_meas = 0, nis = 0;
-  double t_capture = 0;   ///< s, when the measured frame was exposed (t minus the latency)
-  double theta_plan = 0;  ///< the plan's angle for the estimated s_h (stage 2) or time
+  double t_capture = 0;  ///< s, when the measured frame was exposed (t minus the latency)
+  /// The angle the controller steered toward (ControlOutput::theta_reference; the paper's: the
+  /// plan's angle for the estimated s_h in stage 2, else at the time); in a safe stop the plan's
+  /// angle at the time.
+  double theta_plan = 0;
   // Truth (synthetic runs only; NaN otherwise).
   double s_true = 0, sdot_true = 0, theta_true = 0, fn_ratio = 0, mu_required = 0, nees = 0;
   sim::ContactMode mode_true = sim::ContactMode::kRolling;  ///< the contact's mode (synthetic)
@@ -98,20 +104,82 @@ struct LoopResult {
   long frames_damaged = 0, frames_repeated = 0, frames_unreadable = 0;
   std::vector<FrameLog> frame_log;  ///< every frame received, in order
   long measurements = 0;
+  /// When each of the controller's modes began (in order; a mode entered twice appears twice).
+  std::vector<std::pair<double, std::string>> mode_starts;
+  /// The paper controller's stage 2 and 3 (the first ticks in modes "servo" and "finish").
   std::optional<double> t_stage2, t_stage3;
-  double k = 0, period = 0;  ///< the plan used
-  long estimator_steps = 0, estimator_repropagated = 0;
+  std::string controller, estimator;  ///< their names (Controller::name, Estimator::name)
+  double k = 0, period = 0;           ///< the plan used
+  long estimator_steps = 0, estimator_repropagated = 0, estimator_updates = 0;
   /// The estimator's propagations by where the hand's acceleration came from.
   long acceleration_from_readings = 0, acceleration_from_command = 0;
 };
 
-/// What the loop assumes: the nominal compiled scene (its mapping, tracker, estimator,
-/// controller and safety configs) and its plan, simulated once; shared read-only by experiments.
-/// Needs a camera and a disk.
+/// Makes a fresh controller for one run (called once per run; Monte Carlo calls it from its
+/// worker threads, so it must be safe to call concurrently).
+using ControllerFactory = std::function<std::unique_ptr<control::Controller>()>;
+/// Makes a fresh estimator for one run, on the nominal model it is given (the paper's rolling
+/// model: what the plan assumed). Called as ControllerFactory is.
+using EstimatorFactory = std::function<std::unique_ptr<control::Estimator>(
+    std::shared_ptr<const sim::RollingProblem> nominal)>;
+
+/// What the loop assumes: the nominal compiled scene (its mapping, tracker, safety config), its
+/// plan, simulated once, and how to make the controller and the estimator of a run (the scene's
+/// choice unless the caller brings their own); shared read-only by experiments. Needs a camera
+/// and a disk.
 struct LoopSetup {
   explicit LoopSetup(std::shared_ptr<const model::Model> nominal);
+  /// With the caller's own controller and/or estimator; an empty factory keeps the scene's.
+  LoopSetup(std::shared_ptr<const model::Model> nominal, ControllerFactory controller,
+            EstimatorFactory estimator = {});
   std::shared_ptr<const model::Model> model;
   PlanInfo plan;
+  ControllerFactory make_controller;  ///< never empty
+  EstimatorFactory make_estimator;    ///< never empty
+  /// What a controller is started with in a loop whose first tick is at t_start.
+  control::ControllerContext controller_context(double t_start) const;
+};
+
+/// One closed-loop experiment, a tick at a time. Each tick is sense() (read the joint, take the
+/// arrived frames, fold in their measurements, check safety), the controller's step on the
+/// returned input, then act() (command the joint, log, propagate, advance the clock). run_loop
+/// runs it with the setup's controller; a step-by-step environment (Python's flatland.Env)
+/// calls sense() and act() itself with its own commands.
+class Loop {
+ public:
+  /// `controller` may be null when the caller drives the loop with act() alone.
+  Loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint& joint,
+       const LoopOptions& options, std::unique_ptr<control::Controller> controller,
+       std::unique_ptr<control::Estimator> estimator);
+  ~Loop();
+  Loop(const Loop&) = delete;
+  Loop& operator=(const Loop&) = delete;
+
+  /// Begin the next tick: nullptr once the loop has ended (settled after the motion or a safe
+  /// stop, or the replay's ticks used up), else what the controller sees at this tick.
+  const control::ControlInput* sense();
+  /// Ask the loop's controller for this tick's command (it must have one). A controller that
+  /// throws std::runtime_error (or anything but std::invalid_argument) stops the loop safely
+  /// with its message (cause "controller"); std::invalid_argument propagates.
+  control::ControlOutput decide();
+  /// Finish the tick sense() began with `output`: during a safe stop the loop's deceleration
+  /// replaces it. std::invalid_argument for a non-finite acceleration.
+  void act(const control::ControlOutput& output);
+  /// sense(), decide(), act(); false once the loop has ended.
+  bool tick();
+
+  /// The loop is stopping safely (the controller is no longer asked).
+  bool stopping() const;
+  /// The controller has declared its motion done.
+  bool done() const;
+  double t() const;                  ///< the current tick's time
+  const LoopResult& result() const;  ///< so far
+  /// The result, with the counts of the run filled in; call once the loop has ended.
+  LoopResult finish();
+
+ private:
+  struct State;
+  std::unique_ptr<State> s_;
 };
 
 LoopResult run_loop(const LoopSetup& setup, Clock& clock, Camera& camera, Joint& joint,

@@ -5,6 +5,7 @@
 // (paper section 5: feedback makes the roll robust).
 #pragma once
 
+#include "flatland/drivers/experiment.hpp"
 #include "flatland/drivers/synthetic.hpp"
 
 #include <cstdint>
@@ -64,10 +65,10 @@ Interval wilson_interval(long k, long n, double z = 1.959963984540054);
 struct RunRecord {
   int run = 0;
   std::uint64_t seed = 0;  ///< the Monte Carlo seed: (seed, run) rebuild this world (perturb)
-  std::string controller;  ///< "open-loop" or "feedback"
+  std::string controller;  ///< the controller's name (MonteCarloController::name)
   bool success = false;
   Outcome outcome = Outcome::kNotFinished;
-  std::string failure;  ///< empty on success
+  std::string failure;               ///< empty on success
   double slide_s = 0, flight_s = 0;  ///< time the disk spent sliding and flying
   int impacts = 0;
   double duration_s = 0, s_end = 0, fn_min_ratio = 0, mu_max = 0;
@@ -76,8 +77,35 @@ struct RunRecord {
   DrawnPerturbation drawn;
 };
 
+/// A controller Monte Carlo runs on every world: by name, or the caller's own.
+struct MonteCarloController {
+  // Implicit from a name, so that {"open-loop", "feedback"} lists controllers by name.
+  MonteCarloController(std::string name_, ControllerFactory make_ = {},
+                       EstimatorFactory estimator_ = {})
+      : name(std::move(name_)), make(std::move(make_)), estimator(std::move(estimator_)) {}
+  MonteCarloController(const char* name_) : MonteCarloController(std::string(name_)) {}
+  /// "open-loop" (the paper's plan played back), "feedback" (the scene's controller.type in
+  /// feedback mode), a built-in controller type ("paper", ...), or, with `make`, the caller's
+  /// label for their own.
+  std::string name;
+  ControllerFactory make;      ///< empty: made from `name` and the scene
+  EstimatorFactory estimator;  ///< empty: the scene's estimator.type
+};
+
+/// One controller's tally over the worlds.
+struct ControllerSummary {
+  std::string name;
+  int successes = 0;
+  /// Worlds whose simulation failed (Outcome::kNumericalFailure): they have no physical outcome
+  /// and are left out of the rate's denominator.
+  int numerical_failures = 0;
+  Interval ci;  ///< Wilson 95 %, over the runs that did not fail
+};
+
 struct MonteCarloResult {
   int runs = 0;
+  /// Per controller, in the order given.
+  std::vector<ControllerSummary> summaries;
   /// -1 when that controller was not run.
   int success_open_loop = -1, success_feedback = -1;
   /// Worlds whose simulation failed (Outcome::kNumericalFailure), per controller: they have no
@@ -96,19 +124,28 @@ using MonteCarloProgress = std::function<void(long done, long total)>;
 /// more parameter, or a fault to inject); called from the worker threads.
 using WorldEdit = std::function<void(Scene& world, int run)>;
 
-/// `n` runs of each of `controllers` ("open-loop", "feedback"; each at most once) on `threads`
-/// std::threads (0: std::thread::hardware_concurrency()). Run i's world obeys
-/// perturb(nominal.spec, p, seed, i), compiled; the loop assumes `nominal` with
-/// controller.mode set to the controller. Experiments are handed out by index, and each result is
-/// stored at its index, so the records do not depend on the thread count. A run that fails —
-/// contact lost, safe stop — is a result; so is a world whose simulation fails (a
+/// `n` runs of each of `controllers` (names at most once each) on `threads` std::threads (0:
+/// std::thread::hardware_concurrency()). Run i's world obeys perturb(nominal.spec, p, seed, i),
+/// compiled; the loop assumes `nominal` with the controller's type and mode (or the caller's
+/// factories), so every controller meets the very same worlds. Experiments are handed out by index,
+/// and each result is stored at its index, so the records do not depend on the thread count. A run
+/// that fails — contact lost, safe stop — is a result; so is a world whose simulation fails (a
 /// std::runtime_error in it: Outcome::kNumericalFailure with its message, and the study goes
 /// on). Any other exception stops the others and is rethrown. std::invalid_argument for n < 1,
 /// an unknown or repeated controller, invalid perturbations.
 MonteCarloResult run_montecarlo(const model::Model& nominal_model, const Perturbations& p, int n,
-                                std::uint64_t seed, const std::vector<std::string>& controllers,
+                                std::uint64_t seed,
+                                const std::vector<MonteCarloController>& controllers,
                                 unsigned threads = 0, const MonteCarloProgress& progress = {},
                                 const WorldEdit& edit = {});
+/// Controllers by name only.
+std::vector<MonteCarloController> controllers_by_name(const std::vector<std::string>& names);
+
+/// The scene a named controller assumes: "open-loop" -> the paper's controller in open-loop mode;
+/// "feedback" -> the scene's own type in feedback mode; a built-in type -> that type in feedback
+/// mode. std::invalid_argument naming `field` and the known names otherwise.
+Scene scene_for_controller(const Scene& nominal, const std::string& name,
+                           const std::string& field = "controller");
 
 /// runs.csv: one row per experiment (run, controller, outcome, what it drew, ...; the columns
 /// are documented in docs/CLOSED_LOOP.md), in the records' order.

@@ -6,6 +6,7 @@
 
 #include "flatland/camera/board.hpp"
 #include "flatland/camera/camera_model.hpp"
+#include "flatland/control/choice.hpp"
 #include "flatland/control/controller.hpp"
 #include "flatland/control/estimator.hpp"
 #include "flatland/render/renderer.hpp"
@@ -47,9 +48,12 @@ struct Model {
   vision::TrackerConfig tracker;
 
   /// The closed loop (sections `controller`, `estimator`, `joint`).
-  control::ControllerConfig controller;
+  /// The controller and estimator the scene chose (`controller.type`, `estimator.type`) with
+  /// their typed configs; drivers::LoopSetup makes one of each per run from them.
+  control::ControllerChoice controller;
   control::SafetyConfig safety;
-  control::EstimatorConfig estimator;
+  control::EstimatorChoice estimator;
+  double control_dt = 1e-3;  ///< s, the control period (1 / joint.rate)
 };
 
 /// Compile a parsed scene: builds the plant (sim::build_problem's checks, its messages naming the

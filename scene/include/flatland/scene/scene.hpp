@@ -25,15 +25,15 @@ class SceneError : public std::invalid_argument {
 /// the table frame (x, y in the table plane as in the simulator, origin at the hand pivot, z out
 /// of the table towards the camera).
 struct CameraSpec {
-  int width = 640, height = 480;         ///< px
-  double fx = 700, fy = 700;             ///< px
-  double cx = 319.5, cy = 239.5;         ///< px (OpenCV convention: pixel centres at integers)
-  std::array<double, 5> distortion{};    ///< k1, k2, p1, p2, k3
+  int width = 640, height = 480;       ///< px
+  double fx = 700, fy = 700;           ///< px
+  double cx = 319.5, cy = 239.5;       ///< px (OpenCV convention: pixel centres at integers)
+  std::array<double, 5> distortion{};  ///< k1, k2, p1, p2, k3
   std::array<double, 3> position{0.0, 0.0, 1.0};  ///< m, camera centre in the table frame
   std::array<double, 3> look_at{0.0, 0.0, 0.0};   ///< m, point on the optical axis
   std::array<double, 3> up{0.0, 1.0, 0.0};        ///< image "up" direction (table frame)
-  double fps = 30.0;                     ///< frames per second
-  double exposure = 0.0;                 ///< s, exposure time (blur when > 0 and effects.blur_subframes > 1)
+  double fps = 30.0;                              ///< frames per second
+  double exposure = 0.0;        ///< s, exposure time (blur when > 0 and effects.blur_subframes > 1)
   double latency = 0.0;         ///< s, capture (mid-exposure) to arrival at the control loop
   double latency_jitter = 0.0;  ///< s, half-width of a uniform spread of the latency
 };
@@ -57,15 +57,15 @@ std::optional<FieldProblem> camera_problem(const CameraSpec& camera);
 
 /// Image effects (section `effects`); each is off unless the scene asks for it.
 struct EffectsSpec {
-  int supersample = 1;              ///< anti-aliasing: render s x s samples per pixel
-  int blur_subframes = 1;           ///< exposure blur: sub-frames averaged over camera.exposure
-  double noise_read_dn = 0.0;       ///< read noise sigma, DN (8-bit digital numbers)
-  double noise_shot_gain = 0.0;     ///< shot noise: variance += gain * signal (DN)
-  bool quantize = true;             ///< round to 8 bits (off gives a float image)
-  double vignetting = 0.0;          ///< relative fall-off at the image corner (cos^4-like), 0..1
-  double jitter_s = 0.0;            ///< timing jitter sigma, s
-  double drop_probability = 0.0;    ///< probability a frame is dropped
-  std::uint64_t seed = 1;           ///< randomness is seeded
+  int supersample = 1;            ///< anti-aliasing: render s x s samples per pixel
+  int blur_subframes = 1;         ///< exposure blur: sub-frames averaged over camera.exposure
+  double noise_read_dn = 0.0;     ///< read noise sigma, DN (8-bit digital numbers)
+  double noise_shot_gain = 0.0;   ///< shot noise: variance += gain * signal (DN)
+  bool quantize = true;           ///< round to 8 bits (off gives a float image)
+  double vignetting = 0.0;        ///< relative fall-off at the image corner (cos^4-like), 0..1
+  double jitter_s = 0.0;          ///< timing jitter sigma, s
+  double drop_probability = 0.0;  ///< probability a frame is dropped
+  std::uint64_t seed = 1;         ///< randomness is seeded
 };
 
 /// A planar calibration target (section `targets`, list).
@@ -76,8 +76,8 @@ struct TargetSpec {
   /// scene file counts a chessboard by its inner corners (OpenCV's patternSize) and a ChArUco
   /// board by its squares; the default is OpenCV's sample chessboard, 9x6 inner corners.
   int squares_x = 10, squares_y = 7;
-  double square = 0.02;            ///< m
-  double marker = 0.015;           ///< m (ChArUco marker side)
+  double square = 0.02;   ///< m
+  double marker = 0.015;  ///< m (ChArUco marker side)
   std::string dictionary = "DICT_4X4_50";
   std::array<double, 3> position{0.0, 0.0, 0.0};  ///< m, board origin in the table frame
   std::array<double, 3> rotation{0.0, 0.0, 0.0};  ///< rad, Rodrigues vector board -> table
@@ -96,19 +96,22 @@ struct RenderSpec {
 /// acceleration is integrated into a reference angle and rate, which a PD torque loop tracks on a
 /// motor model; the disk's contact force loads the joint.
 struct JointSpec {
-  double inertia = 0.05;          ///< kg m^2, hand plate + reflected rotor, about the joint axis
-  double viscous = 0.02;          ///< N m s/rad, viscous friction
-  double coulomb = 0.05;          ///< N m, Coulomb (dry) friction
-  double torque_limit = 10.0;     ///< N m, the drive saturates here
-  long encoder_counts = 1048576;  ///< counts per revolution (a 20-bit encoder)
-  double kp = 500.0;              ///< N m/rad, PD torque loop
-  double kd = 10.0;               ///< N m s/rad
+  double inertia = 0.05;           ///< kg m^2, hand plate + reflected rotor, about the joint axis
+  double viscous = 0.02;           ///< N m s/rad, viscous friction
+  double coulomb = 0.05;           ///< N m, Coulomb (dry) friction
+  double torque_limit = 10.0;      ///< N m, the drive saturates here
+  long encoder_counts = 1048576;   ///< counts per revolution (a 20-bit encoder)
+  double kp = 500.0;               ///< N m/rad, PD torque loop
+  double kd = 10.0;                ///< N m s/rad
   double velocity_filter = 0.002;  ///< s, time constant of the drive's velocity estimate
-  double rate = 1000.0;           ///< Hz, servo and control-loop rate
+  double rate = 1000.0;            ///< Hz, servo and control-loop rate
 };
 
 /// The paper's vision-feedback controller (section `controller`, section 5 of the paper).
 struct ControllerSpec {
+  /// The control law by name: paper (section 5's three stages; the keys below up to
+  /// finish_after are its own) | transverse (section `controller.transverse`).
+  std::string type = "paper";
   std::string mode = "feedback";  ///< feedback | open-loop
   /// Plan: the scene's motion as given ("scene") or with k solved for the scene's period ("solve").
   std::string plan = "scene";
@@ -120,13 +123,15 @@ struct ControllerSpec {
   double lost_timeout = 0.25;     ///< s without a usable measurement -> safe stop
   double innovation_gate = 50.0;  ///< NIS above this (chi-square, 1 dof) is implausible
   int innovation_strikes = 3;     ///< consecutive implausible innovations -> safe stop
-  double max_joint_jump = 0.05;   ///< rad, a reading further than this from the prediction is a glitch
+  double max_joint_jump =
+      0.05;  ///< rad, a reading further than this from the prediction is a glitch
   double stop_deceleration = 20.0;  ///< rad/s^2, safe stop
-  double settle = 1.0;            ///< s the loop keeps running after the hand stops
+  double settle = 1.0;              ///< s the loop keeps running after the hand stops
 };
 
 /// The contact estimator (section `estimator`).
 struct EstimatorSpec {
+  std::string type = "ekf";       ///< ekf (extended Kalman filter) | ukf (unscented)
   std::string model = "rolling";  ///< rolling | constant-velocity
   bool latency_compensation = true;
   /// 1/s^2 per sqrt(Hz), white noise on sddot_h: calibrated for consistency (NEES) on the
@@ -138,12 +143,12 @@ struct EstimatorSpec {
 
 /// Faults injected into a synthetic experiment (section `faults`), to test the safe stop.
 struct FaultSpec {
-  std::optional<double> camera_stop;      ///< s, no frames after this
-  std::optional<double> camera_stall;     ///< s, frames freeze (the same image, stale stamps)
-  std::optional<double> occlusion;        ///< s, the disk is hidden from here ...
-  double occlusion_duration = 0.5;        ///< s, ... for this long
-  std::optional<double> encoder_glitch;   ///< s, one encoder reading jumps ...
-  double encoder_glitch_size = 0.5;       ///< rad, ... by this much
+  std::optional<double> camera_stop;     ///< s, no frames after this
+  std::optional<double> camera_stall;    ///< s, frames freeze (the same image, stale stamps)
+  std::optional<double> occlusion;       ///< s, the disk is hidden from here ...
+  double occlusion_duration = 0.5;       ///< s, ... for this long
+  std::optional<double> encoder_glitch;  ///< s, one encoder reading jumps ...
+  double encoder_glitch_size = 0.5;      ///< rad, ... by this much
 };
 
 struct Scene {
@@ -153,7 +158,7 @@ struct Scene {
   /// `flatland simulate` runs one; every other section below then keeps its defaults, unused.
   std::optional<sim::SpatialSpec> spatial;
   sim::SimulationSpec sim;
-  std::optional<CameraSpec> camera;     ///< absent: nothing is rendered
+  std::optional<CameraSpec> camera;  ///< absent: nothing is rendered
   EffectsSpec effects;
   RenderSpec render;
   std::vector<TargetSpec> targets;
