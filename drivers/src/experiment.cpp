@@ -11,6 +11,7 @@
 #include <limits>
 #include <sstream>
 #include <stdexcept>
+#include <utility>
 
 namespace flatland::drivers {
 namespace {
@@ -477,8 +478,12 @@ SyntheticResult run_synthetic(const LoopSetup& setup, std::shared_ptr<const mode
   lo.on_frame = options.on_frame;
   lo.progress = options.progress;
 
+  return judge_synthetic(run_loop(setup, clock, camera, joint, lo), world, camera);
+}
+
+SyntheticResult judge_synthetic(LoopResult loop, SimWorld& world, const SyntheticCamera& camera) {
   SyntheticResult r;
-  r.loop = run_loop(setup, clock, camera, joint, lo);
+  r.loop = std::move(loop);
   const std::optional<Outcome> failed_in_loop = world.failure();
   // After a finished motion the outcome is where the disk ends up: the world runs on, the hand
   // held, until the disk is trapped in a well (the losses then settle it there) or gone.

@@ -222,4 +222,10 @@ struct SyntheticOptions {
 SyntheticResult run_synthetic(const LoopSetup& setup, std::shared_ptr<const model::Model> truth,
                               const SyntheticOptions& options = {});
 
+/// run_synthetic's verdict on a synthetic experiment whose loop has ended, for callers that drive
+/// the Loop themselves (Python's flatland.Env): after a finished motion the world runs on, the
+/// hand held, until the disk is trapped in a well or gone (at most 10 s); then the outcome, the
+/// world's counts and the camera's. `world` and `camera` are those the loop ran with.
+SyntheticResult judge_synthetic(LoopResult loop, SimWorld& world, const SyntheticCamera& camera);
+
 }  // namespace flatland::drivers
