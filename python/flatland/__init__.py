@@ -9,7 +9,8 @@ The package binds flatland's C++ library (the same code as the ``flatland`` comm
 * :class:`Renderer` renders camera frames (H x W x 3 ``uint8`` BGR, OpenCV's convention) with
   their ground truth; :class:`Tracker` finds the disk in a frame; ``calibrate`` calibrates a
   camera from board images or corners;
-* ``experiment`` and ``montecarlo`` run the vision-feedback closed loop (paper section 5).
+* ``experiment`` and ``montecarlo`` run the vision-feedback closed loop (paper section 5);
+  ``experiment`` takes your own controller and estimator (any object with their methods);
 
 Units are SI (m, s, rad, N); forces are also given as ratios to the in-plane weight
 m g sin(tilt). Bad input raises ``ValueError`` with the CLI's one-line message (naming the
@@ -36,12 +37,16 @@ for _candidate in (_here / "data", _here.parent.parent / "share" / "flatland"):
         _os.environ["FLATLAND_DATA_DIR"] = str(_candidate)
 
 from . import _flatland  # noqa: E402
-from ._flatland import Model  # noqa: E402
+from ._flatland import (ControlInput, ControllerContext, ControlOutput, Estimate,  # noqa: E402
+                        EstimatorCounts, HandInput, JointReading, Measurement, Model, Plan,
+                        UpdateReport)
 
 __all__ = [
     "Model", "load", "default_scene_path", "solve", "simulate", "Simulation", "time_optimal",
     "locus", "surface", "Renderer", "Tracker", "calibrate", "render_calibration", "experiment",
     "Experiment", "montecarlo", "study", "read_camera_file", "write_camera_file", "project",
+    "Plan", "ControllerContext", "ControlInput", "ControlOutput", "JointReading",
+    "Measurement", "Estimate", "HandInput", "UpdateReport", "EstimatorCounts",
 ]
 
 SceneLike = Union[Model, str, "_os.PathLike[str]", None]
@@ -521,13 +526,27 @@ class Experiment:
         return self.result[key]
 
 
-def experiment(model: SceneLike = None, *, controller: Optional[str] = None) -> Experiment:
+def experiment(model: SceneLike = None, *, controller: Any = None,
+               estimator: Any = None) -> Experiment:
     """One synthetic experiment of the vision-feedback loop (paper section 5): the world of the
     scene (default: the bundled closed-loop air table, scenes/airtable-feedback.yaml) filmed at
-    its camera's rate, the estimator and ``controller`` ("feedback" or "open-loop"; default the
-    scene's) at 1 kHz."""
-    result, log = _flatland.experiment(_scene("model", model),
-                                       _text("controller", controller, True))
+    its camera's rate, the estimator and the controller at 1 kHz.
+
+    ``controller``: None (the scene's), "feedback" or "open-loop" (the scene's controller in that
+    mode), a built-in type ("paper", ...: the scene's ``controller.type``), or your own: any
+    object with ``step(input) -> float | ControlOutput`` and optionally ``start(context)`` and
+    ``name`` (docs/PYTHON.md, "Your own controller"). ``estimator``: None (the scene's), a
+    built-in type ("ekf", ...), or any object with ``reset(t, s_h, sdot_h)``,
+    ``propagate(t_next, hand)``, ``update(z)`` and ``estimate() -> Estimate`` (optionally
+    ``counts()`` and ``name``). Their methods are called with light objects (ControlInput,
+    HandInput, Measurement: a few floats each), with the GIL held only during the call.
+
+    A controller that raises stops the run safely (``result["stop_reason"]`` has
+    "ExceptionType: message"); one that returns NaN or something else than a number or a
+    ControlOutput raises ValueError naming what and when; an estimator that raises raises
+    RuntimeError.
+    """
+    result, log = _flatland.experiment(_scene("model", model), controller, estimator)
     return Experiment(result, log)
 
 
@@ -573,3 +592,4 @@ def _csv_columns(text: str) -> Dict[str, np.ndarray]:
         except ValueError:
             columns[name] = np.array(values)
     return columns
+

@@ -66,16 +66,85 @@ def calibrate(board: str, images: Optional[List[np.ndarray]],
               image_size: Optional[Tuple[int, int]], fix: str, rational: bool) -> Dict[str, Any]: ...
 def render_calibration(scene: SceneArg, intrinsics_views: int, table_views: int, joint_views: int,
                        seed: int, board: str) -> Dict[str, Any]: ...
-def experiment(scene: SceneArg, controller: Optional[str]
+def experiment(scene: SceneArg, controller: Any, estimator: Any
                ) -> Tuple[Dict[str, Any], Dict[str, np.ndarray]]: ...
-def montecarlo(scene: SceneArg, runs: int, seed: int, controllers: Sequence[str], threads: int,
-               perturbations: Optional[Dict[str, float]]) -> Dict[str, Any]: ...
-def study(name: str, scene: SceneArg, quick: bool) -> str: ...
-def read_camera_file(path: str) -> Dict[str, Any]: ...
-def write_camera_file(path: str, camera_name: str, width: int, height: int, K: np.ndarray,
-                      dist: np.ndarray, R: Optional[np.ndarray], t: Optional[np.ndarray],
-                      fps: float, exposure: float, joint: Optional[Tuple[float, float, float]],
-                      unsupported: List[str], force: bool) -> None: ...
-def project(width: int, height: int, K: np.ndarray, dist: np.ndarray, R: Optional[np.ndarray],
-            t: Optional[np.ndarray], points: np.ndarray) -> np.ndarray: ...
-def _noop() -> None: ...
+
+class Plan:
+    @property
+    def duration(self) -> float: ...
+    def hand(self, t: float) -> Tuple[float, float, float]: ...
+    def time_at(self, s_h: float) -> float: ...
+    def s_h_at(self, t: float) -> float: ...
+    def sdot_h_at(self, t: float) -> float: ...
+    @property
+    def s_from(self) -> float: ...
+    @property
+    def s_to(self) -> float: ...
+
+class ControllerContext:
+    @property
+    def plan(self) -> Plan: ...
+    dt: float
+    t_start: float
+    s_h_start: float
+
+class JointReading:
+    t: float
+    theta: float
+    theta_dot: float
+
+class Measurement:
+    t_capture: float
+    t_arrival: float
+    s_h: float
+    sigma: float
+
+class Estimate:
+    def __init__(self, t: float, s_h: float, sdot_h: float,
+                 covariance: Sequence[Sequence[float]]) -> None: ...
+    t: float
+    s_h: float
+    sdot_h: float
+    @property
+    def covariance(self) -> Tuple[Tuple[float, float], Tuple[float, float]]: ...
+
+class ControlInput:
+    t: float
+    joint: JointReading
+    estimate: Estimate
+    estimating: bool
+    measurement: Optional[Measurement]
+
+class ControlOutput:
+    def __init__(self, theta_ddot: float, mode: Optional[str] = None,
+                 theta_reference: Optional[float] = None, done: bool = False,
+                 t_done: Optional[float] = None, stop: Optional[str] = None) -> None: ...
+    theta_ddot: float
+    mode: str
+    theta_reference: float
+    done: bool
+    t_done: Optional[float]
+    @property
+    def stop(self) -> Optional[str]: ...
+
+class HandInput:
+    theta: float
+    theta_dot: float
+    theta_ddot: float
+
+class UpdateReport:
+    def __init__(self, applied: bool = True, innovation: float = 0.0,
+                 innovation_sigma: float = 0.0, nis: float = 0.0,
+                 repropagated_steps: int = 0) -> None: ...
+    applied: bool
+    innovation: float
+    innovation_sigma: float
+    nis: float
+    repropagated_steps: int
+
+class EstimatorCounts:
+    def __init__(self, steps: int = 0, repropagated: int = 0, updates: int = 0) -> None: ...
+    steps: int
+    repropagated: int
+    updates: int
+

@@ -113,6 +113,8 @@ auto run_interruptible(Work&& work) {
 void bind_sim(py::module_& m);
 void bind_camera(py::module_& m);
 void bind_loop(py::module_& m);
+/// Plan, ControllerContext, ControlInput, ControlOutput, ... (python_loop.cpp).
+void bind_loop_types(py::module_& m);
 void bind_studies(py::module_& m);
 
 }  // namespace flatland::python

@@ -1,6 +1,7 @@
 // The closed loop: a synthetic experiment (its result and its 1 kHz log as arrays) and a Monte
 // Carlo study of perturbed worlds.
 #include "convert.hpp"
+#include "python_loop.hpp"
 
 #include "flatland/drivers/experiment.hpp"
 #include "flatland/drivers/montecarlo.hpp"
@@ -21,51 +22,19 @@ using namespace pybind11::literals;
 
 namespace {
 
-/// The experiments' default scene, as `flatland experiment` has it: the closed-loop air table.
-Scene experiment_scene(const py::object& scene) {
-  if (!scene.is_none()) return scene_argument(scene, false, "model");
-  return load_scene(data_directory() + "/scenes/airtable-feedback.yaml");
-}
-
 py::object optional_number(const std::optional<double>& v) {
   return v ? py::object(py::float_(*v)) : py::none();
 }
 
-/// The log as one array per column of log.csv, named without the unit (t, theta, theta_dot, ...);
-/// stage and mode_true as str arrays.
-py::dict log_columns(const std::vector<drivers::TickLog>& log) {
-  const auto& columns = drivers::tick_log_columns();
-  const py::object numpy_array = py::module_::import("numpy").attr("array");
-  py::dict out;
-  for (int c = 0; c < static_cast<int>(columns.size()); ++c) {
-    const std::string name = drivers::tick_log_column_name(columns[c]);
-    if (drivers::tick_log_column_is_text(c)) {
-      py::list values;
-      for (const auto& row : log) values.append(py::str(drivers::tick_log_text(row, c)));
-      out[py::str(name)] = numpy_array(values, "U16");
-      continue;
-    }
-    py::array_t<double> values(static_cast<py::ssize_t>(log.size()));
-    double* data = values.mutable_data();
-    for (std::size_t i = 0; i < log.size(); ++i) data[i] = drivers::tick_log_number(log[i], c);
-    out[py::str(name)] = values;
-  }
-  return out;
-}
-
-py::tuple experiment_binding(const py::object& scene_arg,
-                             const std::optional<std::string>& controller) {
+py::tuple experiment_binding(const py::object& scene_arg, const py::object& controller,
+                             const py::object& estimator) {
   Scene scene = experiment_scene(scene_arg);
-  if (controller) {
-    if (*controller != "open-loop" && *controller != "feedback")
-      throw std::invalid_argument("controller: must be open-loop or feedback, got '" + *controller +
-                                  "'");
-    scene.controller.mode = *controller;
-  }
+  // Names go into the scene (checked when it compiles); Python objects into factories.
+  const LoopChoice choice = choose_loop(scene, controller, estimator);
   const std::shared_ptr<const model::Model> nominal = model::compile(scene);
   drivers::require_friction(scene);
   const drivers::SyntheticResult s = run_interruptible([&] {
-    const drivers::LoopSetup setup(nominal);
+    const drivers::LoopSetup setup(nominal, choice.controller, choice.estimator);
     drivers::SyntheticOptions options;
     options.progress = [](double, double) { InterruptScope::check(); };
     return drivers::run_synthetic(setup, nominal, options);
@@ -92,7 +61,8 @@ py::tuple experiment_binding(const py::object& scene_arg,
   r["finished"] = loop.finished;
   r["k"] = loop.k;
   r["period"] = loop.period;
-  r["controller"] = scene.controller.mode;
+  // The CLI's key: the scene's mode; a Python controller's name.
+  r["controller"] = choice.controller ? loop.controller : scene.controller.mode;
   r["nees_mean"] = s.nees_mean;
   r["measurements"] = loop.measurements;
   r["estimator_steps"] = loop.estimator_steps;
@@ -202,7 +172,7 @@ py::dict montecarlo_binding(const py::object& scene, int runs, std::uint64_t see
 }  // namespace
 
 void bind_loop(py::module_& m) {
-  m.def("experiment", &experiment_binding, "scene"_a, "controller"_a);
+  m.def("experiment", &experiment_binding, "scene"_a, "controller"_a, "estimator"_a);
   m.def("montecarlo", &montecarlo_binding, "scene"_a, "runs"_a, "seed"_a, "controllers"_a,
         "threads"_a, "perturbations"_a);
 }

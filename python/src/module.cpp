@@ -8,6 +8,7 @@ PYBIND11_MODULE(_flatland, m) {
   m.doc() = "flatland's native module; use the package flatland (help(flatland)).";
   flatland::python::bind_sim(m);
   flatland::python::bind_camera(m);
+  flatland::python::bind_loop_types(m);
   flatland::python::bind_loop(m);
   flatland::python::bind_studies(m);
   m.def(

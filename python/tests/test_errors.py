@@ -65,7 +65,7 @@ def test_a_missing_scene_file(cli, tmp_path):
     (lambda: flatland.Tracker().track(np.zeros((4, 4, 2), np.uint8)), "frame: an image of shape"),
     (lambda: flatland.Tracker().track(np.zeros((4, 4), np.int32)), "frame: uint8 or float32"),
     (lambda: flatland.Tracker(method="magic"), "magic"),
-    (lambda: flatland.experiment(controller="psychic"), "controller: must be open-loop or feedback"),
+    (lambda: flatland.experiment(controller="psychic"), "controller: unknown 'psychic' (a mode: feedback, open-loop"),
     (lambda: flatland.montecarlo(perturbations={"gravity": 1}), "perturbations.gravity: unknown"),
     (lambda: flatland.montecarlo(perturbations={"drop": 2}), "perturbations.drop"),
     (lambda: flatland.montecarlo(perturbations={"drop": "often"}),

@@ -12,6 +12,7 @@ EXAMPLES = {
     "fig6_fig7.py": (["--quick"], ["fig6.png", "fig7.png"]),
     "closed_loop_fig10.py": ([], ["fig10.png"]),
     "render_and_track.py": ([], ["tracking.png"]),
+    "python_controller.py": ([], ["python_controller.png"]),
 }
 
 
