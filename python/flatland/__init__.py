@@ -11,6 +11,8 @@ The package binds flatland's C++ library (the same code as the ``flatland`` comm
   camera from board images or corners;
 * ``experiment`` and ``montecarlo`` run the vision-feedback closed loop (paper section 5);
   ``experiment`` takes your own controller and estimator (any object with their methods);
+* :class:`Env` is the closed loop one control tick at a time, in Gymnasium's convention
+  (``reset``, ``step``, spaces, ``render``), for agents that choose the hand's acceleration.
 
 Units are SI (m, s, rad, N); forces are also given as ratios to the in-plane weight
 m g sin(tilt). Bad input raises ``ValueError`` with the CLI's one-line message (naming the
@@ -36,6 +38,8 @@ for _candidate in (_here / "data", _here.parent.parent / "share" / "flatland"):
     if "FLATLAND_DATA_DIR" not in _os.environ and (_candidate / "scenes" / "butterfly.yaml").is_file():
         _os.environ["FLATLAND_DATA_DIR"] = str(_candidate)
 
+import math as _math  # noqa: E402
+
 from . import _flatland  # noqa: E402
 from ._flatland import (ControlInput, ControllerContext, ControlOutput, Estimate,  # noqa: E402
                         EstimatorCounts, HandInput, JointReading, Measurement, Model, Plan,
@@ -45,7 +49,7 @@ __all__ = [
     "Model", "load", "default_scene_path", "solve", "simulate", "Simulation", "time_optimal",
     "locus", "surface", "Renderer", "Tracker", "calibrate", "render_calibration", "experiment",
     "Experiment", "montecarlo", "study", "read_camera_file", "write_camera_file", "project",
-    "Plan", "ControllerContext", "ControlInput", "ControlOutput", "JointReading",
+    "Env", "Box", "success_reward", "Plan", "ControllerContext", "ControlInput", "ControlOutput", "JointReading",
     "Measurement", "Estimate", "HandInput", "UpdateReport", "EstimatorCounts",
 ]
 
@@ -593,3 +597,220 @@ def _csv_columns(text: str) -> Dict[str, np.ndarray]:
             columns[name] = np.array(values)
     return columns
 
+
+# ---------------------------------------------------------------------------------------------
+# The step-by-step environment. gymnasium is imported when flatland.Env is first used (not at
+# `import flatland`): Env then subclasses gymnasium.Env and its spaces are gymnasium.spaces.Box;
+# without gymnasium (Debian does not package it) Env is a plain class with flatland.Box spaces.
+
+class Box:
+    """A box of arrays as ``gymnasium.spaces.Box`` describes one, for when gymnasium is not
+    importable: ``shape``, ``dtype``, ``low`` and ``high`` (arrays of ``shape``) and
+    ``contains(x)``."""
+
+    def __init__(self, low: Any, high: Any, shape: Sequence[int], dtype: Any = np.float64):
+        self.dtype = np.dtype(dtype)
+        self.shape = tuple(int(n) for n in shape)
+        self.low = np.broadcast_to(np.asarray(low, dtype=self.dtype), self.shape).copy()
+        self.high = np.broadcast_to(np.asarray(high, dtype=self.dtype), self.shape).copy()
+
+    def contains(self, x: Any) -> bool:
+        """Whether ``x`` is an array of this shape, of a dtype that casts safely to this one,
+        within [low, high] (as gymnasium's Box.contains)."""
+        if not isinstance(x, np.ndarray):
+            try:
+                x = np.asarray(x, dtype=self.dtype)
+            except (ValueError, TypeError):
+                return False
+        return bool(np.can_cast(x.dtype, self.dtype) and x.shape == self.shape
+                    and np.all(x >= self.low) and np.all(x <= self.high))
+
+    def __contains__(self, x: Any) -> bool:
+        return self.contains(x)
+
+    def __repr__(self) -> str:
+        return f"Box({self.low.min()}, {self.high.max()}, {self.shape}, {self.dtype})"
+
+
+def success_reward(info: Dict[str, Any]) -> float:
+    """Env's default reward: 1 at the step that ends the episode in success (the disk rests in
+    the goal well, judged as ``experiment`` judges it), 0 at every other step."""
+    return 1.0 if _mapping("info", info).get("success") else 0.0
+
+
+def _action(value: Any, limit: float) -> float:
+    """An action as the acceleration it commands: a number or an array of shape (1,) (or ()),
+    finite and within [-limit, limit]."""
+    wrong = f"action: a number or an array of shape (1,) (rad/s^2), got a {_type_name(value)}"
+    if _is_bool(value) or isinstance(value, (str, bytes)):
+        raise ValueError(wrong)
+    if isinstance(value, (int, float, np.integer, np.floating)):
+        a = float(value)
+    else:
+        try:
+            array = np.asarray(value)
+        except Exception:  # ragged nesting and the like
+            raise ValueError(wrong) from None
+        if array.dtype.kind not in "iuf":
+            raise ValueError(f"{wrong} of {array.dtype}")
+        if array.shape not in ((1,), ()):
+            raise ValueError(f"action: shape (1,) (rad/s^2), got shape {array.shape}")
+        a = float(array.reshape(-1)[0])
+    if not _math.isfinite(a):
+        raise ValueError(f"action: must be finite (rad/s^2), got {a}")
+    if abs(a) > limit:
+        raise ValueError(f"action: must be within +-{limit:g} rad/s^2 (joint.torque_limit / "
+                         f"joint.inertia), got {a:g}")
+    return a
+
+
+_ENV_DOC = """The closed loop one control tick at a time, in Gymnasium's convention: an agent
+chooses the hand's angular acceleration (rad/s^2) at each tick of the 1 kHz loop, in place of a
+controller. The world is ``experiment``'s synthetic one (the hybrid contact model, the
+joint's drive, the rendered camera with its noise, rate and latency, the tracker and the
+scene's estimator).
+
+``Env(model=None, *, observation="measurement", ticks_per_step=1, reward=None, duration=None,
+time_limit=None, estimator=None, render_mode="rgb_array")``. ``model``: a Model or a scene
+with a camera and a disk (default: the bundled closed-loop air table).
+
+* ``reset(seed=None, options=None) -> (observation, info)``: a new world (``seed`` is the
+  scene's ``effects.seed``: the camera's noise, drops and latency jitter follow it; None: the
+  scene's seed at the first reset, the last seed + 1 after), the waiting phase run (t < 0: the
+  hand at rest while the estimator locks on), the first observation at t = 0. ``options``: none
+  are known (None or {}).
+* ``step(action) -> (observation, reward, terminated, truncated, info)``: the action (a number
+  or an array of shape (1,), within ``action_space``) commanded for ``ticks_per_step`` ticks.
+  ``terminated`` when the loop stops safely (``info["ended_by"]``: "disk" when the world's
+  failure came first, the disk out of the hand's reach; "safe-stop" when the loop's safety
+  monitor stopped it: implausible innovations, the camera or tracking lost; ``info["outcome"]``
+  says where the disk went) or when the motion's time is up
+  (``duration``, default the plan's: "motion-end"; the hand is then held at the plan's final
+  angle, as the paper's controller holds it, and the experiment judged as ``experiment`` judges
+  it: ``info["success"]``, ``info["outcome"]``). ``truncated`` at ``time_limit`` s (default
+  none), with no judgement. A step that reaches an end stops there (it may cover fewer ticks).
+* Observations, arriving with the camera's rate and latency: "measurement" (float64, the
+  entries of ``observation_names``: t, the joint's theta and theta_dot as read, the latest
+  measured s_meas with its sigma_meas and capture time t_capture (s_h at the start, inf and
+  -inf before the first), the estimator's s_est and sdot_est with their sigmas (inf before the
+  first measurement)); "image" (the latest camera frame, H x W x 3 uint8 BGR as every flatland
+  image, read-only; zeros before the first); "state" (the truth: theta, theta_dot, s_h,
+  sdot_h).
+* ``reward``: a callable(info) -> float, default ``flatland.success_reward`` (1 at the step
+  that ends in success, else 0).
+* ``info``: the truth at the observation's tick (t, s_h, sdot_h, theta, theta_dot, fn_ratio,
+  mu_required, mode: the contact's), the loop's flags (estimating, measured, stopping,
+  stop_reason, ended_by) and the verdict (success, outcome; at the end also failure, s_end,
+  duration_s, fn_min_ratio, mu_max).
+* ``render()``: the latest camera frame at the observation's tick as RGB (Gymnasium's
+  rgb_array), or None before one.
+* ``log()``: the episode's 1 kHz log so far, as ``experiment``'s ``log``; ``plan``: the
+  planned motion (a Plan); ``close()`` frees the renderer.
+
+Bad arguments and actions (NaN, the wrong shape, a str, beyond the joint's reach) raise
+ValueError naming them; ``step`` before ``reset`` or after the end raises RuntimeError, and so
+does a failure of the world's simulation (the episode is then over).
+"""
+
+_Env = None
+
+
+def _define_env(base: type, box: Any) -> type:
+    """Env on `base` (gymnasium.Env or object) with `box` (gymnasium.spaces.Box or Box)."""
+
+    class Env(base):  # type: ignore[misc, valid-type]
+        __doc__ = _ENV_DOC
+        metadata: Dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 30.0}
+
+        def __init__(self, model: SceneLike = None, *, observation: str = "measurement",
+                     ticks_per_step: int = 1, reward: Any = None,
+                     duration: Optional[float] = None, time_limit: Optional[float] = None,
+                     estimator: Any = None, render_mode: Optional[str] = "rgb_array"):
+            if reward is not None and not callable(reward):
+                raise ValueError(f"reward: a callable(info) -> float, got a {_type_name(reward)}")
+            if render_mode not in (None, "rgb_array"):
+                raise ValueError(f"render_mode: rgb_array or None, got {render_mode!r}")
+            if _is_bool(estimator):
+                raise ValueError("estimator: a name or an object with an estimator's methods, "
+                                 "got a bool")
+            self._native = _flatland.Env(
+                _scene("model", model), _text("observation", observation),
+                _integer("ticks_per_step", ticks_per_step, 1, 1_000_000),
+                _number("duration", duration, True), _number("time_limit", time_limit, True),
+                estimator)
+            d = self._native.description
+            self.render_mode = render_mode
+            self.metadata = {"render_modes": ["rgb_array"], "render_fps": d["fps"]}
+            self.observation_names: Tuple[str, ...] = tuple(d["observation_names"])
+            self.dt: float = d["dt"] * ticks_per_step
+            self.max_acceleration: float = d["max_acceleration"]
+            self.action_space = box(-self.max_acceleration, self.max_acceleration, (1,),
+                                    np.float64)
+            if observation == "image":
+                self.observation_space = box(0, 255, d["image_shape"], np.uint8)
+            else:
+                low = np.full(len(self.observation_names), -np.inf)
+                if observation == "measurement":  # the sigmas are not negative
+                    for name in ("sigma_meas", "sigma_s_est", "sigma_sdot_est"):
+                        low[self.observation_names.index(name)] = 0.0
+                self.observation_space = box(low, np.full_like(low, np.inf), low.shape,
+                                             np.float64)
+            self._reward = reward if reward is not None else success_reward
+
+        def reset(self, *, seed: Optional[int] = None,
+                  options: Optional[Dict[str, Any]] = None) -> Tuple[Any, Dict[str, Any]]:
+            if seed is not None:
+                seed = _integer("seed", seed, 0, 2**64 - 1)
+            options = _mapping("options", options, True)
+            if options:
+                raise ValueError(f"options: none are known, got {sorted(map(str, options))}")
+            if base is not object:
+                super().reset(seed=seed)  # gymnasium's np_random
+            return self._native.reset(seed)
+
+        def step(self, action: Any) -> Tuple[Any, float, bool, bool, Dict[str, Any]]:
+            obs, terminated, truncated, info = self._native.step(
+                _action(action, self.max_acceleration))
+            reward = self._reward(info)
+            if _is_bool(reward) or not isinstance(reward, (int, float, np.integer, np.floating)) \
+                    or not _math.isfinite(reward):
+                raise ValueError(f"reward: the callable returned {reward!r} at t = "
+                                 f"{info['t']:.6g} s; a finite number is needed")
+            return obs, float(reward), terminated, truncated, info
+
+        def render(self) -> Optional[np.ndarray]:
+            return self._native.render() if self.render_mode == "rgb_array" else None
+
+        def log(self) -> Dict[str, np.ndarray]:
+            """The episode's 1 kHz log so far: one array per column of ``experiment``'s log
+            (the mode column says "waiting", "action", then "done" or "safe-stop")."""
+            return self._native.log()
+
+        @property
+        def plan(self) -> Plan:
+            """The planned motion: ``duration``, ``hand(t)`` -> (angle, rate, acceleration),
+            ``time_at(s_h)``, ``s_h_at(t)``, ``sdot_h_at(t)``, ``s_from``, ``s_to``."""
+            return self._native.plan
+
+        def close(self) -> None:
+            self._native.close()
+
+    Env.__module__ = __name__
+    return Env
+
+
+def _env_class() -> type:
+    global _Env
+    if _Env is None:
+        try:
+            import gymnasium
+            _Env = _define_env(gymnasium.Env, gymnasium.spaces.Box)
+        except ImportError:
+            _Env = _define_env(object, Box)
+    return _Env
+
+
+def __getattr__(name: str) -> Any:
+    if name == "Env":
+        return _env_class()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -115,6 +115,8 @@ void bind_camera(py::module_& m);
 void bind_loop(py::module_& m);
 /// Plan, ControllerContext, ControlInput, ControlOutput, ... (python_loop.cpp).
 void bind_loop_types(py::module_& m);
+/// The native half of flatland.Env (env_bindings.cpp).
+void bind_env(py::module_& m);
 void bind_studies(py::module_& m);
 
 }  // namespace flatland::python

@@ -10,6 +10,7 @@ PYBIND11_MODULE(_flatland, m) {
   flatland::python::bind_camera(m);
   flatland::python::bind_loop_types(m);
   flatland::python::bind_loop(m);
+  flatland::python::bind_env(m);
   flatland::python::bind_studies(m);
   m.def(
       "_noop", [] {}, "A call that does nothing: the binding's own overhead (benchmarks).");

@@ -38,6 +38,11 @@ WRONG = {
     # A controller or estimator: a name, or an object with the methods (none of these has them).
     "controller": [5, True, b"paper", ["k"], object()],
     "estimator": [5, True, b"ekf", ["k"], object()],
+    "optional_callable": [5, "reward", True],
+    "optional_seed": [2.0, True, "3", -1],
+    "dict": [[1], "info", 5, None],
+    "action": ["1.2", True, None, [1.0, 2.0], float("nan"), {"a": 1}],
+    "render_mode": [5, "human", True],
 }
 
 INTEGRATOR = {"method": "optional_text", "rtol": "optional_number", "atol": "optional_number",
@@ -51,6 +56,12 @@ def renderer():
 
 def tracker():
     return flatland.Tracker()
+
+
+def env():
+    e = flatland.Env(observation="state")
+    e.reset()
+    return e
 
 
 # name: (the callable, with the instance made first for a method; valid arguments besides the
@@ -89,6 +100,14 @@ PUBLIC = {
         "joint_views": "integer", "seed": "seed", "board": "text"}),
     "experiment": (lambda: flatland.experiment, {}, {
         "model": "scene", "controller": "controller", "estimator": "estimator"}),
+    "Env": (lambda: flatland.Env, {}, {
+        "model": "scene", "observation": "text", "ticks_per_step": "integer",
+        "reward": "optional_callable", "duration": "optional_number",
+        "time_limit": "optional_number", "estimator": "estimator", "render_mode": "render_mode"}),
+    "Env.reset": (lambda: flatland.Env(observation="state").reset, {},
+                  {"seed": "optional_seed", "options": "optional_dict"}),
+    "Env.step": (lambda: env().step, {}, {"action": "action"}),
+    "success_reward": (lambda: flatland.success_reward, {}, {"info": "dict"}),
     "montecarlo": (lambda: flatland.montecarlo, {}, {
         "model": "scene", "runs": "integer", "seed": "seed", "controllers": "texts",
         "threads": "integer", "perturbations": "optional_dict"}),
@@ -112,6 +131,8 @@ CALLABLES = {
     "Tracker": flatland.Tracker.__init__, "Tracker.track": flatland.Tracker.track,
     "calibrate": flatland.calibrate, "render_calibration": flatland.render_calibration,
     "experiment": flatland.experiment, "montecarlo": flatland.montecarlo,
+    "Env": flatland.Env.__init__, "Env.reset": flatland.Env.reset, "Env.step": flatland.Env.step,
+    "success_reward": flatland.success_reward,
     "study": flatland.study, "read_camera_file": flatland.read_camera_file,
     "write_camera_file": flatland.write_camera_file, "project": flatland.project,
     "default_scene_path": flatland.default_scene_path,
@@ -119,14 +140,15 @@ CALLABLES = {
 
 
 def test_the_table_lists_every_public_function_and_parameter():
-    # Left out: the result classes; the native module's small classes of the loop
-    # (ControlOutput, Estimate, ...: their constructors' checks are in test_controllers.py).
+    # Left out: the result classes; Box, a description that Env makes; the native module's small
+    # classes of the loop (ControlOutput, Estimate, ...: their constructors' checks are in
+    # test_controllers.py).
     native = {name for name in flatland.__all__
               if getattr(getattr(flatland, name), "__module__", "") == "flatland._flatland"}
     functions = {name for name in flatland.__all__
                  if callable(getattr(flatland, name)) and name not in native
                  and not (inspect.isclass(getattr(flatland, name))
-                          and name in ("Simulation", "Experiment"))}
+                          and name in ("Simulation", "Experiment", "Box"))}
     assert functions <= {name.split(".")[0] for name in CALLABLES}, functions
     for name, fn in CALLABLES.items():
         params = [p for p in inspect.signature(fn).parameters if p != "self"]

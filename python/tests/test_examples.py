@@ -13,6 +13,7 @@ EXAMPLES = {
     "closed_loop_fig10.py": ([], ["fig10.png"]),
     "render_and_track.py": ([], ["tracking.png"]),
     "python_controller.py": ([], ["python_controller.png"]),
+    "env_agent.py": ([], ["env_agent.png"]),
 }
 
 
