@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import flatland
-from conftest import ROOT
+from conftest import ROOT, SCENES
 
 sys.path.insert(0, str(ROOT / "examples"))
 from python_controller import PaperController  # noqa: E402
@@ -49,6 +49,18 @@ def test_the_python_port_in_open_loop_mode_too():
     own = flatland.experiment(controller=PaperController(feedback=False))
     assert_logs_equal(cpp.log, own.log)
     assert own["outcome"] == cpp["outcome"]
+
+
+def test_the_python_port_with_the_time_scaled_law_too(tmp_path):
+    # The bundled scene with stage 2's other law (controller.law: time-scaled).
+    text = (SCENES / "airtable-feedback.yaml").read_text()
+    assert "\n  law: paper " in text
+    scene = tmp_path / "time-scaled.yaml"
+    scene.write_text(text.replace("\n  law: paper ", "\n  law: time-scaled "))
+    cpp = flatland.experiment(scene)
+    own = flatland.experiment(scene, controller=PaperController(law="time-scaled"))
+    assert cpp["t_stage2"] is not None
+    assert_logs_equal(cpp.log, own.log)
 
 
 def test_controller_names_choose_built_in_types():

@@ -215,6 +215,33 @@ def test_a_replaced_reward_sees_the_truth():
                              "measured", "stopping", "stop_reason", "ended_by", "success"}
 
 
+class LastMeasurement:
+    """An estimator that believes the latest measurement, at rest."""
+
+    def reset(self, t, s_h, sdot_h):
+        self.s = s_h
+
+    def propagate(self, t_next, hand):
+        pass
+
+    def update(self, z):
+        self.s = z.s_h
+
+    def estimate(self):
+        return flatland.Estimate(0.0, self.s, 0.0, ((1e-6, 0.0), (0.0, 1.0)))
+
+
+def test_env_runs_your_own_estimator():
+    env = flatland.Env(observation="measurement", estimator=LastMeasurement())
+    obs, _ = env.reset()
+    seen = dict(zip(env.observation_names, obs))
+    assert seen["s_est"] == seen["s_meas"] and seen["sigma_s_est"] == 1e-3
+    for _ in range(100):
+        obs, *_ = env.step(0.0)
+        seen = dict(zip(env.observation_names, obs))
+        assert seen["s_est"] == seen["s_meas"] and seen["sdot_est"] == 0.0
+
+
 def run_python(code, tmp_path, block_gymnasium=False):
     fake = tmp_path / "fake"
     (fake / "gymnasium").mkdir(parents=True)
