@@ -63,7 +63,11 @@ def test_the_python_port_with_the_time_scaled_law_too(tmp_path):
     assert_logs_equal(cpp.log, own.log)
 
 
-def test_controller_names_choose_built_in_types():
+def test_controller_names_choose_built_in_types(cpp_feedback):
+    # The scene's own choice by its names: the same run.
+    named = flatland.experiment(controller="paper", estimator="ekf")
+    assert_logs_equal(cpp_feedback.log, named.log)
+    assert named.result == cpp_feedback.result
     with pytest.raises(ValueError, match=r"^controller: unknown 'pid' \(a mode: feedback, "
                                          r"open-loop; a type: paper"):
         flatland.experiment(controller="pid")
