@@ -5,12 +5,14 @@
 namespace flatland::control {
 
 const std::vector<std::string>& controller_types() {
-  static const std::vector<std::string> types{"paper"};
+  static const std::vector<std::string> types{"paper", "transverse"};
   return types;
 }
 
 std::unique_ptr<Controller> make_controller(const ControllerChoice& choice) {
   if (choice.type == "paper") return std::make_unique<PaperController>(choice.paper);
+  if (choice.type == "transverse")
+    return std::make_unique<TransverseController>(choice.transverse, choice.paper);
   throw std::invalid_argument(
       unknown_type_message("controller.type", choice.type, controller_types()));
 }

@@ -54,6 +54,7 @@
 #include "flatland/control/controller.hpp"
 #include "flatland/control/estimator.hpp"
 #include "flatland/control/hand_input.hpp"
+#include "flatland/control/transverse.hpp"
 #include "flatland/control/types.hpp"
 
 #include "flatland/drivers/calibration_session.hpp"

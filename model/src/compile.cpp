@@ -96,12 +96,22 @@ void compile_loop(Model& m) {
   m.controller.paper.kd = c.kd;
   m.controller.paper.dip_until = c.dip_until;
   m.controller.paper.finish_after = c.finish_after;
+  m.controller.transverse.q = c.transverse.q;
+  m.controller.transverse.r = c.transverse.r;
+  m.controller.transverse.terminal = c.transverse.terminal;
+  m.controller.transverse.grid_step = c.transverse.grid_step;
   const auto& known_controllers = control::controller_types();
   if (std::find(known_controllers.begin(), known_controllers.end(), c.type) ==
       known_controllers.end())
     throw std::invalid_argument(
         scene.origin + ": " +
         control::unknown_type_message("controller.type", c.type, known_controllers));
+  // Open-loop playback is the plan without a law: the paper's controller's mode, no other type's.
+  if (c.mode == "open-loop" && c.type != "paper")
+    throw std::invalid_argument(scene.origin +
+                                ": controller.mode: open-loop plays the plan "
+                                "without feedback, which only controller.type paper does (got '" +
+                                c.type + "')");
   m.control_dt = 1.0 / scene.joint.rate;
   m.safety.stop_deceleration = c.stop_deceleration;
   m.safety.lost_timeout = c.lost_timeout;

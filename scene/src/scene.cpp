@@ -310,11 +310,31 @@ void read_joint(const MapReader& root, Scene& scene) {
                          sim::format_number(omega_dt) + " (must be < 0.5)");
 }
 
+/// `controller.transverse`: the LQR's weights and grid (read whatever the type, as the paper's keys
+/// are; only type transverse uses them).
+void read_transverse(const MapReader& controller, TransverseSpec& ts) {
+  const auto t = controller.optional_section("transverse", {"q", "r", "terminal", "grid_step"});
+  if (!t) return;
+  const auto diagonal = [&](const char* key, std::array<double, 3>& weights) {
+    weights = t->numbers_or<3>(key, "(theta, theta_dot, sdot_h)", weights);
+    for (std::size_t i = 0; i < 3; ++i)
+      if (!(weights[i] >= 0))
+        t->fail_at(std::string(key) + "[" + std::to_string(i) + "]",
+                   "must be >= 0, got " + sim::format_number(weights[i]));
+  };
+  diagonal("q", ts.q);
+  diagonal("terminal", ts.terminal);
+  ts.r = t->positive_or("r", ts.r);
+  ts.grid_step = t->positive_or("grid_step", ts.grid_step);
+  if (ts.grid_step > 0.01)
+    t->fail_at("grid_step", "must be at most 0.01 s, got " + t->node("grid_step").Scalar());
+}
+
 void read_controller(const MapReader& root, Scene& scene) {
   const auto c = root.optional_section(
-      "controller",
-      {"type", "mode", "plan", "law", "kp", "kd", "dip_until", "finish_after", "lost_timeout",
-       "innovation_gate", "innovation_strikes", "max_joint_jump", "stop_deceleration", "settle"});
+      "controller", {"type", "mode", "plan", "law", "kp", "kd", "dip_until", "finish_after",
+                     "lost_timeout", "innovation_gate", "innovation_strikes", "max_joint_jump",
+                     "stop_deceleration", "settle", "transverse"});
   if (!c) return;
   ControllerSpec& cs = scene.controller;
   // The type names a law compiled from the registry of control (model::compile checks it).
@@ -337,6 +357,7 @@ void read_controller(const MapReader& root, Scene& scene) {
   cs.max_joint_jump = c->positive_or("max_joint_jump", cs.max_joint_jump);
   cs.stop_deceleration = c->positive_or("stop_deceleration", cs.stop_deceleration);
   cs.settle = non_negative(*c, "settle", cs.settle);
+  read_transverse(*c, cs.transverse);
 }
 
 void read_estimator(const MapReader& root, Scene& scene) {

@@ -5,6 +5,7 @@
 #include "flatland/control/controller.hpp"
 #include "flatland/control/estimator.hpp"
 #include "flatland/control/interfaces.hpp"
+#include "flatland/control/transverse.hpp"
 
 #include <memory>
 #include <string>
@@ -13,13 +14,14 @@
 namespace flatland::control {
 
 /// A scene's controller: its type and the config of each built-in type (only the chosen one's is
-/// used).
+/// used; `transverse` also runs the paper's dip, finish and hold with `paper`).
 struct ControllerChoice {
   std::string type = "paper";
   PaperConfig paper;
+  TransverseConfig transverse;
 };
 
-/// The built-in controller types, in the order help lists them ("paper", ...).
+/// The built-in controller types, in the order help lists them ("paper", "transverse").
 const std::vector<std::string>& controller_types();
 /// A fresh controller of the chosen type (not started). std::invalid_argument naming
 /// `controller.type` and the known types for an unknown one.

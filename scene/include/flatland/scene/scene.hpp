@@ -107,6 +107,16 @@ struct JointSpec {
   double rate = 1000.0;            ///< Hz, servo and control-loop rate
 };
 
+/// The transverse-linearisation controller's LQR (section `controller.transverse`;
+/// control/transverse.hpp, docs/CLOSED_LOOP.md). The error is (theta - theta*, theta_dot -
+/// theta_dot*, sdot_h - sdot_h*) against the plan at the estimated s_h.
+struct TransverseSpec {
+  std::array<double, 3> q{100.0, 1.0, 1.0};  ///< running cost's diagonal, >= 0
+  double r = 1.0e-2;                             ///< s^4/rad^2, the acceleration's weight, > 0
+  std::array<double, 3> terminal{100.0, 1.0, 1.0};  ///< cost at finish_after, >= 0
+  double grid_step = 1e-3;  ///< s of plan time between stored gains, (0, 0.01]
+};
+
 /// The paper's vision-feedback controller (section `controller`, section 5 of the paper).
 struct ControllerSpec {
   /// The control law by name: paper (section 5's three stages; the keys below up to
@@ -127,6 +137,7 @@ struct ControllerSpec {
       0.05;  ///< rad, a reading further than this from the prediction is a glitch
   double stop_deceleration = 20.0;  ///< rad/s^2, safe stop
   double settle = 1.0;              ///< s the loop keeps running after the hand stops
+  TransverseSpec transverse;        ///< type transverse's own keys
 };
 
 /// The contact estimator (section `estimator`).
