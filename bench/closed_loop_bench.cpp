@@ -1,13 +1,17 @@
 // The closed loop's costs (docs/BENCHMARKS.md, "Closed loop"):
 //  * BM_ControlTick: estimator + controller for one 1 kHz tick in stage 2 (propagate, plan lookup,
 //    control law), with a latency-compensated update every 33rd tick as from a 30 Hz camera.
-//    Target: <= 5 us.
+//    Target: <= 5 us. BM_ControlTickTransverse: the same tick with the transverse-linearisation
+//    controller (its peer, compared as a ratio in the same run); BM_TransverseStart: its Riccati
+//    solution at start(). BM_ControllerStep/0, /1: the paper's and the transverse controller's
+//    step() alone.
 //  * BM_SyntheticExperiment: a whole synthetic experiment of the paper's air-table run (5 deg,
 //    2T = 4 s, 5.2 s simulated with the settle), every frame rendered (640 x 480, 2 DN noise) and
 //    tracked. Counter realtime_factor = simulated time / wall time; target >= 4.
 // Run: build/bin/flatland_closed_loop_bench
 #include <benchmark/benchmark.h>
 
+#include "flatland/control/choice.hpp"
 #include "flatland/control/controller.hpp"
 #include "flatland/control/estimator.hpp"
 #include "flatland/drivers/experiment.hpp"
@@ -15,6 +19,8 @@
 #include "flatland/sim/spec.hpp"
 
 #include <chrono>
+#include <memory>
+#include <string>
 
 using namespace flatland;
 
@@ -30,10 +36,14 @@ const drivers::LoopSetup& setup() {
   return s;
 }
 
-void BM_ControlTick(benchmark::State& state) {
+/// One estimator + controller tick in stage 2, the controller of `type` made as a scene's choice
+/// makes it (through the Controller interface, as the loop calls it).
+void control_tick(benchmark::State& state, const std::string& type) {
   const drivers::LoopSetup& su = setup();
   const control::Plan& plan = *su.plan.plan;
   const auto model = sim::build_problem(scene().sim);
+  control::ControllerChoice choice = su.model->controller;
+  choice.type = type;
   // Stage 2 from t = 1.5 s on the plan: the inputs the loop would see, precomputed.
   constexpr int kTicks = 1000;
   constexpr double kDt = 1e-3, kT0 = 1.5;
@@ -46,24 +56,26 @@ void BM_ControlTick(benchmark::State& state) {
     s_plan[i] = plan.s_h_at(t);
     accel[i] = h.angular_acceleration;
   }
+  // The transverse law solves its Riccati equation in start(): made once, outside the timing.
+  std::unique_ptr<control::Controller> ctl = control::make_controller(choice);
+  ctl->start(su.controller_context(kT0));
   const auto fresh = [&] {
     control::Ekf e(model, su.model->estimator.config);
     e.reset(kT0, s_plan[0], (s_plan[1] - s_plan[0]) / kDt);
-    control::PaperController c(su.model->controller.paper);
-    c.start(su.controller_context(kT0));
+    ctl->start(su.controller_context(kT0));
     control::ControlInput dip;
     dip.joint = joint[0];
     dip.estimate.s_h = -0.5;  // past dip_until: the first step switches to the servo stage
     dip.estimating = true;
-    (void)c.step(dip);
-    return std::make_pair(e, c);
+    (void)ctl->step(dip);
+    return e;
   };
-  auto [est, ctl] = fresh();
+  control::Ekf est = fresh();
   int i = 0;
   for (auto _ : state) {
     if (i + 1 == kTicks) {
       state.PauseTiming();
-      std::tie(est, ctl) = fresh();
+      est = fresh();
       i = 0;
       state.ResumeTiming();
     }
@@ -78,7 +90,7 @@ void BM_ControlTick(benchmark::State& state) {
     in.joint = joint[i];
     in.estimate = est.estimate();
     in.estimating = true;
-    const control::ControlOutput c = ctl.step(in);
+    const control::ControlOutput c = ctl->step(in);
     // The joint follows the plan here (open-loop readings), so the estimator is driven with the
     // plan's acceleration: with the controller's command it would see a hand it does not move.
     est.propagate(t + kDt, {joint[i].theta, joint[i].theta_dot, accel[i]});
@@ -86,7 +98,59 @@ void BM_ControlTick(benchmark::State& state) {
     ++i;
   }
 }
+
+void BM_ControlTick(benchmark::State& state) { control_tick(state, "paper"); }
 BENCHMARK(BM_ControlTick);
+
+/// The same tick with the transverse-linearisation controller: its peer in the same run.
+void BM_ControlTickTransverse(benchmark::State& state) { control_tick(state, "transverse"); }
+BENCHMARK(BM_ControlTickTransverse);
+
+/// The controller's step alone, in stage 2 on the plan's inputs (t = 1.5 .. 2.5 s, s_h below
+/// finish_after throughout, so the stage never changes): arg 0 the paper's, 1 the transverse law.
+void BM_ControllerStep(benchmark::State& state) {
+  const drivers::LoopSetup& su = setup();
+  const control::Plan& plan = *su.plan.plan;
+  control::ControllerChoice choice = su.model->controller;
+  choice.type = state.range(0) == 0 ? "paper" : "transverse";
+  constexpr int kTicks = 1000;
+  constexpr double kDt = 1e-3, kT0 = 1.5;
+  std::vector<control::ControlInput> inputs(kTicks);
+  for (int i = 0; i < kTicks; ++i) {
+    const double t = kT0 + i * kDt;
+    const sim::HandKinematics h = plan.hand(t);
+    control::ControlInput& in = inputs[static_cast<std::size_t>(i)];
+    in.t = t;
+    in.joint = {t, h.angle, h.angular_velocity};
+    in.estimate.t = t;
+    in.estimate.s_h = plan.s_h_at(t);
+    in.estimate.sdot_h = plan.sdot_h_at(t);
+    in.estimating = true;
+  }
+  std::unique_ptr<control::Controller> ctl = control::make_controller(choice);
+  ctl->start(su.controller_context(kT0));
+  std::size_t i = 0;
+  for (auto _ : state) {
+    const control::ControlOutput c = ctl->step(inputs[i]);
+    benchmark::DoNotOptimize(c);
+    if (++i == inputs.size()) i = 0;
+  }
+  state.SetLabel(choice.type);
+}
+BENCHMARK(BM_ControllerStep)->Arg(0)->Arg(1);
+
+/// The transverse controller's start(): the Riccati equation solved along the plan, once a run.
+void BM_TransverseStart(benchmark::State& state) {
+  const drivers::LoopSetup& su = setup();
+  control::ControllerChoice choice = su.model->controller;
+  choice.type = "transverse";
+  for (auto _ : state) {
+    std::unique_ptr<control::Controller> ctl = control::make_controller(choice);
+    ctl->start(su.controller_context(-0.25));
+    benchmark::DoNotOptimize(ctl);
+  }
+}
+BENCHMARK(BM_TransverseStart)->Unit(benchmark::kMillisecond);
 
 void BM_SyntheticExperiment(benchmark::State& state) {
   const drivers::LoopSetup& su = setup();
