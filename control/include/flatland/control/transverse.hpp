@@ -35,7 +35,7 @@ struct TransverseConfig {
   /// 1/s): 1/rad^2, s^2/rad^2, s^2. Non-negative.
   std::array<double, 3> q{100.0, 1.0, 1.0};
   /// Weight R on the acceleration's deviation from the plan's, s^4/rad^2. Positive.
-  double r = 1.0e-2;
+  double r = 0.1;
   /// Diagonal of the terminal cost P(tau_end) at finish_after, as q. Non-negative.
   std::array<double, 3> terminal{100.0, 1.0, 1.0};
   /// s of plan time between stored gains (the Riccati equation's RK4 step). In (0, 0.01].

@@ -111,8 +111,8 @@ struct JointSpec {
 /// control/transverse.hpp, docs/CLOSED_LOOP.md). The error is (theta - theta*, theta_dot -
 /// theta_dot*, sdot_h - sdot_h*) against the plan at the estimated s_h.
 struct TransverseSpec {
-  std::array<double, 3> q{100.0, 1.0, 1.0};  ///< running cost's diagonal, >= 0
-  double r = 1.0e-2;                             ///< s^4/rad^2, the acceleration's weight, > 0
+  std::array<double, 3> q{100.0, 1.0, 1.0};         ///< running cost's diagonal, >= 0
+  double r = 0.1;                                   ///< s^4/rad^2, the acceleration's weight, > 0
   std::array<double, 3> terminal{100.0, 1.0, 1.0};  ///< cost at finish_after, >= 0
   double grid_step = 1e-3;  ///< s of plan time between stored gains, (0, 0.01]
 };
