@@ -18,13 +18,15 @@ std::unique_ptr<Controller> make_controller(const ControllerChoice& choice) {
 }
 
 const std::vector<std::string>& estimator_types() {
-  static const std::vector<std::string> types{"ekf"};
+  static const std::vector<std::string> types{"ekf", "ukf"};
   return types;
 }
 
 std::unique_ptr<Estimator> make_estimator(const EstimatorChoice& choice,
                                           std::shared_ptr<const sim::RollingProblem> model) {
   if (choice.type == "ekf") return std::make_unique<Ekf>(std::move(model), choice.config);
+  if (choice.type == "ukf")
+    return std::make_unique<Ukf>(std::move(model), choice.config, choice.ukf);
   throw std::invalid_argument(
       unknown_type_message("estimator.type", choice.type, estimator_types()));
 }

@@ -16,9 +16,9 @@
 #include "flatland/sim/roots.hpp"
 #include "flatland/sim/search.hpp"
 #include "flatland/sim/simulate.hpp"
-#include "flatland/sim/spec.hpp"
 #include "flatland/sim/spatial.hpp"
 #include "flatland/sim/spatial_run.hpp"
+#include "flatland/sim/spec.hpp"
 #include "flatland/sim/surface.hpp"
 #include "flatland/sim/trajectory_csv.hpp"
 
@@ -51,11 +51,15 @@
 #include "flatland/calibration/report.hpp"
 #include "flatland/calibration/session.hpp"
 
+#include "flatland/control/choice.hpp"
 #include "flatland/control/controller.hpp"
 #include "flatland/control/estimator.hpp"
 #include "flatland/control/hand_input.hpp"
+#include "flatland/control/interfaces.hpp"
+#include "flatland/control/rolling_filter.hpp"
 #include "flatland/control/transverse.hpp"
 #include "flatland/control/types.hpp"
+#include "flatland/control/ukf.hpp"
 
 #include "flatland/drivers/calibration_session.hpp"
 #include "flatland/drivers/experiment.hpp"

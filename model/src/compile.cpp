@@ -77,6 +77,7 @@ void compile_loop(Model& m) {
   ec.model = control::parse_estimator_model(e.model);
   ec.latency_compensation = e.latency_compensation;
   ec.process_noise = e.process_noise;
+  m.estimator.ukf = {e.ukf.alpha, e.ukf.beta, e.ukf.kappa};
   // The estimator re-propagates from the capture time of a late frame: its history must reach
   // back past the worst latency and a frame or two.
   if (scene.camera)

@@ -361,14 +361,21 @@ void read_controller(const MapReader& root, Scene& scene) {
 }
 
 void read_estimator(const MapReader& root, Scene& scene) {
-  const auto e = root.optional_section("estimator",
-                                       {"type", "model", "latency_compensation", "process_noise"});
+  const auto e = root.optional_section(
+      "estimator", {"type", "model", "latency_compensation", "process_noise", "ukf"});
   if (!e) return;
   EstimatorSpec& es = scene.estimator;
+  // The type names a filter of control's registry (model::compile checks it).
   if (e->has("type")) es.type = e->text("type");
   es.model = e->choice_or("model", {"rolling", "constant-velocity"}, es.model.c_str());
   es.latency_compensation = e->boolean_or("latency_compensation", es.latency_compensation);
   es.process_noise = e->positive_or("process_noise", es.process_noise);
+  if (const auto u = e->optional_section("ukf", {"alpha", "beta", "kappa"})) {
+    // The bounds of control::Ukf's check, reported here with the field's path and the file.
+    es.ukf.alpha = number_in(*u, "alpha", 1e-4, 1.0, es.ukf.alpha);
+    es.ukf.beta = non_negative(*u, "beta", es.ukf.beta);
+    es.ukf.kappa = non_negative(*u, "kappa", es.ukf.kappa);
+  }
 }
 
 void read_faults(const MapReader& root, Scene& scene) {

@@ -6,6 +6,7 @@
 #include "flatland/control/estimator.hpp"
 #include "flatland/control/interfaces.hpp"
 #include "flatland/control/transverse.hpp"
+#include "flatland/control/ukf.hpp"
 
 #include <memory>
 #include <string>
@@ -28,13 +29,15 @@ const std::vector<std::string>& controller_types();
 std::unique_ptr<Controller> make_controller(const ControllerChoice& choice);
 
 /// A scene's estimator: its type and its config (`EstimatorConfig` is shared by the built-in
-/// filters: model, latency compensation, process noise, history, initial uncertainty).
+/// filters: model, latency compensation, process noise, history, initial uncertainty), with each
+/// type's own (only the chosen one's is used).
 struct EstimatorChoice {
   std::string type = "ekf";
   EstimatorConfig config;
+  UkfConfig ukf;  ///< type "ukf": the sigma points
 };
 
-/// The built-in estimator types ("ekf", ...).
+/// The built-in estimator types ("ekf", "ukf").
 const std::vector<std::string>& estimator_types();
 /// A fresh estimator of the chosen type on the nominal model. std::invalid_argument naming
 /// `estimator.type` and the known types for an unknown one.

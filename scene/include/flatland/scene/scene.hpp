@@ -140,6 +140,13 @@ struct ControllerSpec {
   TransverseSpec transverse;        ///< type transverse's own keys
 };
 
+/// The unscented filter's sigma points (section `estimator.ukf`; control::UkfConfig).
+struct UkfSpec {
+  double alpha = 1.0;  ///< spread scaling, in [1e-4, 1]
+  double beta = 2.0;   ///< prior's kurtosis term (2: Gaussian), >= 0
+  double kappa = 1.0;  ///< secondary scaling, >= 0 (n + kappa = 3: points at +-sqrt(3) sigma)
+};
+
 /// The contact estimator (section `estimator`).
 struct EstimatorSpec {
   std::string type = "ekf";       ///< ekf (extended Kalman filter) | ukf (unscented)
@@ -150,6 +157,7 @@ struct EstimatorSpec {
   /// Carlo study, with the hand's acceleration estimated from the joint's readings
   /// (docs/CLOSED_LOOP.md, docs/ESTIMATOR.md).
   double process_noise = 0.016;
+  UkfSpec ukf;  ///< type ukf's own parameters
 };
 
 /// Faults injected into a synthetic experiment (section `faults`), to test the safe stop.
