@@ -5,9 +5,11 @@
 
 #include "flatland/render/overlay_text.hpp"
 
+#include "flatland/control/choice.hpp"
 #include "flatland/control/types.hpp"
 #include "flatland/drivers/experiment.hpp"
 #include "flatland/drivers/live.hpp"
+#include "flatland/drivers/montecarlo.hpp"
 #include "flatland/drivers/recorded.hpp"
 #include "flatland/drivers/synthetic.hpp"
 #include "flatland/drivers/tick_log_csv.hpp"
@@ -34,9 +36,10 @@ namespace {
 
 struct ExperimentOptions {
   CommonOptions common;
-  std::string controller, camera = "synthetic", joint, record;
+  std::string controller, estimator, camera = "synthetic", joint, record;
   bool video = false;
   CLI::Option* controller_opt = nullptr;
+  CLI::Option* estimator_opt = nullptr;
   CLI::Option* joint_opt = nullptr;
 };
 
@@ -126,7 +129,23 @@ void run_experiment(const ExperimentOptions& o) {
   CommonOptions common = o.common;
   if (common.scene.empty()) common.scene = default_experiment_scene();
   Scene scene = load_scene_with_overrides(common);
-  if (o.controller_opt->count()) scene.controller.mode = o.controller;
+  // --controller: what Monte Carlo accepts (open-loop, feedback or a built-in type), the same way.
+  if (o.controller_opt->count()) {
+    try {
+      scene = drivers::scene_for_controller(scene, o.controller, "--controller");
+    } catch (const std::invalid_argument& e) {
+      throw UsageError(e.what());
+    }
+  }
+  if (o.estimator_opt->count()) {
+    const auto& types = control::estimator_types();
+    if (std::find(types.begin(), types.end(), o.estimator) == types.end())
+      throw UsageError(control::unknown_type_message("--estimator", o.estimator, types));
+    scene.estimator.type = o.estimator;
+  }
+  // What the run is called: the controller as asked for, else the scene's mode.
+  const std::string controller_label =
+      o.controller_opt->count() ? o.controller : scene.controller.mode;
 
   CameraKind kind;
   if (o.camera == "synthetic")
@@ -269,8 +288,8 @@ void run_experiment(const ExperimentOptions& o) {
     bar->update(std::min(total_ms, std::lround(1000 * (t - t_start))), total_ms);
   };
 
-  std::cerr << "flatland: " << scene.controller.mode << " experiment, " << scene.origin
-            << ", camera " << (camera ? camera->describe() : "synthetic") << ", joint "
+  std::cerr << "flatland: " << controller_label << " experiment, " << scene.origin << ", camera "
+            << (camera ? camera->describe() : "synthetic") << ", joint "
             << (joint ? joint->describe() : "simulated") << "\n";
   const auto start = std::chrono::steady_clock::now();
   drivers::LoopResult loop;
@@ -373,7 +392,9 @@ void run_experiment(const ExperimentOptions& o) {
   j["finished"] = loop.finished;
   j["k"] = number(loop.k);
   j["period"] = number(loop.period);
-  j["controller"] = scene.controller.mode;
+  j["controller"] = controller_label;
+  j["controller_type"] = loop.controller;  // what ran: Controller::name(), Estimator::name()
+  j["estimator"] = loop.estimator;
   j["camera"] = camera ? camera->describe() : "synthetic";
   j["joint"] = joint ? joint->describe() : "simulated";
   j["nees_mean"] = truth ? number(synthetic->nees_mean) : Json(nullptr);
@@ -432,7 +453,8 @@ void run_experiment(const ExperimentOptions& o) {
                        : (v.is_string() ? v.get<std::string>() : v.dump()) + unit;
   };
   std::ostringstream os;
-  os << "flatland experiment: " << scene.origin << " (" << scene.controller.mode << ")\n"
+  os << "flatland experiment: " << scene.origin << " (" << controller_label << ": controller "
+     << loop.controller << ", estimator " << loop.estimator << ")\n"
      << "  success            " << opt(j["success"])
      << (truth && !synthetic->success ? " (" + synthetic->failure + ")" : "") << "\n"
      << "  duration           " << opt(j["duration_s"], " s") << "\n"
@@ -480,11 +502,22 @@ Command add_experiment_command(CLI::App& app) {
       "Scene file (YAML, SI units; schema in docs/SCENE.md). Default: the bundled closed-loop "
       "scene, " +
       default_experiment_scene());
+  std::string controllers, estimators;
+  for (const std::string& t : control::controller_types()) controllers += ", " + t;
+  for (const std::string& t : control::estimator_types())
+    estimators += (estimators.empty() ? "" : ", ") + t;
   o->controller_opt =
       cmd->add_option("--controller", o->controller,
-                      "feedback (the paper's vision feedback) or open-loop (plays the plan). "
-                      "Default: the scene's controller.mode")
-          ->check(CLI::IsMember({"feedback", "open-loop"}));
+                      "open-loop (plays the paper's plan), feedback (the scene's controller.type "
+                      "with vision feedback) or a controller type in feedback mode (" +
+                          controllers.substr(2) +
+                          "). Default: the scene's controller.type and controller.mode")
+          ->type_name("NAME");
+  o->estimator_opt = cmd->add_option("--estimator", o->estimator,
+                                     "The contact estimator's type (" + estimators +
+                                         "; docs/ESTIMATOR.md). Default: the scene's "
+                                         "estimator.type")
+                         ->type_name("NAME");
   cmd->add_option("--camera", o->camera,
                   "synthetic (render the simulated world), video:DIR or video:FILE (replay a "
                   "recording, or a video with FILE.timestamps.csv), v4l2:N (live /dev/videoN). "
