@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # scripts/test.sh's install stage: install BUILD into a temporary prefix, build this directory's
-# downstream project against it with find_package, and run both it and the installed CLI from
-# outside the source tree. Fails (non-zero) on any difference from what an install must give.
+# downstream project against it with find_package (a program with its own closed-loop controller),
+# and run both it and the installed CLI from outside the source tree. Fails (non-zero) on any
+# difference from what an install must give.
 #   tests/downstream/check.sh [BUILD]
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)
@@ -25,7 +26,7 @@ library=$("$work/build/downstream")
 cli=$("$prefix/bin/flatland" solve --period 1.181 --json 2>/dev/null)
 # A program outside the prefix finds the data where FLATLAND_DATA_DIR says, never in the source
 # tree.
-located=$(FLATLAND_DATA_DIR="$prefix/share/flatland" "$work/build/downstream")
+located=$(FLATLAND_DATA_DIR="$prefix/share/flatland" "$work/build/downstream" --no-loop)
 python3 - "$library" "$cli" "$located" "$prefix" "$root" <<'PY'
 import json, sys
 library, cli, located = (json.loads(a) for a in sys.argv[1:4])
@@ -41,6 +42,11 @@ if library["default_scene"].startswith(root + "/"):
     sys.exit(f"downstream: the library's default scene {library['default_scene']} is in the source tree")
 if located["default_scene"] != prefix + "/share/flatland/scenes/butterfly.yaml":
     sys.exit(f"downstream: with FLATLAND_DATA_DIR the default scene is {located['default_scene']}")
+# Its own controller ran in the installed library's loop (the program checked the details: called
+# at every tick, its modes logged, Monte Carlo's records named and on the paper's worlds).
+own = library["own_controller"]
+if own["controller"] != "pd" or own["calls"] < 1 or own["modes"] < 2:
+    sys.exit(f"downstream: its own controller did not run as written: {own}")
 PY
 # The installed CLI names its installed scenes, and its camera commands run.
 "$prefix/bin/flatland" solve --help | grep -q -- "$prefix/share/flatland/scenes/butterfly.yaml" ||
