@@ -3,12 +3,14 @@
 // loop with a 30 Hz camera, with the hand input as the loop makes it (the joint's readings, the
 // acceleration from their change: control/hand_input.hpp) against the commanded acceleration
 // given directly (the loop before issue 24). The budget for estimator + controller is 5 us per
-// tick.
+// tick. The unscented filter against the extended one on the same inputs (BM_FilterPropagate,
+// BM_FilterTick: arg 0 the EKF, arg 1 the UKF; their ratio in one run is the UKF's cost).
 // Run: build/bin/flatland_control_bench
 #include <benchmark/benchmark.h>
 
 #include "flatland/control/estimator.hpp"
 #include "flatland/control/hand_input.hpp"
+#include "flatland/control/ukf.hpp"
 #include "flatland/sim/spec.hpp"
 
 #include <numbers>
@@ -144,6 +146,83 @@ void BM_EstimatorTick(benchmark::State& state) {
   state.SetLabel(from_readings ? "hand input from readings" : "commanded acceleration");
 }
 BENCHMARK(BM_EstimatorTick)->Arg(0)->Arg(1);
+
+// Either filter type, warmed up as above (the same 400 ms of history behind it).
+template <class Filter>
+Filter warmed_up_filter() {
+  const Window& w = inputs();
+  Filter est(model(), {});
+  est.reset(w.t0, w.s_true[0], w.sdot0);
+  for (int i = 0; i < 400; ++i) est.propagate(w.t0 + (i + 1) * kDt, w.u[i]);
+  return est;
+}
+
+// One 1 ms propagation on the rolling model: the EKF's 8 evaluations of the disk equation (4 RK4
+// stages, 4 for the Jacobian) against the UKF's 20 (4 RK4 stages for each of 5 sigma points).
+template <class Filter>
+void filter_propagate(benchmark::State& state) {
+  Filter est = warmed_up_filter<Filter>();
+  const Inputs& in = inputs();
+  long i = 400;
+  for (auto _ : state) {
+    if (i == Inputs::kCount) {
+      state.PauseTiming();
+      est = warmed_up_filter<Filter>();
+      i = 400;
+      state.ResumeTiming();
+    }
+    est.propagate(in.t0 + (i + 1) * kDt, in.u[i]);
+    ++i;
+    benchmark::DoNotOptimize(est);
+  }
+  state.SetLabel(est.name());
+}
+
+// The loop's average tick as BM_EstimatorTick/1 (the hand input from the readings, an update 33
+// ms old every 33 ticks), per filter type.
+template <class Filter>
+void filter_tick(benchmark::State& state) {
+  Filter est = warmed_up_filter<Filter>();
+  control::HandInputFromJoint hand;
+  const Inputs& in = inputs();
+  long i = 400, tick = 0;
+  hand.next(in.readings[i - 1], in.u[i - 1].theta_ddot);
+  for (auto _ : state) {
+    if (i == Inputs::kCount) {
+      state.PauseTiming();
+      est = warmed_up_filter<Filter>();
+      i = 400;
+      hand.reset();
+      hand.next(in.readings[i - 1], in.u[i - 1].theta_ddot);
+      state.ResumeTiming();
+    }
+    const double t1 = in.t0 + (i + 1) * kDt;
+    est.propagate(t1, hand.next(in.readings[i], in.u[i].theta_ddot).input);
+    if (++tick % 33 == 0) {
+      const control::UpdateReport r = est.update({t1 - 0.0325, t1, in.s_true[i - 32], 2e-4});
+      benchmark::DoNotOptimize(r);
+    }
+    ++i;
+    benchmark::DoNotOptimize(est);
+  }
+  state.SetLabel(est.name());
+}
+
+void BM_FilterPropagate(benchmark::State& state) {
+  if (state.range(0) == 0)
+    filter_propagate<control::Ekf>(state);
+  else
+    filter_propagate<control::Ukf>(state);
+}
+BENCHMARK(BM_FilterPropagate)->Arg(0)->Arg(1);
+
+void BM_FilterTick(benchmark::State& state) {
+  if (state.range(0) == 0)
+    filter_tick<control::Ekf>(state);
+  else
+    filter_tick<control::Ukf>(state);
+}
+BENCHMARK(BM_FilterTick)->Arg(0)->Arg(1);
 
 }  // namespace
 

@@ -23,7 +23,9 @@ using namespace flatland;
 // A lab's own law, in the few lines a user writes: the plan's hand motion as feedforward, the
 // hand servoed to it, and a PD on the estimated s_h against the plan's s_h at the time (a disk
 // behind its plan gets the hand's acceleration raised). Before t = 0 it waits; from the plan's end
-// it holds the final angle and says the motion is done.
+// it holds the final angle and says the motion is done. It is a test of the interface, not a good
+// law: on 30 perturbed worlds (seed 1) it succeeds 25 times whatever the sign of its s_h gains up
+// to 4 times these, as often as open-loop playback (25), against the paper's controller's 30.
 class PdOnContact final : public control::Controller {
  public:
   explicit PdOnContact(std::shared_ptr<std::atomic<long>> calls) : calls_(std::move(calls)) {}
