@@ -5,6 +5,8 @@
 
 #include "flatland/drivers/experiment.hpp"
 
+#include <boost/math/distributions/binomial.hpp>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -183,6 +185,7 @@ MonteCarloResult run_montecarlo(const model::Model& nominal_model, const Perturb
         // Each world is its perturbed scene compiled anew (as MuJoCo edits a spec and recompiles).
         Scene world = perturb(nominal, p, seed, run, &rec.drawn);
         if (edit) edit(world, run);
+        if (world.sim.contact.mu) rec.mu = *world.sim.contact.mu;
         SyntheticResult r;
         try {
           r = run_synthetic(*setups[ci], model::compile(std::move(world)));
@@ -205,6 +208,7 @@ MonteCarloResult run_montecarlo(const model::Model& nominal_model, const Perturb
         rec.fn_min_ratio = r.fn_min_ratio;
         rec.mu_max = r.mu_max;
         rec.safe_stop = r.loop.safe_stop;
+        if (r.loop.stop_reason) rec.stop_cause = r.loop.stop_reason->cause;
         rec.frames = r.loop.frames;
         rec.frames_lost = r.loop.frames_lost;
         out.records[static_cast<std::size_t>(job)] = std::move(rec);
@@ -238,6 +242,131 @@ MonteCarloResult run_montecarlo(const model::Model& nominal_model, const Perturb
   return out;
 }
 
+double quantile(std::vector<double> values, double q) {
+  if (!(q >= 0 && q <= 1)) throw std::invalid_argument("quantile: q must be in [0, 1]");
+  if (values.empty()) return NAN;
+  for (double v : values)
+    if (!std::isfinite(v)) throw std::invalid_argument("quantile: a value is not finite");
+  std::sort(values.begin(), values.end());
+  const double h = static_cast<double>(values.size() - 1) * q;
+  const std::size_t lo = static_cast<std::size_t>(std::floor(h));
+  if (lo + 1 >= values.size()) return values.back();
+  return values[lo] + (h - static_cast<double>(lo)) * (values[lo + 1] - values[lo]);
+}
+
+Spread spread(const std::vector<double>& values) {
+  Spread s;
+  s.n = static_cast<int>(values.size());
+  if (values.empty()) return s;
+  s.min = quantile(values, 0);
+  s.p05 = quantile(values, 0.05);
+  s.median = quantile(values, 0.5);
+  s.p95 = quantile(values, 0.95);
+  s.max = quantile(values, 1);
+  return s;
+}
+
+double mcnemar_exact_p(long only_a, long only_b) {
+  if (only_a < 0 || only_b < 0) throw std::invalid_argument("mcnemar_exact_p: counts must be >= 0");
+  const long discordant = only_a + only_b;
+  if (discordant == 0) return 1.0;
+  // Boost.Math's binomial CDF (through the incomplete beta function): exact to rounding for any
+  // count, where summing the terms by hand would underflow past about a thousand worlds.
+  const boost::math::binomial_distribution<double> coin(static_cast<double>(discordant), 0.5);
+  const double tail = boost::math::cdf(coin, static_cast<double>(std::min(only_a, only_b)));
+  return std::min(1.0, 2.0 * tail);
+}
+
+namespace {
+
+/// Every outcome, in the enum's order: the reports list them all, zeros included.
+constexpr Outcome kOutcomes[] = {
+    Outcome::kSuccess,    Outcome::kDropped,  Outcome::kSlidOff,     Outcome::kWrongWell,
+    Outcome::kNotSettled, Outcome::kSafeStop, Outcome::kNotFinished, Outcome::kNumericalFailure};
+
+ControllerReport report_of(const std::string& name, const std::vector<const RunRecord*>& runs) {
+  ControllerReport rep;
+  rep.name = name;
+  rep.runs = static_cast<int>(runs.size());
+  for (Outcome o : kOutcomes) rep.outcomes[to_string(o)] = 0;
+  std::vector<double> duration, fn_min, friction;
+  for (const RunRecord* r : runs) {
+    ++rep.outcomes[to_string(r->outcome)];
+    if (r->outcome == Outcome::kNumericalFailure) {
+      ++rep.numerical_failures;
+      continue;
+    }
+    if (r->outcome == Outcome::kSafeStop)
+      ++rep.safe_stops[r->stop_cause ? control::to_string(*r->stop_cause) : "other"];
+    if (!r->success) continue;
+    ++rep.successes;
+    if (std::isfinite(r->duration_s)) duration.push_back(r->duration_s);
+    if (std::isfinite(r->fn_min_ratio)) fn_min.push_back(r->fn_min_ratio);
+    if (std::isfinite(r->mu_max) && std::isfinite(r->mu) && r->mu > 0)
+      friction.push_back(r->mu_max / r->mu);
+  }
+  rep.ci = wilson_interval(rep.successes, rep.runs - rep.numerical_failures);
+  rep.duration_s = spread(duration);
+  rep.fn_min_ratio = spread(fn_min);
+  rep.friction_use = spread(friction);
+  return rep;
+}
+
+}  // namespace
+
+ControllerComparison compare_controllers(const MonteCarloResult& result) {
+  const std::size_t nc = result.summaries.size();
+  const std::size_t worlds = static_cast<std::size_t>(std::max(result.runs, 0));
+  // by_world[run][c]: the record of world `run` under controller c.
+  std::vector<std::vector<const RunRecord*>> by_world(worlds,
+                                                      std::vector<const RunRecord*>(nc, nullptr));
+  for (const RunRecord& r : result.records) {
+    std::size_t c = 0;
+    while (c < nc && result.summaries[c].name != r.controller) ++c;
+    if (c == nc || r.run < 0 || static_cast<std::size_t>(r.run) >= worlds ||
+        by_world[static_cast<std::size_t>(r.run)][c])
+      throw std::invalid_argument("compare_controllers: record of run " + std::to_string(r.run) +
+                                  " under '" + r.controller +
+                                  "' is unknown, out of range or repeated");
+    by_world[static_cast<std::size_t>(r.run)][c] = &r;
+  }
+  ControllerComparison out;
+  for (std::size_t c = 0; c < nc; ++c) {
+    std::vector<const RunRecord*> runs;
+    for (std::size_t w = 0; w < worlds; ++w) {
+      if (!by_world[w][c])
+        throw std::invalid_argument("compare_controllers: run " + std::to_string(w) +
+                                    " has no record under '" + result.summaries[c].name + "'");
+      runs.push_back(by_world[w][c]);
+    }
+    out.controllers.push_back(report_of(result.summaries[c].name, runs));
+  }
+  const auto counted = [](const RunRecord* r) { return r->outcome != Outcome::kNumericalFailure; };
+  for (std::size_t a = 0; a < nc; ++a)
+    for (std::size_t b = a + 1; b < nc; ++b) {
+      PairedComparison pair;
+      pair.a = result.summaries[a].name;
+      pair.b = result.summaries[b].name;
+      for (std::size_t w = 0; w < worlds; ++w) {
+        const RunRecord* ra = by_world[w][a];
+        const RunRecord* rb = by_world[w][b];
+        if (!counted(ra) || !counted(rb)) continue;
+        ++pair.worlds;
+        if (ra->success && rb->success)
+          ++pair.both;
+        else if (ra->success)
+          ++pair.only_a;
+        else if (rb->success)
+          ++pair.only_b;
+        else
+          ++pair.neither;
+      }
+      pair.p_value = mcnemar_exact_p(pair.only_a, pair.only_b);
+      out.pairs.push_back(std::move(pair));
+    }
+  return out;
+}
+
 namespace {
 /// A CSV field: quoted (with doubled quotes) when it holds a comma, quote or line break.
 std::string csv_field(const std::string& s) {
@@ -253,7 +382,7 @@ std::string runs_csv(const MonteCarloResult& r) {
   std::string s =
       "run,controller,success,failure,duration_s,s_end,fn_min_ratio,mu_max,safe_stop,frames,"
       "frames_lost,s_h0,tilt_deg,radius_m,friction_scale,effects_seed,outcome,slide_s,flight_s,"
-      "impacts,mu_scale,loss_scale,seed\n";
+      "impacts,mu_scale,loss_scale,seed,mu,stop_cause\n";
   for (const RunRecord& x : r.records)
     s += std::to_string(x.run) + "," + x.controller + "," + (x.success ? "1" : "0") + "," +
          csv_field(x.failure) + "," + format_number(x.duration_s) + "," + format_number(x.s_end) +
@@ -264,7 +393,8 @@ std::string runs_csv(const MonteCarloResult& r) {
          format_number(x.drawn.friction_scale) + "," + std::to_string(x.drawn.effects_seed) + "," +
          to_string(x.outcome) + "," + format_number(x.slide_s) + "," + format_number(x.flight_s) +
          "," + std::to_string(x.impacts) + "," + format_number(x.drawn.mu_scale) + "," +
-         format_number(x.drawn.loss_scale) + "," + std::to_string(x.seed) + "\n";
+         format_number(x.drawn.loss_scale) + "," + std::to_string(x.seed) + "," +
+         format_number(x.mu) + "," + (x.stop_cause ? control::to_string(*x.stop_cause) : "") + "\n";
   return s;
 }
 

@@ -283,5 +283,10 @@ TEST(MonteCarloRun, AWorldThatFailsNumericallyIsRecordedAndTheStudyGoesOn) {
   EXPECT_EQ(r.ci_open_loop.hi, ci.hi);
   const std::string csv = drivers::runs_csv(r);
   EXPECT_NE(csv.find(",numerical_failure,"), std::string::npos) << csv;
-  EXPECT_NE(csv.find(",seed\n"), std::string::npos);  // the header's last column
+  // The columns of before keep their places (seed was the last); new ones come after it.
+  EXPECT_NE(csv.find(",loss_scale,seed,mu,stop_cause\n"), std::string::npos) << csv;
+  // The failed world's mu is the world's contact.mu, drawn: nominal mu times its factor.
+  const Scene world = drivers::perturb(s0, {}, 77, 1);
+  ASSERT_TRUE(world.sim.contact.mu);
+  EXPECT_EQ(bad.mu, *world.sim.contact.mu);
 }

@@ -1,15 +1,19 @@
 // Monte Carlo robustness of the closed loop: many synthetic experiments in which the world differs
 // from what the controller assumes (initial position, table tilt, disk size, camera noise,
 // latency, dropped frames, motor friction), run with each controller on the same perturbed
-// worlds, so that the success rates of open-loop playback and vision feedback can be compared
-// (paper section 5: feedback makes the roll robust).
+// worlds, so that controllers can be compared world by world: open-loop playback against vision
+// feedback (paper section 5: feedback makes the roll robust), or one feedback law against another
+// (compare_controllers: each one's outcomes and margins, and paired tests).
 #pragma once
 
 #include "flatland/drivers/experiment.hpp"
 #include "flatland/drivers/synthetic.hpp"
 
+#include <cmath>
 #include <cstdint>
 #include <functional>
+#include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -75,6 +79,11 @@ struct RunRecord {
   bool safe_stop = false;
   long frames = 0, frames_lost = 0;
   DrawnPerturbation drawn;
+  /// What triggered the safe stop (outcome kSafeStop; also a stop after the disk was lost).
+  std::optional<control::StopCause> stop_cause;
+  /// The world's contact.mu (after its perturbation and any WorldEdit): what mu_max is measured
+  /// against. NaN for a world that failed before it was compiled.
+  double mu = NAN;
 };
 
 /// A controller Monte Carlo runs on every world: by name, or the caller's own.
@@ -146,6 +155,63 @@ std::vector<MonteCarloController> controllers_by_name(const std::vector<std::str
 /// mode. std::invalid_argument naming `field` and the known names otherwise.
 Scene scene_for_controller(const Scene& nominal, const std::string& name,
                            const std::string& field = "controller");
+
+/// The q-quantile (0 <= q <= 1) of `values` by linear interpolation between the order statistics
+/// (Hyndman and Fan's type 7, numpy's and R's default): x_(h) with h = (n - 1) q, 0-based, read
+/// between its neighbours. NaN for no values; std::invalid_argument for q outside [0, 1] or a
+/// non-finite value.
+double quantile(std::vector<double> values, double q);
+
+/// How one quantity spread over a set of runs: its extremes, 5th and 95th percentiles and median
+/// (quantile()). All NaN when n = 0.
+struct Spread {
+  int n = 0;
+  double min = NAN, p05 = NAN, median = NAN, p95 = NAN, max = NAN;
+};
+Spread spread(const std::vector<double>& values);
+
+/// The exact two-sided McNemar test of paired successes: `only_a` worlds where A succeeded and B
+/// failed, `only_b` the reverse. Under "the controllers are equally good" each discordant world is
+/// a fair coin, so p = min(1, 2 P[X <= min(only_a, only_b)]) for X ~ Binomial(only_a + only_b,
+/// 1/2); 1 without discordant worlds. std::invalid_argument for negative counts.
+double mcnemar_exact_p(long only_a, long only_b);
+
+/// One controller over the worlds of a Monte Carlo result.
+struct ControllerReport {
+  std::string name;
+  int runs = 0;                ///< worlds
+  int numerical_failures = 0;  ///< worlds without a physical outcome (left out of the rate)
+  int successes = 0;
+  Interval ci;  ///< Wilson 95 % over runs - numerical_failures
+  /// How the runs ended: to_string(Outcome) -> count, every outcome listed (zeros included).
+  std::map<std::string, int> outcomes;
+  /// The safe stops by what triggered them: control::to_string(StopCause) -> count (the causes
+  /// that occurred; "other" for a safe stop without a recorded cause).
+  std::map<std::string, int> safe_stops;
+  /// Over the successes only (a failed run's margins describe how it failed, not how close a
+  /// success came to failing): the motion's duration (s), the smallest normal force over
+  /// m g sin(tilt) (worst: min), and the friction used, mu_max over the world's mu (worst: max;
+  /// 1 is the slip limit).
+  Spread duration_s, fn_min_ratio, friction_use;
+};
+
+/// Two controllers on the same worlds (the worlds where both had a physical outcome).
+struct PairedComparison {
+  std::string a, b;
+  int worlds = 0;  ///< worlds both ran without a numerical failure
+  int both = 0, only_a = 0, only_b = 0, neither = 0;
+  double p_value = 1;  ///< mcnemar_exact_p(only_a, only_b)
+};
+
+struct ControllerComparison {
+  std::vector<ControllerReport> controllers;  ///< in the result's order
+  std::vector<PairedComparison> pairs;        ///< every pair (i < j) in that order
+};
+
+/// The per-controller reports and the paired comparisons of a Monte Carlo result (the
+/// controllers in the order of result.summaries). std::invalid_argument if the records do not
+/// hold one record per world and controller.
+ControllerComparison compare_controllers(const MonteCarloResult& result);
 
 /// runs.csv: one row per experiment (run, controller, outcome, what it drew, ...; the columns
 /// are documented in docs/CLOSED_LOOP.md), in the records' order.
