@@ -4,7 +4,9 @@
 #include "common.hpp"
 
 #include "flatland/drivers/montecarlo.hpp"
+#include "flatland/sim/format.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <iostream>
@@ -41,6 +43,72 @@ Json perturbations_json(const drivers::Perturbations& p) {
   j["friction_rel"] = p.friction_rel;
   j["contact_rel"] = p.contact_rel;
   return j;
+}
+
+Json spread_json(const drivers::Spread& s) {
+  return {{"n", s.n},
+          {"min", number(s.min)},
+          {"p05", number(s.p05)},
+          {"median", number(s.median)},
+          {"p95", number(s.p95)},
+          {"max", number(s.max)}};
+}
+
+/// Per controller: success with its interval, outcomes, safe stops by cause, the successes'
+/// duration and margins (drivers::ControllerReport); the same keys as Python's montecarlo().
+Json report_json(const drivers::ControllerReport& c) {
+  return {{"controller", c.name},
+          {"runs", c.runs},
+          {"successes", c.successes},
+          {"numerical_failures", c.numerical_failures},
+          {"ci95", Json::array({c.ci.lo, c.ci.hi})},
+          {"outcomes", c.outcomes},
+          {"safe_stops", c.safe_stops},
+          {"duration_s", spread_json(c.duration_s)},
+          {"fn_min_ratio", spread_json(c.fn_min_ratio)},
+          {"friction_use", spread_json(c.friction_use)}};
+}
+
+Json pair_json(const drivers::PairedComparison& p) {
+  return {
+      {"a", p.a},           {"b", p.b},           {"worlds", p.worlds},   {"both", p.both},
+      {"only_a", p.only_a}, {"only_b", p.only_b}, {"neither", p.neither}, {"p_value", p.p_value}};
+}
+
+/// The text lines of one controller: its rate, how the others ended, its successes' margins.
+void print_report(std::ostream& os, const drivers::ControllerReport& c, std::size_t width) {
+  const auto padded = [&](const std::string& text) {
+    return text + std::string(width > text.size() ? width - text.size() : 0, ' ');
+  };
+  const int counted = c.runs - c.numerical_failures;
+  const double pct = counted > 0 ? 100.0 * c.successes / counted : 0.0;
+  os << "  " << padded(c.name) << "  " << c.successes << " / " << counted << " succeeded ("
+     << std::lround(pct) << " %; 95 % interval " << std::lround(100 * c.ci.lo) << " .. "
+     << std::lround(100 * c.ci.hi) << " %)";
+  if (c.numerical_failures > 0)
+    os << "; " << c.numerical_failures << " world" << (c.numerical_failures == 1 ? "" : "s")
+       << " failed numerically, not counted";
+  os << "\n";
+  std::string failures;
+  for (const auto& [kind, n] : c.outcomes) {
+    if (kind == "success" || kind == "numerical_failure" || n == 0) continue;
+    failures += (failures.empty() ? "" : ", ") + std::to_string(n) + " " + kind;
+    if (kind == "safe_stop") {
+      std::string causes;
+      for (const auto& [cause, k] : c.safe_stops)
+        causes += (causes.empty() ? "" : ", ") + std::to_string(k) + " " + cause;
+      failures += " (" + causes + ")";
+    }
+  }
+  if (!failures.empty()) os << "  " << padded("") << "  failures: " << failures << "\n";
+  if (c.successes == 0) return;
+  const auto g3 = [](double v) { return sim::format_significant(v, 3); };
+  os << "  " << padded("") << "  successes: duration median " << g3(c.duration_s.median)
+     << " s (max " << g3(c.duration_s.max) << "); f_n min / (m g sin tilt) median "
+     << g3(c.fn_min_ratio.median) << " (5th percentile " << g3(c.fn_min_ratio.p05) << ", worst "
+     << g3(c.fn_min_ratio.min) << "); friction used of mu median " << g3(c.friction_use.median)
+     << " (95th percentile " << g3(c.friction_use.p95) << ", worst " << g3(c.friction_use.max)
+     << ")\n";
 }
 
 void run_montecarlo_command(const MonteCarloOptions& o) {
@@ -80,10 +148,14 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
   if (o.p.latency_jitter > o.p.latency)
     throw UsageError("--latency-jitter: must not exceed --latency (" + format_number(o.p.latency) +
                      " s), got " + format_number(o.p.latency_jitter));
-  for (std::size_t i = 0; i < o.controllers.size(); ++i)
+  if (o.controllers.empty()) throw UsageError("--controller: no controller given");
+  for (std::size_t i = 0; i < o.controllers.size(); ++i) {
+    // std::invalid_argument (exit 2) naming --controller and the known names.
+    drivers::scene_for_controller(scene, o.controllers[i], "--controller");
     for (std::size_t j = 0; j < i; ++j)
       if (o.controllers[i] == o.controllers[j])
         throw UsageError("--controller: " + o.controllers[i] + " given twice");
+  }
   if (!scene.camera)
     throw UsageError(scene.origin +
                      ": camera: the scene has no camera section (needed by the "
@@ -141,6 +213,14 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
     outcomes[c] = counts;
   }
   j["outcomes"] = outcomes;
+  // Every controller's report and every pair's paired comparison (drivers::compare_controllers).
+  const drivers::ControllerComparison comparison = drivers::compare_controllers(r);
+  Json summaries = Json::array(), pairs = Json::array();
+  for (const drivers::ControllerReport& c : comparison.controllers)
+    summaries.push_back(report_json(c));
+  for (const drivers::PairedComparison& p : comparison.pairs) pairs.push_back(pair_json(p));
+  j["summaries"] = summaries;
+  j["pairs"] = pairs;
   j["perturbations"] = perturbations_json(o.p);
   j["runs_per_second"] = number(per_second);
   j["experiments"] = experiments;
@@ -165,31 +245,17 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
   std::ostringstream os;
   os << "flatland montecarlo: " << scene.origin << ", " << r.runs << " runs, seed " << o.seed
      << "\n";
-  const auto line = [&](const char* name, int k, int failed, const drivers::Interval& i) {
-    if (k < 0) return;
-    const int counted = r.runs - failed;
-    const double pct = counted > 0 ? 100.0 * k / counted : 0.0;
-    os << "  " << name << k << " / " << counted << " succeeded (" << std::lround(pct)
-       << " %; 95 % interval " << std::lround(100 * i.lo) << " .. " << std::lround(100 * i.hi)
-       << " %)";
-    if (failed > 0)
-      os << "; " << failed << " world" << (failed == 1 ? "" : "s")
-         << " failed numerically, not counted";
-    os << "\n";
-  };
-  line("open loop          ", r.success_open_loop, r.numerical_failures_open_loop, r.ci_open_loop);
-  line("feedback           ", r.success_feedback, r.numerical_failures_feedback, r.ci_feedback);
-  for (const std::string& c : o.controllers) {
-    std::string failures;
-    for (const auto& [kind, n] : j["outcomes"][c].items())
-      if (kind != "success" && n.get<int>() > 0)
-        failures += (failures.empty() ? "" : ", ") + std::to_string(n.get<int>()) + " " + kind;
-    if (!failures.empty()) os << "  " << c << " failures: " << failures << "\n";
-  }
-  os << "  speed              " << format_number(std::round(per_second * 100) / 100)
-     << " experiments/s on " << threads << " threads (" << format_number(std::round(r.seconds))
-     << " s)\n";
-  for (const std::string& p : outputs.paths()) os << "  wrote              " << p << "\n";
+  std::size_t width = 0;
+  for (const std::string& c : o.controllers) width = std::max(width, c.size());
+  for (const drivers::ControllerReport& c : comparison.controllers) print_report(os, c, width);
+  for (const drivers::PairedComparison& p : comparison.pairs)
+    os << "  paired: " << p.a << " vs " << p.b << " on " << p.worlds << " worlds: both succeeded "
+       << p.both << ", only " << p.a << " " << p.only_a << ", only " << p.b << " " << p.only_b
+       << ", neither " << p.neither
+       << " (exact McNemar p = " << sim::format_significant(p.p_value, 2) << ")\n";
+  os << "  speed  " << format_number(std::round(per_second * 100) / 100) << " experiments/s on "
+     << threads << " threads (" << format_number(std::round(r.seconds)) << " s)\n";
+  for (const std::string& p : outputs.paths()) os << "  wrote  " << p << "\n";
   std::cout << os.str();
 }
 
@@ -211,11 +277,15 @@ Command add_montecarlo_command(CLI::App& app) {
   cmd->add_option("--seed", o->seed,
                   "Seed of the draws, 0 to 2^63 - 1 (with the run number: run i is the same world "
                   "whatever N and --threads are). Default: 1");
-  cmd->add_option("--controller", o->controllers,
-                  "Controllers to compare, comma-separated: open-loop, feedback. Default: "
-                  "open-loop,feedback")
-      ->delimiter(',')
-      ->check(CLI::IsMember({"open-loop", "feedback"}));
+  std::string known = "open-loop, feedback";
+  for (const std::string& type : control::controller_types()) known += ", " + type;
+  cmd->add_option(
+         "--controller", o->controllers,
+         "Controllers to compare on the same worlds, comma-separated or repeated: " + known +
+             " (open-loop: the paper's plan played back; feedback: the scene's "
+             "controller.type; a type: that controller in feedback mode). Default: "
+             "open-loop,feedback")
+      ->delimiter(',');
   cmd->add_option("--threads", o->threads,
                   "Worker threads, each running whole experiments with its own GL context (0 = "
                   "all cores). Results do not depend on it. Default: 0");

@@ -9,9 +9,11 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
+#include <map>
 #include <numbers>
 #include <sstream>
 #include <string>
@@ -159,6 +161,13 @@ TEST_F(CliExperimentTest, BadInputExits2AndWritesNothing) {
   expect_bad_input("montecarlo --latency 0.01 --latency-jitter 0.02", "--latency-jitter");
   expect_bad_input("montecarlo --out full", "--out", {});
   expect_bad_input("montecarlo --contact-rel 1", "--contact-rel");
+  // Unknown controllers are named with the known ones; a name given twice (comma list or
+  // repeated option) is refused.
+  expect_bad_input("montecarlo --controller open-loop,closed --out out",
+                   "--controller: unknown type 'closed' (known: open-loop, feedback, paper");
+  expect_bad_input("montecarlo --controller paper --controller paper --out out",
+                   "--controller: paper given twice");
+  expect_bad_input("montecarlo --controller paper,open-loop,paper --out out", "given twice");
 
   // Friction is always counted: a synthetic world needs the scene's contact.mu.
   std::string scene = read_text(fs::path(FLATLAND_ASSET_DIR) / "scenes" / "airtable-feedback.yaml");
@@ -397,6 +406,93 @@ TEST_F(CliExperimentTest, MonteCarloWritesRunsAndCounts) {
   json saved;
   ASSERT_NO_THROW(saved = json::parse(read_text(dir_ / "mc" / "result.json")));
   EXPECT_EQ(saved["success_feedback"], j["success_feedback"]);
+}
+
+// Controllers named in a comma list and by a repeated option, compared on the same worlds: the
+// JSON's per-controller summaries and its paired comparison agree with a count over runs.csv, and
+// result.json holds the same.
+TEST_F(CliExperimentTest, MonteCarloComparesNamedControllersOnTheSameWorlds) {
+  const int n = 3;
+  const Result r = run("montecarlo --n " + std::to_string(n) +
+                       " --seed 7 --controller open-loop,feedback --controller paper --out mc "
+                       "--json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const json j = parse_json(r);
+  const std::vector<std::string> names = {"open-loop", "feedback", "paper"};
+  EXPECT_EQ(j["controllers"].get<std::vector<std::string>>(), names);
+  const Csv csv = read_csv(dir_ / "mc" / "runs.csv");
+  ASSERT_EQ(csv.rows.size(), 3u * n);
+  const int c_run = csv.column("run"), c_ctl = csv.column("controller"),
+            c_ok = csv.column("success"), c_s0 = csv.column("s_h0"), c_out = csv.column("outcome"),
+            c_mu = csv.column("mu"), c_fn = csv.column("fn_min_ratio");
+  ASSERT_GE(c_mu, 0) << "runs.csv has no mu column";
+  ASSERT_GE(csv.column("stop_cause"), 0) << "runs.csv has no stop_cause column";
+  // success[controller][world], and every controller meets the same drawn world.
+  std::map<std::string, std::vector<bool>> ok;
+  for (const auto& row : csv.rows) {
+    const int w = std::stoi(row[c_run]);
+    ok[row[c_ctl]].resize(n);
+    ok[row[c_ctl]][w] = row[c_ok] == "1";
+    EXPECT_EQ(row[c_s0], csv.rows[3 * w][c_s0]) << "world " << w;
+    EXPECT_NE(row[c_out], "numerical_failure");
+    EXPECT_GT(std::stod(row[c_mu]), 0);
+  }
+  ASSERT_EQ(j["summaries"].size(), 3u);
+  for (std::size_t i = 0; i < 3; ++i) {
+    const json& s = j["summaries"][i];
+    SCOPED_TRACE(s.dump());
+    EXPECT_EQ(s["controller"], names[i]);
+    EXPECT_EQ(s["runs"], n);
+    int k = 0, total = 0;
+    for (bool b : ok[names[i]]) k += b;
+    EXPECT_EQ(s["successes"].get<int>(), k);
+    for (const auto& [kind, count] : s["outcomes"].items()) total += count.get<int>();
+    EXPECT_EQ(total, n);
+    EXPECT_EQ(s["outcomes"]["success"].get<int>(), k);
+    EXPECT_EQ(s["fn_min_ratio"]["n"].get<int>(), k);
+    if (k > 0) {
+      // The worst normal-force margin is the smallest over the successes in runs.csv.
+      double worst = 1e300;
+      for (const auto& row : csv.rows)
+        if (row[c_ctl] == names[i] && row[c_ok] == "1")
+          worst = std::min(worst, std::stod(row[c_fn]));
+      EXPECT_DOUBLE_EQ(s["fn_min_ratio"]["min"].get<double>(), worst);
+      EXPECT_LE(s["friction_use"]["max"].get<double>(), 1.0);
+    }
+  }
+  // The pairs, in order, against a count over the worlds.
+  ASSERT_EQ(j["pairs"].size(), 3u);
+  std::size_t p = 0;
+  for (std::size_t a = 0; a < 3; ++a)
+    for (std::size_t b = a + 1; b < 3; ++b, ++p) {
+      const json& pair = j["pairs"][p];
+      SCOPED_TRACE(pair.dump());
+      EXPECT_EQ(pair["a"], names[a]);
+      EXPECT_EQ(pair["b"], names[b]);
+      int both = 0, only_a = 0, only_b = 0, neither = 0;
+      for (int w = 0; w < n; ++w) {
+        const bool x = ok[names[a]][w], y = ok[names[b]][w];
+        both += x && y;
+        only_a += x && !y;
+        only_b += !x && y;
+        neither += !x && !y;
+      }
+      EXPECT_EQ(pair["worlds"], n);
+      EXPECT_EQ(pair["both"], both);
+      EXPECT_EQ(pair["only_a"], only_a);
+      EXPECT_EQ(pair["only_b"], only_b);
+      EXPECT_EQ(pair["neither"], neither);
+      // Exact McNemar: 2 * P[Binomial(d, 1/2) <= min] with d discordant worlds (d <= 3 here).
+      const int d = only_a + only_b, m = std::min(only_a, only_b);
+      double tail = 0;
+      for (int i = 0, binom = 1; i <= m; binom = binom * (d - i) / (i + 1), ++i) tail += binom;
+      EXPECT_NEAR(pair["p_value"].get<double>(), std::min(1.0, 2 * tail / (1 << d)), 1e-12);
+    }
+  // "feedback" is the scene's own type, paper: the same experiment in every world.
+  EXPECT_EQ(ok["feedback"], ok["paper"]);
+  const json saved = json::parse(read_text(dir_ / "mc" / "result.json"));
+  EXPECT_EQ(saved["summaries"], j["summaries"]);
+  EXPECT_EQ(saved["pairs"], j["pairs"]);
 }
 
 }  // namespace
