@@ -558,9 +558,15 @@ def montecarlo(model: SceneLike = None, *, runs: int = 20, seed: int = 1,
                controllers: Sequence[str] = ("open-loop", "feedback"), threads: int = 0,
                perturbations: Optional[Dict[str, float]] = None) -> Dict[str, Any]:
     """``runs`` experiments of each controller, each in a perturbed world (the same worlds for
-    both): success counts with Wilson 95 % intervals and one record per experiment.
-    ``perturbations`` overrides the spreads of ``flatland montecarlo`` (s_h, tilt_deg,
-    radius_rel, noise_dn, latency, latency_jitter, drop, friction_rel, contact_rel)."""
+    all): success counts with Wilson 95 % intervals, one record per experiment, and the
+    controllers compared on those worlds: ``summaries`` (one dict per controller: successes,
+    ``ci95``, ``outcomes``, ``safe_stops`` by cause, and the successes' ``duration_s``,
+    ``fn_min_ratio`` and ``friction_use`` spreads) and ``pairs`` (per two controllers:
+    ``both``, ``only_a``, ``only_b``, ``neither`` and the exact McNemar ``p_value``), as
+    ``flatland montecarlo --json`` has them. ``controllers``: "open-loop", "feedback" or a
+    controller type ("paper", ...), each once. ``perturbations`` overrides the spreads of
+    ``flatland montecarlo`` (s_h, tilt_deg, radius_rel, noise_dn, latency, latency_jitter, drop,
+    friction_rel, contact_rel)."""
     perturbations = _mapping("perturbations", perturbations, True)
     if perturbations is not None:
         perturbations = {_text("perturbations key", key): _number(f"perturbations.{key}", value)

@@ -162,9 +162,54 @@ py::dict montecarlo_binding(const py::object& scene, int runs, std::uint64_t see
     d["safe_stop"] = rec.safe_stop;
     d["frames"] = rec.frames;
     d["frames_lost"] = rec.frames_lost;
+    d["mu"] = rec.mu;
+    d["stop_cause"] = rec.stop_cause ? py::object(py::str(control::to_string(*rec.stop_cause)))
+                                     : py::object(py::none());
     records.append(d);
   }
   out["records"] = records;
+  // Per controller and per pair (drivers::compare_controllers): the keys of the CLI's
+  // "summaries" and "pairs", NaN where the CLI writes null (no successes to take a margin of).
+  const drivers::ControllerComparison comparison = drivers::compare_controllers(r);
+  const auto spread = [](const drivers::Spread& x) {
+    py::dict d;
+    d["n"] = x.n;
+    d["min"] = x.min;
+    d["p05"] = x.p05;
+    d["median"] = x.median;
+    d["p95"] = x.p95;
+    d["max"] = x.max;
+    return d;
+  };
+  py::list summaries, pairs;
+  for (const drivers::ControllerReport& c : comparison.controllers) {
+    py::dict d;
+    d["controller"] = c.name;
+    d["runs"] = c.runs;
+    d["successes"] = c.successes;
+    d["numerical_failures"] = c.numerical_failures;
+    d["ci95"] = py::make_tuple(c.ci.lo, c.ci.hi);
+    d["outcomes"] = c.outcomes;
+    d["safe_stops"] = c.safe_stops;
+    d["duration_s"] = spread(c.duration_s);
+    d["fn_min_ratio"] = spread(c.fn_min_ratio);
+    d["friction_use"] = spread(c.friction_use);
+    summaries.append(d);
+  }
+  for (const drivers::PairedComparison& p : comparison.pairs) {
+    py::dict d;
+    d["a"] = p.a;
+    d["b"] = p.b;
+    d["worlds"] = p.worlds;
+    d["both"] = p.both;
+    d["only_a"] = p.only_a;
+    d["only_b"] = p.only_b;
+    d["neither"] = p.neither;
+    d["p_value"] = p.p_value;
+    pairs.append(d);
+  }
+  out["summaries"] = summaries;
+  out["pairs"] = pairs;
   out["seconds"] = r.seconds;
   return out;
 }
