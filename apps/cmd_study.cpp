@@ -289,6 +289,9 @@ void run_calibration_study(const StudyOptions& o) {
 namespace {
 
 void run_study(const StudyOptions& o) {
+  if (!o.controllers.empty() && o.name != "closed-loop")
+    throw UsageError("--controller: only the closed-loop study has a controller axis, not '" +
+                     o.name + "'");
   if (o.name == "sim") return run_sim_study(o);
   if (o.name == "calibration") return run_calibration_study(o);
   if (o.name == "render") return run_render_study(o);
@@ -342,6 +345,13 @@ Command add_study_command(CLI::App& app) {
                 "latency and 0.3 s) instead of 30 on 4 x 6; render: supersampling 1, 2, 4 at 2 "
                 "resolutions, 4 disk positions (about a second); tracker: every third frame, "
                 "exposures 0 and 1/fps, noise 0, 2, 8, 32 DN (a few seconds). Default: off");
+  cmd->add_option("--controller", o->controllers,
+                  "closed-loop only: the controller axis, comma-separated or repeated: open-loop, "
+                  "feedback (the scene's controller.type) or a controller type (paper, ...); each "
+                  "runs the whole rate x latency grid on the same worlds, and without open-loop "
+                  "on the axis it runs once at the scene's camera as the baseline. Default: "
+                  "feedback")
+      ->delimiter(',');
   cmd->add_option("--min-cpu", o->min_cpu,
                   "CPU seconds each timing repeats for (> 0; longer is steadier). Default: 0.02")
       ->check(CLI::PositiveNumber);

@@ -6,6 +6,7 @@
 #include "common.hpp"
 
 #include <string>
+#include <vector>
 
 namespace flatland::app {
 
@@ -18,6 +19,7 @@ struct StudyOptions {
   bool json = false;
   bool no_plot = false;
   double min_cpu = 0.02;  // s: timing repeats until this much CPU time has been spent
+  std::vector<std::string> controllers;  // closed-loop's controller axis; empty: feedback
 };
 
 void run_sim_study(const StudyOptions& o);

@@ -41,51 +41,64 @@ Json cell_json(const studies::ClosedLoopCellResult& c, int n) {
   return j;
 }
 
-/// 2 x 2 panels against latency (ms), one curve per camera rate (feedback), the open-loop
-/// baseline as one black square: success rate with its Wilson interval, the smallest normal force
-/// (mean and worst over the successes), the estimator's RMS error in the servo stage, and the CPU
-/// time per experiment.
-std::string plot_body(const std::vector<double>& rates, double max_latency, int n) {
+/// 2 x 2 panels against latency (ms), one curve per controller of the axis and camera rate (a
+/// colour per rate, a point shape and dash per controller), the open-loop baseline (when the
+/// grid has one) as one black square: success rate with its Wilson interval, the smallest normal
+/// force (mean and worst over the successes), the estimator's RMS error in the servo stage, and
+/// the CPU time per experiment.
+std::string plot_body(const studies::ClosedLoopGrid& grid, int n) {
+  const std::vector<double>& rates = grid.rates;
+  const std::vector<std::string>& controllers = grid.controllers;
+  const double max_latency = grid.latencies.back();
   const char* colors[] = {"#1b9e77", "#d95f02", "#7570b3", "#e7298a", "#66a61e", "#e6ab02"};
+  const int points[] = {7, 9, 5, 11, 13};  // filled circle, triangle, square, diamond, pentagon
+  const int dashes[] = {1, 4, 5, 2, 3};
+  const std::size_t curves = rates.size() * controllers.size();
+  // Curve i: controller i / rates, rate i % rates; neighbouring curves are drawn 1.5 ms apart so
+  // that their error bars do not overlap.
+  const auto offset = [&](std::size_t i) {
+    return format_number(1.5 * (static_cast<double>(i) - 0.5 * static_cast<double>(curves - 1)));
+  };
+  const auto name = [&](std::size_t i) { return "'" + controllers[i / rates.size()] + "'"; };
+  const auto rate = [&](std::size_t i) { return format_number(rates[i % rates.size()]); };
   // `scale` multiplies the column (e.g. "100 * " for percent); `bars` adds the Wilson interval.
   // `col2`: a second column drawn dashed with open points, in the same colours.
   const auto panel = [&](const std::string& title, const std::string& ylabel, int col,
                          const std::string& scale, bool bars, int col2 = 0) {
     const std::string c = std::to_string(col);
     std::string p = "set title '" + title + "'\nset ylabel '" + ylabel + "'\nplot ";
-    for (std::size_t i = 0; col2 && i < rates.size(); ++i) {
-      const std::string r = format_number(rates[i]);
-      const std::string off = format_number(
-          1.5 * (static_cast<double>(i) - 0.5 * static_cast<double>(rates.size() - 1)));
-      p += "datafile skip 1 using (fx(" + r + ", " + off + ")):(" + scale + "fb(" + r + ", " +
-           std::to_string(col2) + ")) with linespoints lw 1 dt 2 pt 6 lc rgb '" + colors[i % 6] +
-           "' notitle, \\\n     ";
+    for (std::size_t i = 0; col2 && i < curves; ++i) {
+      const std::string args = name(i) + ", " + rate(i);
+      p += "datafile skip 1 using (cx(" + args + ", " + offset(i) + ")):(" + scale + "cc(" + args +
+           ", " + std::to_string(col2) + ")) with linespoints lw 1 dt 2 pt 6 lc rgb '" +
+           colors[i % rates.size() % 6] + "' notitle, \\\n     ";
     }
-    for (std::size_t i = 0; i < rates.size(); ++i) {
-      const std::string r = format_number(rates[i]);
-      // Neighbouring rates are drawn 1.5 ms apart so that their error bars do not overlap.
-      const std::string off = format_number(
-          1.5 * (static_cast<double>(i) - 0.5 * static_cast<double>(rates.size() - 1)));
-      p += std::string(i ? ", \\\n     " : "") + "datafile skip 1 using (fx(" + r + ", " + off +
-           ")):(" + scale + "fb(" + r + ", " + c + "))" +
-           (bars ? ":(100 * fb(" + r + ", 8)):(100 * fb(" + r + ", 9)) with yerrorlines"
+    for (std::size_t i = 0; i < curves; ++i) {
+      const std::string args = name(i) + ", " + rate(i);
+      const std::size_t k = i / rates.size();
+      p += std::string(i ? ", \\\n     " : "") + "datafile skip 1 using (cx(" + args + ", " +
+           offset(i) + ")):(" + scale + "cc(" + args + ", " + c + "))" +
+           (bars ? ":(100 * cc(" + args + ", 8)):(100 * cc(" + args + ", 9)) with yerrorlines"
                  : std::string(" with linespoints")) +
-           " lw 2 pt 7 lc rgb '" + colors[i % 6] + "' title '" + r + " Hz'";
+           " lw 2 dt " + std::to_string(dashes[k % 5]) + " pt " + std::to_string(points[k % 5]) +
+           " lc rgb '" + colors[i % rates.size() % 6] + "' title '" +
+           (controllers.size() > 1 ? controllers[k] + " " : std::string()) + rate(i) + " Hz'";
     }
-    p += ", \\\n     datafile skip 1 using (ox(0)):(" + scale + "ol(" + c + "))" +
-         (bars ? std::string(":(100 * ol(8)):(100 * ol(9)) with yerrorbars") : " with points") +
-         " pt 5 ps 1.5 lc rgb 'black' title 'open loop'\n";
-    return p;
+    if (grid.open_loop_baseline)
+      p += ", \\\n     datafile skip 1 using (ox(0)):(" + scale + "ol(" + c + "))" +
+           (bars ? std::string(":(100 * ol(8)):(100 * ol(9)) with yerrorbars") : " with points") +
+           " pt 5 ps 1.5 lc rgb 'black' title 'open loop'";
+    return p + "\n";
   };
   return "set datafile missing 'nan'\n"
          "set grid\nset key bottom left box opaque\nset xlabel 'camera latency (ms)'\n"
          "set xrange [-10:" +
          format_number(std::ceil(1000 * max_latency / 10) * 10 + 10) +
          "]\n"
-         "# fb(r, col): column col of the feedback row at rate r; ol(col): of the open-loop row\n"
-         "fb(r, col) = (column(1) == r && strcol(4) eq 'feedback') ? column(col) : NaN\n"
-         "fx(r, off) = (column(1) == r && strcol(4) eq 'feedback') ? 1000 * column(2) + off : "
-         "NaN\n"
+         "# cc(c, r, col): column col of controller c's row at rate r; ol(col): of the open-loop "
+         "baseline\n"
+         "cc(c, r, col) = (column(1) == r && strcol(4) eq c) ? column(col) : NaN\n"
+         "cx(c, r, off) = (column(1) == r && strcol(4) eq c) ? 1000 * column(2) + off : NaN\n"
          "ol(col) = strcol(4) eq 'open-loop' ? column(col) : NaN\n"
          "ox(off) = strcol(4) eq 'open-loop' ? 1000 * column(2) + off : NaN\n"
          "set multiplot layout 2,2 title 'Closed loop against camera rate and latency (" +
@@ -115,7 +128,16 @@ void run_closed_loop_study(const StudyOptions& o) {
   common.scene = o.scene.empty() ? default_closed_loop_scene() : o.scene;
   const Scene scene = load_scene_with_overrides(common);
   const std::shared_ptr<const model::Model> nominal = model::compile(scene);
-  const studies::ClosedLoopGrid grid = studies::closed_loop_grid(*nominal, o.quick);
+  std::vector<std::string> controllers = o.controllers;
+  if (controllers.empty()) controllers = {"feedback"};
+  for (std::size_t i = 0; i < controllers.size(); ++i) {
+    // std::invalid_argument (exit 2) naming --controller and the known names.
+    drivers::scene_for_controller(scene, controllers[i], "--controller");
+    for (std::size_t j = 0; j < i; ++j)
+      if (controllers[i] == controllers[j])
+        throw UsageError("--controller: " + controllers[i] + " given twice");
+  }
+  const studies::ClosedLoopGrid grid = studies::closed_loop_grid(*nominal, o.quick, controllers);
   const fs::path dir = o.out;
   if (!dir.empty()) check_output_directory("--out", dir, o.force);
   const bool plots = !dir.empty() && !o.no_plot;
@@ -125,10 +147,14 @@ void run_closed_loop_study(const StudyOptions& o) {
   const std::uint64_t seed = studies::kClosedLoopSeed;
   studies::ClosedLoopStudyOptions so;
   so.threads = std::max(1u, std::thread::hardware_concurrency());
+  std::string axis;
+  for (const std::string& c : controllers) axis += (axis.empty() ? "" : ", ") + c;
   std::cerr << "flatland: study closed-loop: " << grid.cells.size() << " cells ("
-            << grid.rates.size() << " rates x " << grid.latencies.size()
-            << " latencies, feedback; open-loop baseline) x " << n << " worlds (seed " << seed
-            << ") on " << so.threads << " threads, " << scene.origin << "\n";
+            << controllers.size() << " controllers (" << axis << ") x " << grid.rates.size()
+            << " rates x " << grid.latencies.size() << " latencies"
+            << (grid.open_loop_baseline ? "; open-loop baseline" : "") << ") x " << n
+            << " worlds (seed " << seed << ") on " << so.threads << " threads, " << scene.origin
+            << "\n";
   studies::ClosedLoopStudyResult study;
   {
     ProgressBar bar("study closed-loop");
@@ -144,6 +170,8 @@ void run_closed_loop_study(const StudyOptions& o) {
   j["scene"] = scene.origin;
   j["seed"] = seed;
   j["runs_per_cell"] = n;
+  j["controllers"] = controllers;
+  j["open_loop_baseline"] = grid.open_loop_baseline;
   j["quick"] = o.quick;
   j["rates_hz"] = rates;
   j["latencies_s"] = latencies;
@@ -169,8 +197,7 @@ void run_closed_loop_study(const StudyOptions& o) {
     outputs.stage(dir / "closed_loop.csv", studies::closed_loop_study_csv(study));
     if (plots)
       run_plot(outputs, dir,
-               {"closed_loop.gp", "closed_loop.csv", "closed_loop.png",
-                plot_body(rates, latencies.back(), n)});
+               {"closed_loop.gp", "closed_loop.csv", "closed_loop.png", plot_body(grid, n)});
     outputs.stage(dir / "closed_loop.json", j.dump(2) + "\n");
     outputs.commit();
     written = outputs.paths();

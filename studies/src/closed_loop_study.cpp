@@ -43,21 +43,25 @@ int failure_column(const std::string& cls) {
 const char* const kFailureColumns[] = {"fail_dropped", "fail_slid_off", "fail_wrong_well",
                                        "fail_safe_stop", "fail_other"};
 
-/// The scene the loop assumes in a cell: the nominal scene with the cell's camera. The truth
-/// worlds are perturbed from it, so the loop and the world agree on the camera's rate and
-/// latency. The estimator's latency compensation rewinds to each frame's capture time stamp (the
-/// synthetic camera's stamps are exact), so it compensates the latency a frame really had; the
-/// scene's camera.latency only sizes the estimator's history (drivers::LoopSetup), which must
+/// The nominal scene with the cell's camera. The truth worlds are perturbed from it, so the loop
+/// and the world agree on the camera's rate and latency, and the worlds do not depend on the
+/// controller. The estimator's latency compensation rewinds to each frame's capture time stamp
+/// (the synthetic camera's stamps are exact), so it compensates the latency a frame really had;
+/// the scene's camera.latency only sizes the estimator's history (drivers::LoopSetup), which must
 /// reach back that far.
-Scene cell_scene(const Scene& nominal, const Cell& c) {
+Scene camera_scene(const Scene& nominal, const Cell& c) {
   Scene s = nominal;
-  s.controller.mode = c.controller;
   s.camera->fps = c.fps;
   // scene validation: exposure <= 1/fps. A faster camera cannot expose longer than its frame.
   s.camera->exposure = std::min(s.camera->exposure, 1.0 / c.fps);
   s.camera->latency = c.latency;
   s.camera->latency_jitter = c.jitter;
   return s;
+}
+
+/// The scene the loop assumes in a cell: the cell's camera and controller.
+Scene cell_scene(const Scene& nominal, const Cell& c) {
+  return drivers::scene_for_controller(camera_scene(nominal, c), c.controller, "controllers");
 }
 
 /// The estimate while it steers the hand (the servo stage, before any failure stops the world):
@@ -114,6 +118,7 @@ CellResult run_cell(const Scene& nominal, const Cell& cell, int n, unsigned thre
                     const std::function<void()>& tick) {
   CellResult out;
   out.cell = cell;
+  const Scene camera = camera_scene(nominal, cell);
   const Scene assumed = cell_scene(nominal, cell);
   drivers::Perturbations p;
   p.latency = cell.latency;
@@ -127,18 +132,17 @@ CellResult run_cell(const Scene& nominal, const Cell& cell, int n, unsigned thre
       n, std::max(1u, threads),
       [&](long index) {
         const int run = static_cast<int>(index);
+        RunSummary s;
         drivers::SyntheticResult r;
         try {
-          r = drivers::run_synthetic(setup,
-                                     model::compile(drivers::perturb(assumed, p, kSeed, run)));
+          r = drivers::run_synthetic(
+              setup, model::compile(drivers::perturb(camera, p, kSeed, run, &s.drawn)));
         } catch (const std::runtime_error&) {
           // A world whose simulation fails is recorded and the study goes on (counted apart).
-          RunSummary failed;
-          failed.outcome = drivers::Outcome::kNumericalFailure;
-          out.runs[static_cast<std::size_t>(run)] = std::move(failed);
+          s.outcome = drivers::Outcome::kNumericalFailure;
+          out.runs[static_cast<std::size_t>(run)] = std::move(s);
           return;
         }
-        RunSummary s;
         s.success = r.success;
         s.outcome = r.outcome;
         if (r.loop.stop_reason) s.stop_cause = r.loop.stop_reason->cause;
@@ -225,7 +229,8 @@ std::string failure_class(const ClosedLoopRun& r) {
   return std::string("safe_stop (") + control::to_string(*r.stop_cause) + ")";
 }
 
-ClosedLoopGrid closed_loop_grid(const model::Model& nominal, bool quick) {
+ClosedLoopGrid closed_loop_grid(const model::Model& nominal, bool quick,
+                                const std::vector<std::string>& controllers) {
   const Scene& scene = nominal.spec;
   if (!scene.camera)
     throw std::invalid_argument(
@@ -235,9 +240,17 @@ ClosedLoopGrid closed_loop_grid(const model::Model& nominal, bool quick) {
         scene.origin + ": motion: study closed-loop needs the butterfly (motion.type: butterfly)");
   const drivers::Perturbations defaults;
   drivers::perturb(scene, defaults, kSeed, 0);  // std::invalid_argument for what it refuses
+  if (controllers.empty()) throw std::invalid_argument("controllers: no controller given");
+  for (std::size_t i = 0; i < controllers.size(); ++i) {
+    drivers::scene_for_controller(scene, controllers[i], "controllers");  // known names
+    for (std::size_t j = 0; j < i; ++j)
+      if (controllers[j] == controllers[i])
+        throw std::invalid_argument("controllers: '" + controllers[i] + "' given twice");
+  }
 
   // The scene's own rate and latency are always in the grid (the nominal cell).
   ClosedLoopGrid grid;
+  grid.controllers = controllers;
   grid.nominal_fps = scene.camera->fps;
   grid.nominal_latency = scene.camera->latency;
   const double fps0 = grid.nominal_fps, latency0 = grid.nominal_latency;
@@ -249,11 +262,15 @@ ClosedLoopGrid closed_loop_grid(const model::Model& nominal, bool quick) {
   // Each cell keeps the Monte Carlo study's latency spread where it can (it must not exceed the
   // latency: a frame cannot arrive before it is taken).
   const auto jitter = [&](double latency) { return std::min(defaults.latency_jitter, latency); };
-  for (double r : grid.rates)
-    for (double l : grid.latencies) grid.cells.push_back({r, l, jitter(l), "feedback"});
+  for (const std::string& c : controllers)
+    for (double r : grid.rates)
+      for (double l : grid.latencies) grid.cells.push_back({r, l, jitter(l), c});
   // The open loop does not use the camera to steer, so one baseline (at the scene's camera) says
-  // what feedback adds.
-  grid.cells.push_back({fps0, latency0, jitter(latency0), "open-loop"});
+  // what feedback adds, unless the axis has it already.
+  grid.open_loop_baseline =
+      std::find(controllers.begin(), controllers.end(), "open-loop") == controllers.end();
+  if (grid.open_loop_baseline)
+    grid.cells.push_back({fps0, latency0, jitter(latency0), "open-loop"});
   // Every cell's loop set-up is built now, so that a scene the loop cannot run is bad input
   // rather than a failure half-way through.
   for (const Cell& c : grid.cells) drivers::LoopSetup check(model::compile(cell_scene(scene, c)));

@@ -216,6 +216,12 @@ TEST_F(CliStudyClosedLoop, BadInputExitsTwoAndWritesNothing) {
   write_text(dir_ / "bad.yaml", scene);
   expect_bad_input("study closed-loop --quick --out out --scene bad.yaml", "latency");
   expect_bad_input("study closed-loop --quick --out out --no-such-option", "--no-such-option");
+  // The controller axis: unknown or repeated names, and the option on a study without the axis.
+  expect_bad_input("study closed-loop --quick --out out --controller paper,bogus",
+                   "--controller: unknown type 'bogus' (known: open-loop, feedback, paper");
+  expect_bad_input("study closed-loop --quick --out out --controller paper --controller paper",
+                   "given twice");
+  expect_bad_input("study sim --quick --out out --controller paper", "--controller");
 }
 
 }  // namespace

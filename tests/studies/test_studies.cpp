@@ -12,6 +12,7 @@
 #include <cmath>
 #include <sstream>
 #include <string>
+#include <vector>
 
 namespace {
 
@@ -131,6 +132,71 @@ TEST(Studies, ClosedLoopQuickGridHasACellThatMustFail) {
   ASSERT_NE(nominal_cell, r.cells.end());
   EXPECT_EQ(nominal_cell->successes, 2);
   EXPECT_EQ(csv_lines(studies::closed_loop_study_csv(r)), 6);
+}
+
+// The controller axis: every controller meets the very same worlds. "feedback" is the scene's
+// own type (paper) in feedback mode, so it and "paper" must agree bit for bit in every world;
+// the open loop, on the axis, replaces the baseline.
+TEST(Studies, ClosedLoopControllerAxisMeetsIdenticalWorlds) {
+  const auto nominal = flatland::model::compile(bundled("airtable-feedback.yaml"));
+  ASSERT_EQ(nominal->spec.controller.type, "paper");
+  const std::vector<std::string> axis = {"feedback", "paper", "open-loop"};
+  studies::ClosedLoopGrid grid = studies::closed_loop_grid(*nominal, true, axis);
+  EXPECT_EQ(grid.controllers, axis);
+  EXPECT_FALSE(grid.open_loop_baseline);
+  // Each controller over the whole 2 x 2 grid, in the axis' order; no baseline.
+  ASSERT_EQ(grid.cells.size(), 12u);
+  for (std::size_t i = 0; i < grid.cells.size(); ++i)
+    EXPECT_EQ(grid.cells[i].controller, axis[i / 4]) << i;
+  // Run the scene's own camera only (one cell per controller), to keep the test short.
+  std::erase_if(grid.cells, [&](const auto& c) {
+    return c.fps != grid.nominal_fps || c.latency != grid.nominal_latency;
+  });
+  ASSERT_EQ(grid.cells.size(), 3u);
+  studies::ClosedLoopStudyOptions o;
+  o.threads = 2;
+  const studies::ClosedLoopStudyResult r = studies::run_closed_loop_study(*nominal, grid, o);
+  ASSERT_EQ(r.cells.size(), 3u);
+  const auto& feedback = r.cells[0];
+  const auto& paper = r.cells[1];
+  const auto& open = r.cells[2];
+  EXPECT_EQ(paper.cell.controller, "paper");
+  ASSERT_EQ(feedback.runs.size(), 2u);
+  for (std::size_t w = 0; w < 2; ++w) {
+    SCOPED_TRACE("world " + std::to_string(w));
+    for (const auto* c : {&paper, &open}) {
+      const flatland::drivers::DrawnPerturbation& a = feedback.runs[w].drawn;
+      const flatland::drivers::DrawnPerturbation& b = c->runs[w].drawn;
+      EXPECT_EQ(a.s_h0, b.s_h0);
+      EXPECT_EQ(a.tilt_deg, b.tilt_deg);
+      EXPECT_EQ(a.radius, b.radius);
+      EXPECT_EQ(a.friction_scale, b.friction_scale);
+      EXPECT_EQ(a.effects_seed, b.effects_seed);
+      EXPECT_EQ(a.mu_scale, b.mu_scale);
+      EXPECT_EQ(a.loss_scale, b.loss_scale);
+    }
+    // The same controller under two names: the same experiment.
+    EXPECT_EQ(feedback.runs[w].outcome, paper.runs[w].outcome);
+    EXPECT_EQ(feedback.runs[w].fn_min, paper.runs[w].fn_min);
+    EXPECT_EQ(feedback.runs[w].frames, paper.runs[w].frames);
+    EXPECT_TRUE(feedback.runs[w].duration == paper.runs[w].duration ||
+                (std::isnan(feedback.runs[w].duration) && std::isnan(paper.runs[w].duration)));
+  }
+  // The worlds themselves differ from one another.
+  EXPECT_NE(feedback.runs[0].drawn.s_h0, feedback.runs[1].drawn.s_h0);
+  // Bad axes are refused with the known names.
+  try {
+    studies::closed_loop_grid(*nominal, true, {"paper", "bogus"});
+    ADD_FAILURE() << "an unknown controller";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("controllers: unknown type 'bogus' (known: open-loop, "
+                                         "feedback, paper"),
+              std::string::npos)
+        << e.what();
+  }
+  EXPECT_THROW(studies::closed_loop_grid(*nominal, true, {"paper", "paper"}),
+               std::invalid_argument);
+  EXPECT_THROW(studies::closed_loop_grid(*nominal, true, {}), std::invalid_argument);
 }
 
 TEST(Studies, ClosedLoopNeedsACamera) {

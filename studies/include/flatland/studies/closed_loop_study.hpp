@@ -1,7 +1,8 @@
-// Success of the vision-feedback loop against camera rate and latency. Every cell of the grid
-// (rate x latency) runs the same N perturbed worlds (drivers::perturb with the default Monte
-// Carlo perturbations and a fixed seed, so the cells differ only in the camera) through the
-// feedback controller; the open loop runs once, at the scene's rate and latency, as the baseline.
+// Success of the vision-feedback loop against camera rate and latency, per controller. Every cell
+// of the grid (controller x rate x latency) runs the same N perturbed worlds (drivers::perturb
+// with the default Monte Carlo perturbations and a fixed seed, so the cells differ only in the
+// camera and the controller) through its controller; unless the open loop is on the controller
+// axis, it runs once, at the scene's rate and latency, as the baseline.
 // Per cell: successes with their Wilson 95 % interval, why the others failed, the smallest normal
 // force, the estimator's error while it steers the hand, and what the cell cost
 // (docs/ACCURACY.md).
@@ -26,13 +27,17 @@ inline constexpr std::uint64_t kClosedLoopSeed = 1;
 /// One cell: the camera the loop and its worlds share, and the controller.
 struct ClosedLoopCell {
   double fps = 30, latency = 0, jitter = 0;  ///< Hz, s, s
-  std::string controller = "feedback";       ///< feedback | open-loop
+  /// A name drivers::scene_for_controller accepts: open-loop, feedback or a controller type.
+  std::string controller = "feedback";
 };
 
-/// The grid of a scene: rates 15, 30, 60, 120 Hz and latencies 0-200 ms (quick: 15 Hz and an
-/// absurd 300 ms, beyond the safety monitor's lost_timeout, so that one cell must fail), the
-/// scene's own rate and latency added to each; the open-loop baseline last.
+/// The grid of a scene: for each controller of the axis, rates 15, 30, 60, 120 Hz and latencies
+/// 0-200 ms (quick: 15 Hz and an absurd 300 ms, beyond the safety monitor's lost_timeout, so that
+/// one cell must fail), the scene's own rate and latency added to each; the open-loop baseline
+/// last unless open-loop is on the axis.
 struct ClosedLoopGrid {
+  std::vector<std::string> controllers;  ///< the controller axis, in the order given
+  bool open_loop_baseline = false;       ///< the last cell is the open-loop baseline
   std::vector<double> rates, latencies;
   double nominal_fps = 0, nominal_latency = 0;
   std::vector<ClosedLoopCell> cells;
@@ -46,6 +51,9 @@ struct ClosedLoopRun {
   std::optional<control::StopCause> stop_cause;  ///< why it stopped safely (outcome kSafeStop)
   double fn_min = NAN, duration = NAN, est_rms = NAN, nees = NAN;
   long frames = 0, frames_lost = 0;
+  /// The world it ran in: perturb(nominal with the cell's camera, kClosedLoopSeed, run), the same
+  /// for every controller of a camera.
+  drivers::DrawnPerturbation drawn;
 };
 /// A short class for how a run failed: the outcome ("dropped", ...) and, for a safe stop, what
 /// triggered it ("safe_stop (camera)").
@@ -80,14 +88,18 @@ struct ClosedLoopStudyResult {
   double seconds = 0, cpu_seconds = 0;  ///< wall and process CPU time of the whole study
 };
 
-/// The grid of a compiled scene, checked: std::invalid_argument (naming the scene and field) for
-/// a scene without a camera or a butterfly, or one that some cell's loop cannot run.
-ClosedLoopGrid closed_loop_grid(const model::Model& nominal, bool quick);
+/// The grid of a compiled scene over `controllers` (names drivers::scene_for_controller accepts,
+/// each once), checked: std::invalid_argument (naming the scene and field, or `controllers` and
+/// the known names) for a scene without a camera or a butterfly, one that some cell's loop cannot
+/// run, no controller, or an unknown or repeated one.
+ClosedLoopGrid closed_loop_grid(const model::Model& nominal, bool quick,
+                                const std::vector<std::string>& controllers = {"feedback"});
 
 /// The study over `grid` (closed_loop_grid of the same scene): each cell's scene is the nominal
-/// one with the cell's camera and controller, compiled; each world is its perturbed scene,
-/// compiled. An exception in any run stops the others and is rethrown (a failed experiment is a
-/// result, not an exception).
+/// one with the cell's camera and controller (drivers::scene_for_controller), compiled; each
+/// world is the nominal scene with the cell's camera, perturbed and compiled, so every controller
+/// meets the same worlds. An exception in any run stops the others and is rethrown (a failed
+/// experiment is a result, not an exception).
 ClosedLoopStudyResult run_closed_loop_study(const model::Model& nominal, const ClosedLoopGrid& grid,
                                             const ClosedLoopStudyOptions& options = {});
 
