@@ -111,11 +111,9 @@ void print_report(std::ostream& os, const drivers::ControllerReport& c, std::siz
      << ")\n";
 }
 
-void run_montecarlo_command(const MonteCarloOptions& o) {
-  // ---- bad input first
-  CommonOptions common = o.common;
-  if (common.scene.empty()) common.scene = default_experiment_scene();
-  const Scene scene = load_scene_with_overrides(common);
+/// Bad input, before anything runs or is written: a UsageError (or std::invalid_argument) naming
+/// the option.
+void check_options(const MonteCarloOptions& o, const Scene& scene) {
   if (o.n < 1 || o.n > 1000000)
     throw UsageError("--n: must be in [1, 1000000], got " + std::to_string(o.n));
   if (o.seed < 0) throw UsageError("--seed: must be >= 0, got " + std::to_string(o.seed));
@@ -161,6 +159,14 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
                      ": camera: the scene has no camera section (needed by the "
                      "closed loop)");
   drivers::require_friction(scene);
+}
+
+void run_montecarlo_command(const MonteCarloOptions& o) {
+  // ---- bad input first
+  CommonOptions common = o.common;
+  if (common.scene.empty()) common.scene = default_experiment_scene();
+  const Scene scene = load_scene_with_overrides(common);
+  check_options(o, scene);
   const fs::path dir = o.common.out;
   if (!dir.empty()) check_output_directory("--out", dir, o.common.force);
 
@@ -198,27 +204,16 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
       failed.push_back(
           {{"run", x.run}, {"seed", x.seed}, {"controller", x.controller}, {"failure", x.failure}});
   j["numerical_failure_runs"] = failed;
-  // How the runs ended, per controller (drivers::Outcome).
-  Json outcomes;
-  for (const std::string& c : o.controllers) {
-    Json counts;
-    for (const drivers::Outcome k :
-         {drivers::Outcome::kSuccess, drivers::Outcome::kDropped, drivers::Outcome::kSlidOff,
-          drivers::Outcome::kWrongWell, drivers::Outcome::kNotSettled, drivers::Outcome::kSafeStop,
-          drivers::Outcome::kNotFinished, drivers::Outcome::kNumericalFailure}) {
-      int n = 0;
-      for (const drivers::RunRecord& x : r.records) n += x.controller == c && x.outcome == k;
-      counts[drivers::to_string(k)] = n;
-    }
-    outcomes[c] = counts;
-  }
-  j["outcomes"] = outcomes;
-  // Every controller's report and every pair's paired comparison (drivers::compare_controllers).
+  // Every controller's report and every pair's paired comparison (drivers::compare_controllers);
+  // "outcomes" (how the runs ended, per controller) is older than "summaries" and kept.
   const drivers::ControllerComparison comparison = drivers::compare_controllers(r);
-  Json summaries = Json::array(), pairs = Json::array();
-  for (const drivers::ControllerReport& c : comparison.controllers)
+  Json outcomes, summaries = Json::array(), pairs = Json::array();
+  for (const drivers::ControllerReport& c : comparison.controllers) {
+    outcomes[c.name] = c.outcomes;
     summaries.push_back(report_json(c));
+  }
   for (const drivers::PairedComparison& p : comparison.pairs) pairs.push_back(pair_json(p));
+  j["outcomes"] = outcomes;
   j["summaries"] = summaries;
   j["pairs"] = pairs;
   j["perturbations"] = perturbations_json(o.p);
