@@ -23,14 +23,14 @@
 #   scripts/compare_controllers.sh [--flatland BIN] [--controllers LIST] [--headline-runs N]
 #                                  [--runs N] [--threads N] [--work DIR] [--out DIR]
 #
-# Defaults: build/bin/flatland, open-loop,paper, 200 worlds in the headline cells (--headline-runs),
+# Defaults: build/bin/flatland, open-loop,paper,transverse, 200 worlds in the headline cells (--headline-runs),
 # 50 elsewhere (--runs), all cores,
 # /tmp/flatland-compare-controllers, docs/closed_loop. Bad arguments: one line, exit 2.
 set -euo pipefail
 
 root=$(cd "$(dirname "$0")/.." && pwd)
 flatland=$root/build/bin/flatland
-controllers=open-loop,paper
+controllers=open-loop,paper,transverse
 headline_runs=200
 runs=50
 threads=0
