@@ -230,6 +230,9 @@ struct Loop::State {
   LoopResult out;
   long tick = -1;
   bool in_tick = false, ended = false, estimating = false;
+  // The estimator threw (its belief became non-finite, a user's estimator raised): the belief is
+  // gone, the loop stops safely and does not ask it again.
+  bool estimator_failed = false;
   double last_capture = -std::numeric_limits<double>::infinity();
   std::optional<double> t_rest;  // when the hand came to rest after finishing or stopping
   std::optional<control::StopReason> stop;
@@ -244,6 +247,20 @@ struct Loop::State {
   }
   void safe_stop(control::StopReason why) {
     if (!stop) stop = std::move(why);
+  }
+  /// Runs one call of the estimator; a failure (anything but std::invalid_argument, which is the
+  /// caller's bad input and propagates) ends the estimation and stops the loop safely.
+  template <typename Call>
+  void with_estimator(Call&& call) {
+    try {
+      call();
+    } catch (const std::invalid_argument&) {
+      throw;
+    } catch (const std::exception& e) {
+      estimator_failed = true;
+      estimating = false;
+      safe_stop({control::StopCause::kEstimator, std::string("estimator: ") + e.what()});
+    }
   }
   void take_frames(double t);
 };
@@ -269,20 +286,25 @@ void Loop::State::take_frames(double t) {
     flog.stale = !fresh;
     if (fresh) last_capture = frame->t_capture;
     if (fresh && intact) {
-      const double guess = estimating ? estimator->estimate().s_h : scene.sim.initial.s_h;
+      double guess = scene.sim.initial.s_h;
+      if (estimating) with_estimator([&] { guess = estimator->estimate().s_h; });
       z = measure_frame(*frame, *model.mapping, tracker, angles, guess, tr, flog);
     }
     out.frame_log.push_back(flog);
     safety.frame(t, fresh, z.has_value());
     if (z) {
       ++out.measurements;
-      if (!estimating) {
-        estimator->reset(t, z->s_h, 0.0);
-        estimating = true;
-      } else {
-        const control::UpdateReport u = estimator->update(*z);
-        row.nis = u.nis;
-        if (auto why = safety.innovation(u.nis)) safe_stop(*why);
+      if (!estimating && !estimator_failed) {
+        with_estimator([&] {
+          estimator->reset(t, z->s_h, 0.0);
+          estimating = true;
+        });
+      } else if (estimating) {
+        with_estimator([&] {
+          const control::UpdateReport u = estimator->update(*z);
+          row.nis = u.nis;
+          if (auto why = safety.innovation(u.nis)) safe_stop(*why);
+        });
       }
       row.measured = true;
       row.s_meas = z->s_h;
@@ -347,10 +369,11 @@ const control::ControlInput* Loop::sense() {
     s.safe_stop({control::StopCause::kTimeout, "timeout: the motion did not finish by t = " +
                                                    sim::format_significant(s.t_limit, 5) + " s"});
   control::Estimate est;
-  if (s.estimating)
-    est = s.estimator->estimate();
-  else
+  if (s.estimating) s.with_estimator([&] { est = s.estimator->estimate(); });
+  if (!s.estimating) {
+    est = control::Estimate{};
     est.s_h = s.scene.sim.initial.s_h;
+  }
   fill_estimate(s.row, est, s.estimating);
   s.input.estimate = est;
   s.input.estimating = s.estimating;
@@ -419,8 +442,8 @@ void Loop::act(const control::ControlOutput& output) {
     return;
   }
   const double t_next = s.time_of(s.tick + 1);
+  if (s.estimating) s.with_estimator([&] { s.estimator->propagate(t_next, hand.input); });
   if (s.estimating) {
-    s.estimator->propagate(t_next, hand.input);
     ++(hand.source == control::AccelerationSource::kReadings ? s.out.acceleration_from_readings
                                                              : s.out.acceleration_from_command);
   }

@@ -74,14 +74,16 @@ class Wrapped final : public control::Controller {
 
 class WrappedEstimator final : public control::Estimator {
  public:
-  WrappedEstimator(std::unique_ptr<control::Estimator> inner, Seen& seen)
-      : inner_(std::move(inner)), seen_(seen) {}
+  WrappedEstimator(std::unique_ptr<control::Estimator> inner, Seen& seen,
+                   double fail_at = std::numeric_limits<double>::infinity())
+      : inner_(std::move(inner)), seen_(seen), fail_at_(fail_at) {}
   void reset(double t, double s, double sdot) override {
     ++seen_.resets;
     inner_->reset(t, s, sdot);
   }
   void propagate(double t_next, const control::HandInput& u) override {
     ++seen_.propagations;
+    if (t_next >= fail_at_) throw std::runtime_error("the test's estimator diverged");
     inner_->propagate(t_next, u);
   }
   control::UpdateReport update(const control::Measurement& z) override {
@@ -95,11 +97,12 @@ class WrappedEstimator final : public control::Estimator {
  private:
   std::unique_ptr<control::Estimator> inner_;
   Seen& seen_;
+  double fail_at_;
 };
 
-drivers::SyntheticResult run_wrapped(const Scene& scene, Seen& seen,
-                                     Wrapped::Fault fault = Wrapped::Fault::kNone,
-                                     double fault_at = 0) {
+drivers::SyntheticResult run_wrapped(
+    const Scene& scene, Seen& seen, Wrapped::Fault fault = Wrapped::Fault::kNone,
+    double fault_at = 0, double estimator_fails_at = std::numeric_limits<double>::infinity()) {
   const auto model = model::compile(scene);
   const control::ControllerChoice choice = model->controller;
   const control::EstimatorChoice estimator = model->estimator;
@@ -108,9 +111,9 @@ drivers::SyntheticResult run_wrapped(const Scene& scene, Seen& seen,
       [&seen, choice, fault, fault_at] {
         return std::make_unique<Wrapped>(control::make_controller(choice), seen, fault, fault_at);
       },
-      [&seen, estimator](std::shared_ptr<const sim::RollingProblem> nominal) {
-        return std::make_unique<WrappedEstimator>(control::make_estimator(estimator, nominal),
-                                                  seen);
+      [&seen, estimator, estimator_fails_at](std::shared_ptr<const sim::RollingProblem> nominal) {
+        return std::make_unique<WrappedEstimator>(control::make_estimator(estimator, nominal), seen,
+                                                  estimator_fails_at);
       });
   return drivers::run_synthetic(setup, model);
 }
@@ -248,4 +251,24 @@ TEST(LoopInterfaces, UnknownTypesListTheKnownOnes) {
     EXPECT_NE(what.find("estimator.type: unknown type 'particle' (known: ekf"), std::string::npos)
         << what;
   }
+}
+
+// An estimator that fails (its belief non-finite, a user's filter raising) ends the estimation:
+// the loop stops safely with cause "estimator" and the message, the run is a safe stop (not a
+// numerical failure of the world), and the estimator is not asked again.
+TEST(LoopInterfaces, AFailingEstimatorStopsSafely) {
+  Seen seen;
+  const drivers::SyntheticResult r =
+      run_wrapped(feedback_scene(), seen, Wrapped::Fault::kNone, 0, 1.0);
+  ASSERT_TRUE(r.loop.safe_stop);
+  ASSERT_TRUE(r.loop.stop_reason);
+  EXPECT_EQ(r.loop.stop_reason->cause, control::StopCause::kEstimator);
+  EXPECT_EQ(r.loop.stop_reason->detail, "estimator: the test's estimator diverged");
+  EXPECT_EQ(r.outcome, drivers::Outcome::kSafeStop);
+  EXPECT_EQ(seen.resets, 1);
+  long estimating_after = 0;
+  for (const drivers::TickLog& row : r.loop.log)
+    if (row.t >= 1.0) estimating_after += row.estimating;
+  EXPECT_EQ(estimating_after, 0);
+  EXPECT_LT(std::abs(r.loop.log.back().theta_dot), 1e-3);
 }
