@@ -169,6 +169,11 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
   check_options(o, scene);
   const fs::path dir = o.common.out;
   if (!dir.empty()) check_output_directory("--out", dir, o.common.force);
+  // The scene as every controller assumes it compiles before anything is printed: a bad type or
+  // config is the one line of bad input.
+  const auto nominal = model::compile(scene);
+  for (const std::string& name : o.controllers)
+    model::compile(drivers::scene_for_controller(scene, name, "--controller"));
 
   const unsigned threads =
       o.threads ? o.threads : std::max(1u, std::thread::hardware_concurrency());
@@ -178,9 +183,9 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
   drivers::MonteCarloResult r;
   {
     ProgressBar bar("montecarlo");
-    r = drivers::run_montecarlo(
-        *model::compile(scene), o.p, o.n, static_cast<std::uint64_t>(o.seed),
-        drivers::controllers_by_name(o.controllers), threads, bar.callback());
+    r = drivers::run_montecarlo(*nominal, o.p, o.n, static_cast<std::uint64_t>(o.seed),
+                                drivers::controllers_by_name(o.controllers), threads,
+                                bar.callback());
   }
   const double per_second = r.seconds > 0 ? static_cast<double>(experiments) / r.seconds : 0;
 

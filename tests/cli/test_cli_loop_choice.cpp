@@ -106,6 +106,11 @@ TEST_F(CliLoopChoiceTest, BadNamesAndConfigsExit2AndWriteNothing) {
   write_scene("estimator.yaml", "  model: rolling ", "  type: particle\n  model: rolling ");
   expect_bad_input("experiment --scene estimator.yaml --out out",
                    {"estimator.yaml", "estimator.type: unknown type 'particle' (known: ekf, ukf)"});
+  // Monte Carlo refuses the same scenes before it starts (no banner line before the error).
+  expect_bad_input("montecarlo --scene controller.yaml --n 2 --out out",
+                   {"controller.yaml", "controller.type: unknown type 'pid'"});
+  expect_bad_input("montecarlo --scene estimator.yaml --n 2 --out out",
+                   {"estimator.yaml", "estimator.type: unknown type 'particle'"});
   // A controller config key of the wrong kind, and one out of range.
   write_scene("kp.yaml", "  kp: 900 ", "  kp: \"fast\" ");
   expect_bad_input("experiment --scene kp.yaml --out out", {"kp.yaml", "controller.kp", "string"});
