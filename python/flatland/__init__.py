@@ -547,8 +547,8 @@ def experiment(model: SceneLike = None, *, controller: Any = None,
 
     A controller that raises stops the run safely (``result["stop_reason"]`` has
     "ExceptionType: message"); one that returns NaN or something else than a number or a
-    ControlOutput raises ValueError naming what and when; an estimator that raises raises
-    RuntimeError.
+    ControlOutput raises ValueError naming what and when; an estimator that raises stops the
+    run safely too (``stop_reason`` starts "estimator: ").
     """
     result, log = _flatland.experiment(_scene("model", model), controller, estimator)
     return Experiment(result, log)

@@ -248,10 +248,16 @@ class RaisingUpdate(AlphaBeta):
         raise KeyError("no such frame")
 
 
-def test_an_estimator_returning_the_wrong_type_or_raising_is_one_line():
+def test_an_estimator_returning_the_wrong_type_is_one_line_and_one_raising_stops_safely():
     with pytest.raises(ValueError, match=r"^estimator 'alpha-beta': estimate returned a tuple "
                                          r"\(\(.*\)\) at t = .* s; expected a flatland\.Estimate$"):
         flatland.experiment(estimator=WrongEstimate())
-    with pytest.raises(RuntimeError, match=r"^estimator 'alpha-beta': update raised KeyError: "
-                                           r"'no such frame' at t = "):
-        flatland.experiment(estimator=RaisingUpdate())
+    # A filter that fails is the loop's to handle, as a controller that fails: the hand is
+    # stopped safely, with the estimator's message, and the filter is not asked again.
+    e = flatland.experiment(estimator=RaisingUpdate())
+    assert e["safe_stop"] and e["outcome"] == "safe_stop"
+    assert e["stop_reason"].startswith(
+        "estimator: estimator 'alpha-beta': update raised KeyError: 'no such frame' at t = ")
+    log = e.log
+    first_failure = log["t"][log["stage"] == "safe-stop"].min()
+    assert not log["estimating"][log["t"] > first_failure].any()
