@@ -80,6 +80,22 @@ using CurvePtr = std::shared_ptr<const Curve>;
 /// Compute geometry from a jet. `normal_side` as in Curve::normal_side().
 CurveGeometry geometry_from_jet(const CurveJet& jet, int normal_side);
 
+/// A hand's outline. Every hand follows the paper's parameter convention where it applies: a
+/// closed outline is periodic in s with period() (4 for the butterfly hands: s = -1 the middle of
+/// the palm, 0 the tip, +1 the middle of the back, 2 the mirrored tip), traversed clockwise. A hand
+/// with has_palm_and_back() has wells at s = -1 and s = +1: the butterfly's start and goal, which
+/// the searches (solve, locus, surface, time-optimal) and the closed loop's plan need; the others
+/// (a line, a circular well) are simulated, drawn and tracked, and refused by those with one line.
+class HandCurve : public Curve {
+ public:
+  /// The parameter's period over the closed outline; +infinity for an open curve (a line).
+  virtual double period() const = 0;
+  /// Whether s = -1 and s = +1 are the palm's and the back's wells (the butterfly convention).
+  virtual bool has_palm_and_back() const = 0;
+};
+
+using HandPtr = std::shared_ptr<const HandCurve>;
+
 /// The paper's hand (section 4.1). Right half, s in [-1, 1]:
 ///   x(s) = a + c s^2 + e s^4,  y(s) = b s + d s^3 + f s^5,
 /// with e = -(a + c), f = -(b + 3 d)/5 so that x(+-1) = 0 and y'(+-1) = 0. The left half is its
@@ -88,7 +104,7 @@ CurveGeometry geometry_from_jet(const CurveJet& jet, int normal_side);
 ///   odd m the mirrored half with local u = 2m - s.
 /// So s = -1 is the middle of the palm, 0 the tip, +1 the middle of the back, 2 the mirrored tip,
 /// and s is periodic with period 4. Traversed clockwise: outward normal = tangent turned +90 deg.
-class PolynomialHand final : public Curve {
+class PolynomialHand final : public HandCurve {
  public:
   /// Coefficients in metres.
   PolynomialHand(double a, double b, double c, double d);
@@ -108,6 +124,8 @@ class PolynomialHand final : public Curve {
   /// In [-1, 3): the closed outline's period.
   double nearest(const Vec2& p) const override;
   double reach() const override { return reach_; }
+  double period() const override { return 4.0; }
+  bool has_palm_and_back() const override { return true; }
 
  private:
   double a_, b_, c_, d_, e_, f_;
