@@ -1,4 +1,5 @@
 #include "flatland/sim/object.hpp"
+#include "flatland/sim/format.hpp"
 
 #include <cmath>
 #include <stdexcept>
@@ -17,8 +18,6 @@ RigidObject make_disk(double radius, double mass, double inertia) {
   check_positive(radius, "object.radius");
   check_positive(mass, "object.mass");
   check_positive(inertia, "object.inertia");
-  if (inertia > mass * radius * radius * (1 + 1e-12))
-    throw std::invalid_argument("object.inertia: a disk's inertia cannot exceed m r^2 (a ring)");
   RigidObject o;
   o.mass = mass;
   o.inertia = inertia;
@@ -32,6 +31,21 @@ RigidObject make_uniform_disk(double radius, double mass) {
   check_positive(radius, "object.radius");
   check_positive(mass, "object.mass");
   return make_disk(radius, mass, 0.5 * mass * radius * radius);
+}
+
+RollingDisk ball_on_rails(double radius, double gap, double mass, bool hollow) {
+  check_positive(radius, "object.radius");
+  check_positive(gap, "object.rails.gap");
+  check_positive(mass, "object.mass");
+  if (!(gap < 2 * radius))
+    throw std::invalid_argument("object.rails.gap: larger than the ball's diameter (" +
+                                format_significant(2 * radius) + " m), got " +
+                                format_significant(gap) + " m: the ball falls through");
+  const double half_gap = 0.5 * gap;
+  // (R - g/2)(R + g/2) rather than R^2 - (g/2)^2: no cancellation when the gap nears 2R.
+  const double rolling_radius = std::sqrt((radius - half_gap) * (radius + half_gap));
+  const double shape_factor = hollow ? 2.0 / 3.0 : 0.4;
+  return {rolling_radius, shape_factor * mass * radius * radius};
 }
 
 RigidObject make_uniform_ellipse(double ax, double ay, double mass) {

@@ -1,4 +1,5 @@
 #include "flatland/sim/spec.hpp"
+#include "flatland/sim/format.hpp"
 
 #include <cmath>
 #include <stdexcept>
@@ -13,6 +14,88 @@ double SimulationSpec::end_time() const {
   return motion.kind == MotionSpec::Kind::kButterfly ? motion.period : initial.t0 + 1.0;
 }
 
+namespace {
+
+const char* kind_name(ObjectSpec::Kind kind) {
+  switch (kind) {
+    case ObjectSpec::Kind::kDisk:
+      return "disk";
+    case ObjectSpec::Kind::kRing:
+      return "ring";
+    case ObjectSpec::Kind::kBall:
+      return "ball";
+    case ObjectSpec::Kind::kEllipse:
+      break;
+  }
+  return "ellipse";
+}
+
+void require_positive(double value, const char* field) {
+  if (!(value > 0) || !std::isfinite(value))
+    throw std::invalid_argument(std::string(field) + ": must be positive and finite, got " +
+                                format_significant(value));
+}
+
+// The given inertia against what a body of the description can have: its mass lies within
+// `outer` of the centre (J <= m outer^2) and, for a ring, not inside `inner` (J >= m inner^2).
+void check_inertia_bounds(const ObjectSpec& o, double inner, double outer) {
+  const double J = *o.inertia, m = o.mass;
+  require_positive(J, "object.inertia");
+  const std::string body =
+      std::string("a ") + kind_name(o.kind) + " of mass " + format_significant(m) + " kg";
+  // A relative slack of 1e-12: the bound itself (a thin ring) is a body one can describe.
+  if (J > m * outer * outer * (1 + 1e-12))
+    throw std::invalid_argument(
+        "object.inertia: " + body + " within " + format_significant(outer) +
+        " m of its centre has at most m R^2 = " + format_significant(m * outer * outer) +
+        " kg m^2, got " + format_significant(J));
+  if (J < m * inner * inner * (1 - 1e-12))
+    throw std::invalid_argument(
+        "object.inertia: " + body + " with no mass inside " + format_significant(inner) +
+        " m has at least m R_i^2 = " + format_significant(m * inner * inner) + " kg m^2, got " +
+        format_significant(J));
+}
+
+}  // namespace
+
+double ObjectSpec::seen_radius() const {
+  if (!round()) throw std::logic_error("ObjectSpec::seen_radius: an ellipse has no radius");
+  return radius;
+}
+
+RollingDisk equivalent_disk(const ObjectSpec& o) {
+  if (!o.round()) throw std::logic_error("equivalent_disk: an ellipse is no disk");
+  require_positive(o.radius, "object.radius");
+  require_positive(o.mass, "object.mass");
+  const double R = o.radius, m = o.mass;
+  RollingDisk disk{R, 0.5 * m * R * R};
+  double inner = 0;
+  switch (o.kind) {
+    case ObjectSpec::Kind::kRing:
+      inner = o.inner_radius;
+      require_positive(inner, "object.inner_radius");
+      if (!(inner < R))
+        throw std::invalid_argument("object.inner_radius: must be below object.radius (" +
+                                    format_significant(R) + " m), got " +
+                                    format_significant(inner));
+      disk.inertia = 0.5 * m * (R * R + inner * inner);
+      break;
+    case ObjectSpec::Kind::kBall:
+      if (o.rail_gap)
+        disk = ball_on_rails(R, *o.rail_gap, m, o.hollow);
+      else
+        disk.inertia = (o.hollow ? 2.0 / 3.0 : 0.4) * m * R * R;
+      break;
+    default:
+      break;
+  }
+  if (o.inertia) {
+    check_inertia_bounds(o, inner, R);
+    disk.inertia = *o.inertia;
+  }
+  return disk;
+}
+
 std::shared_ptr<const RollingProblem> build_problem(const SimulationSpec& spec) {
   if (!(spec.gravity > 0) || !std::isfinite(spec.gravity))
     throw std::invalid_argument("gravity.g: must be positive and finite");
@@ -21,10 +104,11 @@ std::shared_ptr<const RollingProblem> build_problem(const SimulationSpec& spec) 
   auto pb = std::make_shared<RollingProblem>();
   auto hand = std::make_shared<PolynomialHand>(spec.hand.a, spec.hand.b, spec.hand.c, spec.hand.d);
   const ObjectSpec& o = spec.object;
-  if (o.kind == ObjectSpec::Kind::kDisk) {
-    pb->object =
-        o.inertia ? make_disk(o.radius, o.mass, *o.inertia) : make_uniform_disk(o.radius, o.mass);
-    validate_hand_for_disk(*hand, o.radius);
+  if (o.round()) {
+    const RollingDisk disk = equivalent_disk(o);
+    pb->object = make_disk(disk.radius, o.mass, disk.inertia);
+    pb->object.kind = kind_name(o.kind);
+    validate_hand_for_disk(*hand, disk.radius);
   } else {
     pb->object = make_uniform_ellipse(o.semi_axis_x, o.semi_axis_y, o.mass);
     if (o.inertia) {
@@ -49,7 +133,7 @@ std::shared_ptr<const RollingProblem> build_problem(const SimulationSpec& spec) 
   if (law.rolling_resistance > 0 && pb->object.disk_radius && law.mu &&
       !(law.rolling_resistance < law.kinetic() * *pb->object.disk_radius))
     throw std::invalid_argument(
-        "contact.rolling_resistance: must be below mu_kinetic x object.radius (" +
+        "contact.rolling_resistance: must be below mu_kinetic x the rolling radius (" +
         std::to_string(law.kinetic() * *pb->object.disk_radius) +
         " m): a larger couple than friction's could hold a sliding disk's rotation");
   if (spec.run.model == ContactModel::kRolling && spec.contact.has_losses())

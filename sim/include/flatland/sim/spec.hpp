@@ -2,6 +2,7 @@
 // The scene loader (scene/) fills it; sim turns it into a RollingProblem.
 #pragma once
 
+#include "flatland/sim/object.hpp"
 #include "flatland/sim/simulate.hpp"
 
 #include <numbers>
@@ -14,15 +15,40 @@ struct HandSpec {
   double a = 0.18, b = -0.18, c = -0.252, d = 0.216;
 };
 
+/// The rolling object's physical description (the scene's `object`); build_problem converts it
+/// into the rigid object the dynamics see (equivalent_disk for the round ones).
 struct ObjectSpec {
-  enum class Kind { kDisk, kEllipse };
+  enum class Kind {
+    kDisk,     ///< a plate of radius `radius`
+    kRing,     ///< an annulus: outer radius `radius`, inner radius `inner_radius`
+    kBall,     ///< a ball of radius `radius`, on the hand's edge or on two rails (`rail_gap`)
+    kEllipse,  ///< an elliptical plate
+  };
   Kind kind = Kind::kDisk;
-  double radius = 0.051;                    ///< m (disk)
+  double radius = 0.051;                    ///< m: disk radius, ring's outer, ball's radius
+  double inner_radius = 0;                  ///< m (ring), < radius
+  bool hollow = false;                      ///< ball: a thin shell rather than solid
+  std::optional<double> rail_gap;           ///< m (ball): rides on two parallel rails this apart
   double semi_axis_x = 0, semi_axis_y = 0;  ///< m (ellipse)
   double mass = 1.0;                        ///< kg
-  std::optional<double> inertia;            ///< kg m^2; default: uniform plate
+  /// kg m^2 about the centre; default: the uniform body of the description
+  std::optional<double> inertia;
+
+  /// Disk, ring or ball: rolls on a circle about its centre (the reduced formulation applies).
+  bool round() const { return kind != Kind::kEllipse; }
+  /// Radius of the outline a camera looking along the plane's normal sees: the disk's or ring's
+  /// outer radius, the ball's own radius R (also on rails). Ellipse: std::logic_error.
+  double seen_radius() const;
 };
 
+/// A round object's description as the planar dynamics see it: the rolling radius (the ball on
+/// rails: sqrt(R^2 - (gap/2)^2), else `radius`) and the inertia about the centre (given, or the
+/// uniform body's: disk m R^2/2, ring m (R^2 + R_i^2)/2, ball 2/5 m R^2, hollow 2/3 m R^2). A
+/// given inertia is checked against what a body of that description can have: J > 0 for all,
+/// J <= m R^2 (mass within R of the centre; R the outer or the ball's radius, not the rolling
+/// radius), J >= m R_i^2 for a ring (no mass inside its hole). Throws std::invalid_argument naming
+/// the field; std::logic_error for an ellipse.
+RollingDisk equivalent_disk(const ObjectSpec& object);
 struct MotionSpec {
   enum class Kind { kButterfly, kFixed };
   Kind kind = Kind::kButterfly;
