@@ -67,30 +67,61 @@ void read_hand(const MapReader& root, sim::SimulationSpec& spec) {
   spec.hand.d = h.number("d");
 }
 
+void read_ellipse_axes(const MapReader& o, sim::ObjectSpec& obj) {
+  if (!o.has("semi_axes")) o.fail_at("semi_axes", "missing required key");
+  const YAML::Node axes = o.node("semi_axes");
+  if (!axes.IsSequence() || axes.size() != 2)
+    o.fail_at("semi_axes", "expected a list of two numbers [x, y], got " +
+                               (axes.IsSequence() ? "a list of " + std::to_string(axes.size())
+                                                  : describe(axes)));
+  double v[2];
+  for (std::size_t i = 0; i < 2; ++i) {
+    const std::string where = o.field("semi_axes") + "[" + std::to_string(i) + "]";
+    v[i] = o.to_number(axes[i], where);
+    if (!(v[i] > 0)) fail(o.origin(), where, "must be positive, got " + axes[i].Scalar());
+  }
+  obj.semi_axis_x = v[0];
+  obj.semi_axis_y = v[1];
+}
+
+// A ball's keys: solid or hollow, and the rails it may ride on. The rolling radius and inertia
+// they imply, and their bounds, are sim's (equivalent_disk), reported when the scene is built.
+void read_ball(const MapReader& o, sim::ObjectSpec& obj) {
+  obj.hollow = o.boolean_or("hollow", false);
+  if (o.has("inertia") && o.has("hollow"))
+    o.fail_at("hollow",
+              "only chooses the default inertia (2/5 or 2/3 m R^2); remove it when "
+              "object.inertia is given");
+  if (const auto rails = o.optional_section("rails", {"gap"}))
+    obj.rail_gap = rails->positive("gap");
+}
+
 void read_object(const MapReader& root, sim::SimulationSpec& spec) {
-  const MapReader o = root.section("object", {"type", "radius", "semi_axes", "mass", "inertia"});
+  const MapReader o = root.section("object", {"type", "radius", "inner_radius", "hollow", "rails",
+                                              "semi_axes", "mass", "inertia"});
   auto& obj = spec.object;
-  if (o.choice("type", {"disk", "ellipse"}) == "disk") {
-    o.reject_if_present("semi_axes", "only for type: ellipse (a disk has `radius`)");
-    obj.kind = sim::ObjectSpec::Kind::kDisk;
-    obj.radius = o.positive("radius");
-  } else {
-    o.reject_if_present("radius", "only for type: disk (an ellipse has `semi_axes`)");
+  const std::string type = o.choice("type", {"disk", "ring", "ball", "ellipse"});
+  if (type != "ring") o.reject_if_present("inner_radius", "only for type: ring");
+  if (type != "ball") {
+    o.reject_if_present("hollow", "only for type: ball");
+    o.reject_if_present("rails", "only for type: ball (a ball riding on two rails)");
+  }
+  if (type == "ellipse") {
+    o.reject_if_present("radius", "only for type: disk, ring, ball (an ellipse has `semi_axes`)");
     obj.kind = sim::ObjectSpec::Kind::kEllipse;
-    if (!o.has("semi_axes")) o.fail_at("semi_axes", "missing required key");
-    const YAML::Node axes = o.node("semi_axes");
-    if (!axes.IsSequence() || axes.size() != 2)
-      o.fail_at("semi_axes", "expected a list of two numbers [x, y], got " +
-                                 (axes.IsSequence() ? "a list of " + std::to_string(axes.size())
-                                                    : describe(axes)));
-    double v[2];
-    for (std::size_t i = 0; i < 2; ++i) {
-      const std::string where = o.field("semi_axes") + "[" + std::to_string(i) + "]";
-      v[i] = o.to_number(axes[i], where);
-      if (!(v[i] > 0)) fail(o.origin(), where, "must be positive, got " + axes[i].Scalar());
+    read_ellipse_axes(o, obj);
+  } else {
+    o.reject_if_present("semi_axes", "only for type: ellipse (a " + type + " has `radius`)");
+    obj.radius = o.positive("radius");
+    if (type == "disk") {
+      obj.kind = sim::ObjectSpec::Kind::kDisk;
+    } else if (type == "ring") {
+      obj.kind = sim::ObjectSpec::Kind::kRing;
+      obj.inner_radius = o.positive("inner_radius");
+    } else {
+      obj.kind = sim::ObjectSpec::Kind::kBall;
+      read_ball(o, obj);
     }
-    obj.semi_axis_x = v[0];
-    obj.semi_axis_y = v[1];
   }
   obj.mass = o.positive_or("mass", 1.0);
   if (o.has("inertia")) obj.inertia = o.positive("inertia");

@@ -337,6 +337,65 @@ TEST(SceneTest, EllipseObject) {
   EXPECT_DOUBLE_EQ(*s.sim.object.inertia, 2e-4);
 }
 
+const std::string kDiskKeys = "  type: disk\n  radius: 0.051\n";
+
+// A ring and a ball (solid, hollow, on rails) read into their description; sim converts it.
+TEST(SceneTest, RingAndBallObjects) {
+  const Scene ring =
+      parse_scene(with(kBase, kDiskKeys, "  type: ring\n  radius: 0.05\n  inner_radius: 0.04\n"));
+  EXPECT_EQ(ring.sim.object.kind, sim::ObjectSpec::Kind::kRing);
+  EXPECT_EQ(ring.sim.object.radius, 0.05);
+  EXPECT_EQ(ring.sim.object.inner_radius, 0.04);
+  const Scene ball = parse_scene(with(kBase, kDiskKeys, "  type: ball\n  radius: 0.05\n"));
+  EXPECT_EQ(ball.sim.object.kind, sim::ObjectSpec::Kind::kBall);
+  EXPECT_FALSE(ball.sim.object.hollow);
+  EXPECT_FALSE(ball.sim.object.rail_gap.has_value());
+  const Scene on_rails = parse_scene(with(
+      kBase, kDiskKeys, "  type: ball\n  radius: 0.05\n  hollow: true\n  rails: {gap: 0.06}\n"));
+  EXPECT_TRUE(on_rails.sim.object.hollow);
+  ASSERT_TRUE(on_rails.sim.object.rail_gap.has_value());
+  EXPECT_EQ(*on_rails.sim.object.rail_gap, 0.06);
+  // Its own inertia, 2/3 m R^2 = 1.67e-3 for m = 1, is above m r^2 = 1.6e-3 of its rolling radius
+  // 0.04 m, and a given one up to m R^2 = 2.5e-3 is a ball's.
+  EXPECT_NO_THROW(
+      parse_scene(with(kBase, kDiskKeys,
+                       "  type: ball\n  radius: 0.05\n  rails: {gap: 0.06}\n  inertia: 2.4e-3\n")));
+}
+
+TEST(SceneTest, RingAndBallErrorsNameTheField) {
+  const auto object = [](const std::string& keys) { return with(kBase, kDiskKeys, keys); };
+  expect_field_error(object("  type: ball\n  radius: 0.05\n  rails: {gap: 0.1}\n"),
+                     "object.rails.gap", "larger than the ball's diameter");
+  expect_field_error(object("  type: ball\n  radius: 0.05\n  rails: {gap: 0}\n"),
+                     "object.rails.gap", "positive");
+  expect_field_error(object("  type: ball\n  radius: 0.05\n  rails: {width: 0.06}\n"),
+                     "object.rails.width", "unknown key");
+  expect_field_error(object("  type: ball\n  radius: 0.05\n  hollow: yes\n"), "object.hollow",
+                     "true or false");
+  expect_field_error(object("  type: ball\n  radius: 0.05\n  hollow: true\n  inertia: 1e-3\n"),
+                     "object.hollow", "remove it");
+  expect_field_error(
+      object("  type: ball\n  radius: 0.05\n  rails: {gap: 0.06}\n  inertia: 2.6e-3\n"),
+      "object.inertia", "at most m R^2");
+  expect_field_error(object("  type: ring\n  radius: 0.05\n  inner_radius: 0.05\n"),
+                     "object.inner_radius", "must be below object.radius");
+  expect_field_error(object("  type: ring\n  radius: 0.05\n  inner_radius: -0.01\n"),
+                     "object.inner_radius", "positive");
+  expect_field_error(object("  type: ring\n  radius: 0.05\n"), "object.inner_radius", "missing");
+  expect_field_error(
+      object("  type: ring\n  radius: 0.05\n  inner_radius: 0.03\n  inertia: 5e-4\n"),
+      "object.inertia", "at least m R_i^2");
+  expect_field_error(object("  type: disk\n  radius: 0.05\n  inner_radius: 0.03\n"),
+                     "object.inner_radius", "only for type: ring");
+  expect_field_error(object("  type: disk\n  radius: 0.05\n  rails: {gap: 0.06}\n"), "object.rails",
+                     "only for type: ball");
+  expect_field_error(object("  type: ring\n  radius: 0.05\n  hollow: true\n"), "object.hollow",
+                     "only for type: ball");
+  expect_field_error(object("  type: ball\n  semi_axes: [0.03, 0.02]\n"), "object.semi_axes",
+                     "only for type: ellipse");
+  expect_field_error(object("  type: cube\n  radius: 0.05\n"), "object.type", "disk, ring, ball");
+}
+
 // --------------------------------------------------------------------------------------------
 // Structural errors
 
@@ -415,7 +474,7 @@ TEST(SceneTest, UnknownEnumValues) {
                      "'euler' (allowed: dopri5, dop853, rk4)");
   expect_field_error(with(kBase, "formulation: auto", "formulation: magic"),
                      "integrator.formulation", "allowed: auto, general, reduced");
-  expect_field_error(with(kBase, "type: disk", "type: square"), "object.type", "disk, ellipse");
+  expect_field_error(with(kBase, "type: disk", "type: square"), "object.type", "disk, ring, ball, ellipse");
   expect_field_error(with(kBase, "type: butterfly", "type: wave"), "motion.type",
                      "butterfly, fixed");
   expect_field_error(with(kBase, "shape: polynomial", "shape: circle"), "hand.shape",
@@ -490,10 +549,11 @@ TEST(SceneTest, OversizedSceneIsRefused) {
 
 // The hybrid model's contact law and losses.
 TEST(SceneTest, HybridContactSection) {
-  const std::string hybrid = "contact:\n  model: hybrid\n  mu: 0.8\n  mu_kinetic: 0.6\n"
-                             "  restitution: 0.4\n  capture_velocity: 0.002\n"
-                             "  rolling_resistance: 5.0e-5\n  drag: 0.015\n"
-                             "  drag_angular: 2.0e-5\n  event_tolerance: 1.0e-12\n";
+  const std::string hybrid =
+      "contact:\n  model: hybrid\n  mu: 0.8\n  mu_kinetic: 0.6\n"
+      "  restitution: 0.4\n  capture_velocity: 0.002\n"
+      "  rolling_resistance: 5.0e-5\n  drag: 0.015\n"
+      "  drag_angular: 2.0e-5\n  event_tolerance: 1.0e-12\n";
   const std::string rolling =
       "contact:\n  stop_on_contact_loss: true\n  event_tolerance: 1.0e-12\n";
   const Scene s = parse_scene(with(kBase, rolling, hybrid));
@@ -542,9 +602,9 @@ TEST(SceneTest, PhysicallyInvalidScenes) {
   // c = -0.5 pulls the outline across the axis of symmetry.
   expect_field_error(with(kBase, "c: -0.252", "c: -0.5"), "hand", "self-intersects");
   expect_field_error(with(kBase, "a: 0.18", "a: -0.18"), "hand.a", "positive");
-  // A ring is the most inertia a disk of that mass and radius can have.
+  // A thin ring is the most inertia a body within the disk's radius can have: m R^2.
   expect_field_error(with(kBase, "mass: 1.0", "mass: 1.0\n  inertia: 0.01"), "object.inertia",
-                     "m r^2");
+                     "at most m R^2");
   expect_field_error(with(with(kBase, "  type: disk\n  radius: 0.051\n",
                                "  type: ellipse\n  semi_axes: [0.03, 0.02]\n"),
                           "formulation: auto", "formulation: reduced"),
