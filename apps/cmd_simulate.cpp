@@ -55,7 +55,7 @@ std::string hybrid_text(const sim::SimulationSpec& spec, const sim::RunResult& r
   }
   os << "; " << r.stats.mode_changes << " changes, " << r.stats.impacts << " impacts, ends "
      << sim::to_string(r.final.mode) << "\n";
-  if (spec.object.kind != sim::ObjectSpec::Kind::kDisk && r.reason == sim::StopReason::kContactLost)
+  if (!spec.object.round() && r.reason == sim::StopReason::kContactLost)
     os << "  note               flight and impacts are modelled for a disk only: the run stops "
           "where this object would lift off\n";
   int i = 0;

@@ -165,6 +165,10 @@ void run_track(const TrackOptions& o) {
   CommonOptions common;
   common.scene = o.scene;
   const Scene scene = load_scene_with_overrides(common);
+  // The tracker's model is a solid disk's face: an object it cannot follow is refused up front,
+  // not tracked into a biased centre.
+  if (const auto problem = model::tracking_problem(scene.sim.object))
+    throw UsageError(scene.origin + ": " + *problem);
   std::optional<EncoderLog> encoder;
   std::optional<vision::HandMapping> mapping;
   if (!o.encoder.empty()) {
@@ -172,8 +176,6 @@ void run_track(const TrackOptions& o) {
       throw UsageError("--encoder: " + o.camera +
                        " has no table pose (needed to map pixels to the table for s_h)");
     encoder = read_encoder(o.encoder);
-    if (scene.sim.object.kind != sim::ObjectSpec::Kind::kDisk)
-      throw UsageError(scene.origin + ": object: track maps a disk's centre (object.type: disk)");
     mapping = model::hand_mapping(*model::compile(scene), camera,
                                   camfile.joint ? camfile.joint->axis_table : cv::Point2d(0, 0));
   }

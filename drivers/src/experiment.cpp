@@ -88,9 +88,8 @@ LoopSetup::LoopSetup(std::shared_ptr<const model::Model> nominal, ControllerFact
     throw std::invalid_argument(scene.origin +
                                 ": camera: the closed loop needs a camera section (its model "
                                 "maps tracked pixels to the table)");
-  if (!model->mapping)
-    throw std::invalid_argument(scene.origin +
-                                ": object: the closed loop rolls a disk (object.type: disk)");
+  if (const auto problem = model::tracking_problem(scene.sim.object))
+    throw std::invalid_argument(scene.origin + ": " + *problem + " (the closed loop tracks it)");
   plan = make_plan(*model);
   if (!make_controller) {
     const control::ControllerChoice choice = model->controller;

@@ -66,9 +66,9 @@ SimWorld::SimWorld(std::shared_ptr<const model::Model> truth_model, double t_sta
       t_start_(t_start),
       t_(t_start) {
   const Scene& truth = scene_;
-  if (truth.sim.object.kind != sim::ObjectSpec::Kind::kDisk)
+  if (!truth.sim.object.round())
     throw std::invalid_argument(truth.origin +
-                                ": object: the closed loop rolls a disk (object.type: disk)");
+                                ": object.type: the closed loop rolls a disk, ring or ball");
   require_friction(truth);
   // The world is the hybrid model whatever the scene's contact.model: it slides, flies and is
   // caught again where the real table would.
@@ -78,7 +78,7 @@ SimWorld::SimWorld(std::shared_ptr<const model::Model> truth_model, double t_sta
   step_options_ = sim::run_options(spec);
   step_options_.formulation = sim::Formulation::kReduced;
   step_options_.record = false;
-  step_options_.stop_at_transition = true;  // the joint's load changes there
+  step_options_.stop_at_transition = true;           // the joint's load changes there
   step_options_.hand_inertia = truth.joint.inertia;  // an impact kicks the hand too
   step_options_.events.s_h_bounds.reset();
 
@@ -188,8 +188,8 @@ double SimWorld::step_disk(double t, double t_end, double alpha) {
       last_contact_mode_ = disk_.mode;
   }
   if (r.reason == sim::StopReason::kDropped) {
-    failure_ = last_contact_mode_ == sim::ContactMode::kSliding ? Outcome::kSlidOff
-                                                                 : Outcome::kDropped;
+    failure_ =
+        last_contact_mode_ == sim::ContactMode::kSliding ? Outcome::kSlidOff : Outcome::kDropped;
     failure_detail_ =
         std::string(last_contact_mode_ == sim::ContactMode::kSliding ? "the disk slid off the hand"
                                                                      : "the disk lost contact") +
@@ -370,10 +370,10 @@ GoalCheck SimWorld::goal_check() const {
   out.rim_right = right;
   // The disk's energy in the table plane.
   const double m = problem_->object.mass, g = problem_->gravity;
-  const double energy = 0.5 * m * disk_.velocity.squaredNorm() +
-                        0.5 * problem_->object.inertia * disk_.angular_velocity *
-                            disk_.angular_velocity +
-                        m * g * disk_.position.y();
+  const double energy =
+      0.5 * m * disk_.velocity.squaredNorm() +
+      0.5 * problem_->object.inertia * disk_.angular_velocity * disk_.angular_velocity +
+      m * g * disk_.position.y();
   const double rim = std::min(height(left), height(right));
   out.energy_margin = m * g * rim - energy;
   // A well holds the disk only where the hand faces up at its bottom (elsewhere the lowest point
@@ -470,15 +470,18 @@ std::optional<CameraFrame> SyntheticCamera::poll(double now) {
     }
     ++rendered_;
     std::uniform_real_distribution<double> spread(-camera_.latency_jitter, camera_.latency_jitter);
-    const double latency = camera_.latency + (camera_.latency_jitter > 0 ? spread(latency_rng_) : 0);
+    const double latency =
+        camera_.latency + (camera_.latency_jitter > 0 ? spread(latency_rng_) : 0);
     CameraFrame frame;
     frame.index = index;
     frame.t_capture = f.truth.t;
     // A camera delivers in order.
     frame.t_arrival = std::max(f.truth.t + latency, last_arrival_);
     last_arrival_ = frame.t_arrival;
-    if (f.image.depth() != CV_8U) f.image.convertTo(frame.image, CV_8U);
-    else frame.image = f.image;
+    if (f.image.depth() != CV_8U)
+      f.image.convertTo(frame.image, CV_8U);
+    else
+      frame.image = f.image;
     last_ = frame;
     queue_.push_back(frame);
   }

@@ -127,10 +127,27 @@ void compile_vision(Model& m) {
   // The tracked edge is the disk's top face.
   m.tracker.camera = *m.camera;
   m.tracker.plane_z = scene.render.disk_thickness;
-  if (scene.sim.object.kind == sim::ObjectSpec::Kind::kDisk) m.mapping = hand_mapping(m, *m.camera);
+  if (!tracking_problem(scene.sim.object)) m.mapping = hand_mapping(m, *m.camera);
 }
 
 }  // namespace
+
+std::optional<std::string> tracking_problem(const sim::ObjectSpec& object) {
+  switch (object.kind) {
+    case sim::ObjectSpec::Kind::kDisk:
+      return std::nullopt;
+    case sim::ObjectSpec::Kind::kBall:
+      if (!object.rail_gap) return std::nullopt;
+      return "object.rails: the tracker follows a disk's face seen whole; a ball on rails reaches "
+             "between them, behind the hand, beyond its rolling radius";
+    case sim::ObjectSpec::Kind::kRing:
+      return "object.type: ring: the tracker follows a solid disk's face; a ring's hole is not in "
+             "its model";
+    case sim::ObjectSpec::Kind::kEllipse:
+      break;
+  }
+  return "object.type: ellipse: the tracker and the mapping follow a disk's centre";
+}
 
 render::RenderSetup render_setup(const Model& model) {
   if (!model.camera)
@@ -184,15 +201,15 @@ render::RenderSetup spatial_render_setup(const Scene& scene, const sim::SpatialS
 vision::HandMapping hand_mapping(const Model& model, const camera::CameraModel& camera,
                                  cv::Point2d axis_table) {
   const Scene& scene = model.spec;
-  if (scene.sim.object.kind != sim::ObjectSpec::Kind::kDisk)
-    throw std::invalid_argument(scene.origin +
-                                ": object: the mapping finds a disk's centre (object.type: disk)");
+  if (const auto problem = tracking_problem(scene.sim.object))
+    throw std::invalid_argument(scene.origin + ": " + *problem);
   vision::HandMapping mapping;
   mapping.camera = camera;
   mapping.axis_table = axis_table;
   // The tracked edge lies on the disk's top face.
   mapping.plane_z = scene.render.disk_thickness;
-  mapping.disk_radius = scene.sim.object.radius;
+  // The centre rides the hand's outline at the rolling radius (a ball on rails': below R).
+  mapping.disk_radius = *model.plant->object.disk_radius;
   mapping.hand = *model.hand;
   return mapping;
 }

@@ -148,12 +148,13 @@ uniform vec3 face_color;
 uniform vec3 ring_color;
 uniform vec3 marker_color;
 uniform float ring_inner;      // inner radius of the O-ring band, in radii
+uniform float hole;            // a ring's hole, in radii (0: a solid face)
 uniform vec2 marker_center;    // in radii
 uniform float marker_radius;   // in radii
 out vec4 out_color;
 void main() {
   float d2 = dot(tex_uv, tex_uv);
-  if (d2 > 1.0) discard;
+  if (d2 > 1.0 || d2 < hole * hole) discard;
   vec3 c = d2 > ring_inner * ring_inner ? ring_color : face_color;
   vec2 m = tex_uv - marker_center;
   if (dot(m, m) < marker_radius * marker_radius) c = marker_color;
@@ -394,15 +395,18 @@ Mesh hand_mesh(const sim::PolynomialHand& hand, double thickness) {
   return m;
 }
 
-// The disk's rubber side wall (its top is drawn by kDiskFragmentShader on disk_top_quad).
-Mesh disk_side_mesh(double r, double thickness) {
+// The disk's rubber side wall (its top is drawn by kDiskFragmentShader on disk_top_quad), and a
+// ring's inner wall around its hole (radius `hole` > 0, facing the centre).
+Mesh disk_side_mesh(double r, double thickness, double hole = 0) {
   constexpr int kSeg = 64;
   Mesh m;
   for (int i = 0; i < kSeg; ++i) {
     const double a0 = 2 * std::numbers::pi * i / kSeg, a1 = 2 * std::numbers::pi * (i + 1) / kSeg;
     const cv::Vec3d u0(std::cos(a0), std::sin(a0), 0), u1(std::cos(a1), std::sin(a1), 0);
-    add_quad(m, r * u0, r * u1, r * u1 + cv::Vec3d(0, 0, thickness),
-             r * u0 + cv::Vec3d(0, 0, thickness), 0.5 * (u0 + u1), kRubber);
+    const cv::Vec3d up(0, 0, thickness);
+    add_quad(m, r * u0, r * u1, r * u1 + up, r * u0 + up, 0.5 * (u0 + u1), kRubber);
+    if (hole > 0)
+      add_quad(m, hole * u0, hole * u1, hole * u1 + up, hole * u0 + up, -0.5 * (u0 + u1), kRubber);
   }
   return m;
 }
@@ -578,7 +582,9 @@ struct Renderer::Impl {
   camera::CameraModel& camera = setup.camera;
   DistortionMaps maps;
   int supersample = 1;
-  double disk_radius = 0;
+  double disk_radius = 0;    // m, the object's outline as the camera sees it (a ball's R)
+  double hole_radius = 0;    // m, a ring's hole
+  double marker_offset = 0;  // marker centre from the object's centre, fraction of its radius
   std::unique_ptr<GlContext> context;
   std::unique_ptr<Gl> gl;
   unsigned program = 0, textured_program = 0, disk_program = 0, fbo = 0, color_rb = 0, depth_rb = 0;
@@ -605,9 +611,17 @@ struct Renderer::Impl {
     supersample = s.effects.supersample;
     if (supersample < 1 || supersample > 8)
       throw std::invalid_argument("effects.supersample: must be between 1 and 8");
-    if (!s.spatial && s.object.kind != sim::ObjectSpec::Kind::kDisk)
-      throw std::invalid_argument("object.type: the renderer draws disks only");
-    disk_radius = s.object.radius;
+    if (!s.spatial && !s.object.round())
+      throw std::invalid_argument(
+          "object.type: ellipse: the renderer draws disks, rings and balls");
+    if (!s.spatial) {
+      // A ball is drawn as its equatorial disk seen from above (radius R, the face's texture),
+      // not a shaded sphere; a ring as the annulus of its face.
+      disk_radius = s.object.seen_radius();
+      if (s.object.kind == sim::ObjectSpec::Kind::kRing) hole_radius = s.object.inner_radius;
+      // The marker on the face between the hole and the O-ring band.
+      marker_offset = std::max(kMarkerOffset, 0.5 * (hole_radius / disk_radius + 1.0 - kRingWidth));
+    }
     maps = make_distortion_maps(camera, supersample);
     fbo_width = maps.ideal_width;
     fbo_height = maps.ideal_height;
@@ -630,7 +644,7 @@ struct Renderer::Impl {
     }
     table = upload(table_mesh(s.render.table_extent));
     if (s.hand) hand = upload(hand_mesh(*s.hand, s.render.hand_thickness));
-    disk = upload(disk_side_mesh(disk_radius, s.render.disk_thickness));
+    disk = upload(disk_side_mesh(disk_radius, s.render.disk_thickness, hole_radius));
     disk_top = upload(disk_top_quad(disk_radius, s.render.disk_thickness));
     for (const camera::PlacedBoard& b : s.boards) targets.push_back(make_target(b));
     for (const Drawable& t : targets) textured_targets = textured_targets || t.texture != 0;
@@ -723,8 +737,10 @@ struct Renderer::Impl {
     set3("marker_color", kMarker);
     gl->glUniform1f(gl->glGetUniformLocation(disk_program, "ring_inner"), float(1.0 - kRingWidth));
     gl->glUniform1f(gl->glGetUniformLocation(disk_program, "marker_radius"), float(kMarkerRadius));
-    gl->glUniform2f(gl->glGetUniformLocation(disk_program, "marker_center"), float(kMarkerOffset),
+    gl->glUniform2f(gl->glGetUniformLocation(disk_program, "marker_center"), float(marker_offset),
                     0.0f);
+    gl->glUniform1f(gl->glGetUniformLocation(disk_program, "hole"),
+                    float(disk_radius > 0 ? hole_radius / disk_radius : 0.0));
   }
 
   void build_framebuffer() {
@@ -981,8 +997,8 @@ struct Renderer::Impl {
     }
     const double z = setup.render.disk_thickness;
     tr.disk_center_table = {st.disk_center.x, st.disk_center.y, z};
-    tr.marker_table = {st.disk_center.x + kMarkerOffset * disk_radius * std::cos(st.disk_angle),
-                       st.disk_center.y + kMarkerOffset * disk_radius * std::sin(st.disk_angle), z};
+    tr.marker_table = {st.disk_center.x + marker_offset * disk_radius * std::cos(st.disk_angle),
+                       st.disk_center.y + marker_offset * disk_radius * std::sin(st.disk_angle), z};
     const auto px = camera.project(std::vector<cv::Point3d>{tr.disk_center_table, tr.marker_table});
     tr.disk_center_px = px[0];
     tr.marker_px = px[1];

@@ -19,6 +19,7 @@
 
 #include <memory>
 #include <optional>
+#include <string>
 #include <vector>
 
 namespace flatland::model {
@@ -42,7 +43,8 @@ struct Model {
   std::vector<camera::PlacedBoard> boards;
 
   /// Tracked pixel -> table -> hand -> s_h, with the joint axis at the table origin (a synthetic
-  /// world's; a real one's comes from a camera file). Present with a camera and a disk.
+  /// world's; a real one's comes from a camera file). Present with a camera and an object the
+  /// tracker can follow (tracking_problem).
   std::optional<vision::HandMapping> mapping;
   /// The tracker, knowing the camera and the plane of the disk's top face.
   vision::TrackerConfig tracker;
@@ -72,9 +74,17 @@ render::RenderSetup render_setup(const Model& model);
 /// Renderer both draw a spatial scene through it.
 render::RenderSetup spatial_render_setup(const Scene& scene, const sim::SpatialSetup& setup);
 
-/// The pixel -> s_h mapping of a compiled scene's hand and disk seen by `camera` (the scene's, or
-/// a calibrated camera file's), the joint axis at `axis_table`. std::invalid_argument naming
-/// object.type unless the object is a disk.
+/// Why the tracker cannot follow this object, as "FIELD: reason", or nullopt when it can. The
+/// tracker's model is a solid disk's face seen whole: it follows a disk and a ball rolling on the
+/// hand's edge (drawn as its equatorial disk of radius R, which is then also its rolling radius);
+/// not a ring (its hole), a ball on rails (its part beyond the rolling radius reaches between the
+/// rails, behind the hand), nor an ellipse (no centre on an offset curve).
+std::optional<std::string> tracking_problem(const sim::ObjectSpec& object);
+
+/// The pixel -> s_h mapping of a compiled scene's hand and object seen by `camera` (the scene's,
+/// or a calibrated camera file's), the joint axis at `axis_table`; the centre's offset from the
+/// hand is the plant's rolling radius. std::invalid_argument naming the object's field
+/// (tracking_problem) unless the tracker can follow the object.
 vision::HandMapping hand_mapping(const Model& model, const camera::CameraModel& camera,
                                  cv::Point2d axis_table = {0, 0});
 

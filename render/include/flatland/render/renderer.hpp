@@ -59,8 +59,8 @@ struct Frame {
 };
 
 /// A spatial scene's bodies: the hand's surface over `hand_extent` of its chart (an infinite side
-/// cut at the chart's patch; the drawing is one-sided: seen from behind, a surface is not drawn) and
-/// the object's whole surface, its chart's cells in two colours so that its turning shows.
+/// cut at the chart's patch; the drawing is one-sided: seen from behind, a surface is not drawn)
+/// and the object's whole surface, its chart's cells in two colours so that its turning shows.
 struct SpatialBodies {
   sim::SurfacePtr hand, object;
   sim::SurfacePatch hand_extent;
@@ -72,8 +72,8 @@ struct RenderSetup {
   camera::CameraModel camera;
   std::shared_ptr<const sim::PolynomialHand> hand;  ///< the hand's outline (extruded)
   std::vector<camera::PlacedBoard> boards;          ///< calibration boards on the table
-  sim::ObjectSpec object;                           ///< a disk: its radius
-  RenderSpec render;                                ///< backend, thicknesses, table extent
+  sim::ObjectSpec object;  ///< a disk, ring (annulus) or ball (its equatorial disk): radii
+  RenderSpec render;       ///< backend, thicknesses, table extent
   EffectsSpec effects;
   /// A spatial scene: these bodies instead of the hand and the disk (no table); `hand` and
   /// `object` are then unused. Frames come from render_linear / render_8u with SceneState::spatial.
@@ -83,7 +83,7 @@ struct RenderSetup {
 class Renderer {
  public:
   /// Creates the GL context (backend from setup.render.backend unless `backend` is given).
-  /// Throws std::invalid_argument on values it cannot draw (an object that is not a disk, no
+  /// Throws std::invalid_argument on values it cannot draw (an ellipse, no
   /// hand) and std::runtime_error when no GL context can be made.
   explicit Renderer(const RenderSetup& setup, std::optional<GlBackend> backend = std::nullopt);
   ~Renderer();
