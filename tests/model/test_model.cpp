@@ -119,8 +119,29 @@ TEST(Model, AnEllipseHasNoDiskMapping) {
     model::hand_mapping(*m, *m->camera);
     ADD_FAILURE() << "a mapping for an ellipse";
   } catch (const std::invalid_argument& e) {
-    EXPECT_NE(std::string(e.what()).find("object: "), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("object.type: ellipse: "), std::string::npos) << e.what();
   }
+}
+
+// The mapping offsets a ball on rails' centre by its rolling radius; the tracker cannot follow it
+// (the hand hides its part beyond r), nor a ring (its hole): no mapping, one line naming the key.
+TEST(Model, MappingUsesTheRollingRadiusAndRefusesWhatTheTrackerCannotFollow) {
+  Scene scene = bundled("butterfly-camera.yaml");
+  scene.sim.object.kind = sim::ObjectSpec::Kind::kBall;
+  scene.sim.object.radius = 0.05;
+  const auto plain = model::compile(scene);
+  ASSERT_TRUE(plain->mapping);
+  EXPECT_EQ(plain->mapping->disk_radius, 0.05);
+  scene.sim.object.rail_gap = 0.06;  // rolling radius 0.04 (3-4-5)
+  const auto on_rails = model::compile(scene);
+  EXPECT_NEAR(*on_rails->plant->object.disk_radius, 0.04, 1e-15);
+  EXPECT_FALSE(on_rails->mapping);
+  EXPECT_EQ(model::tracking_problem(scene.sim.object)->rfind("object.rails: ", 0), 0u);
+  scene.sim.object.kind = sim::ObjectSpec::Kind::kRing;
+  scene.sim.object.rail_gap.reset();
+  scene.sim.object.inner_radius = 0.03;
+  EXPECT_FALSE(model::compile(scene)->mapping);
+  EXPECT_EQ(model::tracking_problem(scene.sim.object)->rfind("object.type: ring: ", 0), 0u);
 }
 
 TEST(Model, ARecompiledEditIsANewWorldAndTheOldOneStays) {
