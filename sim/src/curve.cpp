@@ -7,6 +7,7 @@
 #include <cmath>
 #include <limits>
 #include <numbers>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 
@@ -230,10 +231,71 @@ std::string where(double s, const Vec2& p) {
 }
 }  // namespace
 
-void validate_hand_for_disk(const PolynomialHand& hand, double disk_radius) {
+namespace {
+
+void check_disk_radius(double disk_radius) {
   if (!(disk_radius > 0) || !std::isfinite(disk_radius))
     throw std::invalid_argument("object.radius: must be positive and finite, got " +
                                 format_significant(disk_radius));
+}
+
+// One sample of the outline: no cusp (speed above `min_speed`) and, for a disk (radius > 0), no
+// concave part tighter than it.
+void check_outline_sample(const CurveGeometry& g, double s, double min_speed, double disk_radius) {
+  if (!(g.speed > min_speed))
+    throw std::invalid_argument("hand: outline has a cusp (zero parametric speed) " +
+                                where(s, g.point));
+  if (disk_radius > 0 && g.curvature < 0 && !(disk_radius * -g.curvature < 1.0))
+    throw std::invalid_argument("hand: concave part too tight for the disk (curvature radius " +
+                                format_significant(-1.0 / g.curvature) + " m <= disk radius " +
+                                format_significant(disk_radius) + " m) " + where(s, g.point));
+}
+
+// The first pair (in outline order) of crossing segments of the polyline through every
+// `stride`-th point (closed: the last joined to the first), or none. Only the segment pairs whose
+// x ranges overlap are tested (a sweep over the segments sorted by their left end: about 1 % of
+// all pairs on the paper's hand); the pair found is the first in outline order, as a test of every
+// pair would find.
+std::optional<std::pair<int, int>> first_crossing(const std::vector<Vec2>& pts, int stride,
+                                                  bool closed) {
+  const int points = static_cast<int>(pts.size());
+  const int segments = closed ? points / stride : (points - 1) / stride;
+  auto end_of = [&](int k) { return pts[static_cast<std::size_t>(((k + 1) * stride) % points)]; };
+  auto start_of = [&](int k) { return pts[static_cast<std::size_t>(k * stride)]; };
+  std::vector<double> x_lo(segments), x_hi(segments);
+  std::vector<int> by_left(segments);
+  for (int k = 0; k < segments; ++k) {
+    x_lo[k] = std::min(start_of(k).x(), end_of(k).x());
+    x_hi[k] = std::max(start_of(k).x(), end_of(k).x());
+    by_left[k] = k;
+  }
+  std::sort(by_left.begin(), by_left.end(), [&](int a, int b) { return x_lo[a] < x_lo[b]; });
+  std::pair<int, int> first{segments, segments};
+  for (int p = 0; p < segments; ++p) {
+    const int a = by_left[p];
+    for (int q = p + 1; q < segments && x_lo[by_left[q]] <= x_hi[a]; ++q) {
+      const int i = std::min(a, by_left[q]), j = std::max(a, by_left[q]);
+      if (j - i < 2 || (closed && i == 0 && j == segments - 1)) continue;  // neighbours
+      if (segments_intersect(start_of(i), end_of(i), start_of(j), end_of(j)))
+        first = std::min(first, {i, j});
+    }
+  }
+  if (first.first == segments) return std::nullopt;
+  return std::pair{first.first * stride, first.second * stride};
+}
+
+void check_wells(const HandCurve& hand, int piece_at_wells) {
+  for (double s : {-1.0, 1.0}) {
+    const CurveGeometry g =
+        hand.geometry(s, piece_at_wells < 0 ? hand.piece_at(s, +1) : piece_at_wells);
+    if (!(g.curvature < 0))
+      throw std::invalid_argument(std::string("hand: no well at the ") + (s < 0 ? "palm" : "back") +
+                                  " (the outline must be concave there, curvature " +
+                                  format_significant(g.curvature) + " 1/m) " + where(s, g.point));
+  }
+}
+
+void validate_polynomial_hand(const PolynomialHand& hand, double disk_radius) {
   if (!(hand.a() > 0))
     throw std::invalid_argument("hand.a: the tip x(0) = a must be positive, got " +
                                 format_significant(hand.a()));
@@ -252,50 +314,52 @@ void validate_hand_for_disk(const PolynomialHand& hand, double disk_radius) {
       throw std::invalid_argument(
           "hand: outline self-intersects (right half reaches its mirror image, x <= 0) " +
           where(s, g.point));
-    if (g.curvature < 0 && !(disk_radius * -g.curvature < 1.0))
-      throw std::invalid_argument("hand: concave part too tight for the disk (curvature radius " +
-                                  format_significant(-1.0 / g.curvature) + " m <= disk radius " +
-                                  format_significant(disk_radius) + " m) " + where(s, g.point));
+    check_outline_sample(g, s, 1e-9 * std::abs(hand.a()), disk_radius);
   }
-  // Self-intersection of the right half on a coarser polyline. Every scene load, command and
-  // shape-search candidate validates, so only the segment pairs whose x ranges overlap are
-  // tested (a sweep over the segments sorted by their left end: about 1 % of all pairs on the
-  // paper's hand); the pair reported is the first in outline order, as a test of every pair
-  // would find.
-  constexpr int kStride = 4;
-  constexpr int kSegments = kSamples / kStride;
-  std::array<double, kSegments> x_lo{}, x_hi{};
-  std::array<int, kSegments> by_left{};
-  for (int k = 0; k < kSegments; ++k) {
-    x_lo[k] = std::min(pts[k * kStride].x(), pts[(k + 1) * kStride].x());
-    x_hi[k] = std::max(pts[k * kStride].x(), pts[(k + 1) * kStride].x());
-    by_left[k] = k;
-  }
-  std::sort(by_left.begin(), by_left.end(), [&](int a, int b) { return x_lo[a] < x_lo[b]; });
-  std::pair<int, int> first{kSegments, kSegments};
-  for (int p = 0; p < kSegments; ++p) {
-    const int a = by_left[p];
-    for (int q = p + 1; q < kSegments && x_lo[by_left[q]] <= x_hi[a]; ++q) {
-      const int i = std::min(a, by_left[q]), j = std::max(a, by_left[q]);
-      if (j - i < 2) continue;  // neighbours share an end point
-      if (segments_intersect(pts[i * kStride], pts[(i + 1) * kStride], pts[j * kStride],
-                             pts[(j + 1) * kStride]))
-        first = std::min(first, {i, j});
-    }
-  }
-  if (first.first < kSegments) {
-    const int i = first.first * kStride, j = first.second * kStride;
+  // Self-intersection of the right half on a coarser polyline.
+  if (const auto crossing = first_crossing(pts, 4, false)) {
+    const auto [i, j] = *crossing;
     throw std::invalid_argument("hand: outline self-intersects between " +
                                 where(-1.0 + 2.0 * i / kSamples, pts[i]) + " and " +
                                 where(-1.0 + 2.0 * j / kSamples, pts[j]));
   }
-  for (double s : {-1.0, 1.0}) {
-    const CurveGeometry g = hand.geometry(s, 0);
-    if (!(g.curvature < 0))
-      throw std::invalid_argument(std::string("hand: no well at the ") + (s < 0 ? "palm" : "back") +
-                                  " (the outline must be concave there, curvature " +
-                                  format_significant(g.curvature) + " 1/m) " + where(s, g.point));
+  check_wells(hand, 0);
+}
+
+// Any other closed outline, over its whole period from s = -1; a disk radius of 0 skips the
+// disk's checks.
+void validate_closed_outline(const HandCurve& hand, double disk_radius) {
+  const double period = hand.period();
+  if (!std::isfinite(period) || !(period > 0))
+    throw std::invalid_argument("hand: " + hand.describe() +
+                                " is not a closed outline (its checks need a finite period)");
+  constexpr int kSamples = 4000;
+  const double min_speed = 1e-9 * hand.reach();
+  std::vector<Vec2> pts(kSamples);
+  for (int i = 0; i < kSamples; ++i) {
+    const double s = -1.0 + period * i / kSamples;
+    const CurveGeometry g = hand.geometry(s);
+    pts[i] = g.point;
+    check_outline_sample(g, s, min_speed, disk_radius);
+  }
+  if (const auto crossing = first_crossing(pts, 1, true)) {
+    const auto [i, j] = *crossing;
+    throw std::invalid_argument("hand: outline self-intersects between " +
+                                where(-1.0 + period * i / kSamples, pts[i]) + " and " +
+                                where(-1.0 + period * j / kSamples, pts[j]));
   }
 }
+
+}  // namespace
+
+void validate_hand_for_disk(const HandCurve& hand, double disk_radius) {
+  check_disk_radius(disk_radius);
+  if (const auto* polynomial = dynamic_cast<const PolynomialHand*>(&hand))
+    return validate_polynomial_hand(*polynomial, disk_radius);
+  validate_closed_outline(hand, disk_radius);
+  if (hand.has_palm_and_back()) check_wells(hand, -1);
+}
+
+void validate_hand_outline(const HandCurve& hand) { validate_closed_outline(hand, 0.0); }
 
 }  // namespace flatland::sim

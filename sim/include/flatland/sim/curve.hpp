@@ -200,6 +200,12 @@ class EllipseCurve final : public Curve {
 /// the outline does not self-intersect, the palm (s = -1) and back (s = +1) are wells (concave),
 /// and every concave part has curvature radius larger than the disk radius (r * |kappa| < 1).
 /// Throws std::invalid_argument naming the failing condition and where (s and the point, in m).
-void validate_hand_for_disk(const PolynomialHand& hand, double disk_radius);
+/// The polynomial hand is checked on its right half (the left is its mirror) and its tip `hand.a`
+/// too; any other hand on its whole closed outline (a finite period()), the wells only where it
+/// has_palm_and_back().
+void validate_hand_for_disk(const HandCurve& hand, double disk_radius);
+/// The checks of a closed outline that need no object: no cusp (zero parametric speed) and no
+/// self-intersection, on the whole period. Throws std::invalid_argument "hand: ..." as above.
+void validate_hand_outline(const HandCurve& hand);
 
 }  // namespace flatland::sim
