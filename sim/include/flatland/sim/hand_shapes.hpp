@@ -111,7 +111,7 @@ class PointsHand final : public HandCurve {
  public:
   /// Use make_points_hand.
   PointsHand(std::vector<double> knots, std::vector<std::array<double, 12>> spans,
-             HandFitReport fit, std::string source, bool closed);
+             std::array<double, 5> anchors, HandFitReport fit, std::string source, bool closed);
 
   const HandFitReport& fit() const { return fit_; }
   bool closed() const { return closed_; }
@@ -130,9 +130,12 @@ class PointsHand final : public HandCurve {
   bool has_palm_and_back() const override { return true; }
 
  private:
-  std::vector<double> knots_;                  ///< span starts over [-1, 3), then 3
+  std::vector<double> knots_;  ///< span starts (chord length from the palm), then the period
   std::vector<std::array<double, 12>> spans_;  ///< per span: x, y Taylor coefficients 0..5
   std::vector<int> lookup_;                    ///< first span of each of the equal cells
+  /// The chord-length parameters of palm, tip, back, other tip, palm + period: s = -1 .. 3.
+  std::array<double, 5> anchors_;
+  double shortest_arc_;  ///< the shortest of the four arcs between them
   HandFitReport fit_;
   std::string source_;
   bool closed_;
@@ -164,6 +167,7 @@ class PolarHand final : public HandCurve {
   PolarHandSpec spec_;
   std::vector<double> knots_;                 ///< kTable: span starts over [0, 2 pi), then 2 pi
   std::vector<std::array<double, 6>> spans_;  ///< kTable: r's Taylor coefficients per span
+  std::vector<int> lookup_;                   ///< kTable: first span of each of the equal cells
   std::vector<Vec2> outline_;
   double reach_ = 0;
 };
