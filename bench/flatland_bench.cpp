@@ -1,6 +1,7 @@
 // Speed (and cost-versus-accuracy) of the simulator and the design search, on the paper's
 // butterfly: sim::SimulationSpec's defaults (2T = 1.181 s, k = -1.1393, disk r = 5.1 cm, g = 9.8).
 // Results and how to rerun: docs/BENCHMARKS.md.
+#include "flatland/sim/hand_shapes.hpp"
 #include "flatland/sim/rolling.hpp"
 #include "flatland/sim/search.hpp"
 #include "flatland/sim/simulate.hpp"
@@ -11,6 +12,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <random>
 #include <string>
 
 namespace sim = flatland::sim;
@@ -87,6 +89,72 @@ void Rhs(benchmark::State& state) {
     benchmark::DoNotOptimize(dy);
     benchmark::ClobberMemory();
   }
+}
+
+// The hands compared (issue 26): the paper's polynomial, and the same hand given as 200 points
+// of its right half (the points hand: a periodic quintic spline, sim/hand_shapes.hpp).
+enum class HandKind { kPolynomial, kPoints };
+
+sim::CurvePtr bench_hand(HandKind kind) {
+  const sim::HandSpec h;
+  const sim::PolynomialHand poly(h.a, h.b, h.c, h.d);
+  if (kind == HandKind::kPolynomial) return std::make_shared<sim::PolynomialHand>(poly);
+  sim::PointsHandSpec spec;
+  for (int i = 0; i < 200; ++i) spec.points.push_back(poly.jet(-1.0 + 2.0 * i / 199, 0).c);
+  return sim::make_points_hand(spec);
+}
+
+// The hand's geometry (the jet and everything derived from it) at random s over the outline.
+void HandGeometry(benchmark::State& state, HandKind kind) {
+  const sim::CurvePtr hand = bench_hand(kind);
+  std::mt19937 rng(1);
+  std::uniform_real_distribution<double> uniform(-1.0, 3.0);
+  std::vector<double> s(1024);
+  for (double& v : s) v = uniform(rng);
+  std::size_t i = 0;
+  for (auto _ : state) {
+    const double at = s[i++ & 1023];
+    sim::CurveGeometry g = hand->geometry(at, hand->piece_at(at, +1));
+    benchmark::DoNotOptimize(g);
+  }
+}
+
+// The reduced formulation's right-hand side at a mid-roll state (as BM_Rhs) on either hand.
+void HandRhs(benchmark::State& state, HandKind kind) {
+  const sim::SimulationSpec spec;
+  auto problem = std::make_shared<sim::RollingProblem>(*sim::build_problem(spec));
+  problem->hand = bench_hand(kind);
+  const sim::ReducedDiskRolling model(problem);
+  sim::InitialContact init;
+  init.t0 = 0.3;
+  init.s_h = -0.5;
+  init.sdot_h = 1.0;
+  sim::ReducedDiskRolling::State y = model.initial_state(init), dy;
+  sim::Pieces pieces = model.pieces_for(y, +1);
+  pieces.motion = 1;
+  for (auto _ : state) {
+    model.derivative(init.t0, y, pieces, dy);
+    benchmark::DoNotOptimize(dy);
+    benchmark::ClobberMemory();
+  }
+}
+
+// One full 2T butterfly run (reduced, rtol 1e-10, unrecorded) on either hand.
+void HandButterflyRun(benchmark::State& state, HandKind kind) {
+  sim::SimulationSpec spec = with_tolerance(1e-10, 1e-12);
+  spec.run.formulation = sim::Formulation::kReduced;
+  spec.run.record = false;
+  auto problem = std::make_shared<sim::RollingProblem>(*sim::build_problem(spec));
+  problem->hand = bench_hand(kind);
+  const sim::RunOptions options = sim::run_options(spec);
+  sim::RunResult result;
+  for (auto _ : state) {
+    result = sim::simulate(problem, spec.initial, options);
+    benchmark::DoNotOptimize(result);
+  }
+  state.counters["steps"] = benchmark::Counter(static_cast<double>(result.stats.steps));
+  state.counters["rhs_evals"] = benchmark::Counter(static_cast<double>(result.stats.rhs_evals));
+  state.counters["restarts"] = benchmark::Counter(result.stats.restarts);
 }
 
 // Solve k for 2T = 1.181 s to a bracket of 1e-6 (the acceptance target: <= 2 ms).
@@ -252,6 +320,15 @@ void register_all() {
   }
   benchmark::RegisterBenchmark("BM_Rhs/general", Rhs<sim::GeneralRolling>);
   benchmark::RegisterBenchmark("BM_Rhs/reduced", Rhs<sim::ReducedDiskRolling>);
+  for (const auto& [kind, name] :
+       {std::pair{HandKind::kPolynomial, "polynomial"}, {HandKind::kPoints, "points"}}) {
+    benchmark::RegisterBenchmark((std::string("BM_HandGeometry/") + name).c_str(), HandGeometry,
+                                 kind);
+    benchmark::RegisterBenchmark((std::string("BM_HandRhs/") + name).c_str(), HandRhs, kind);
+    benchmark::RegisterBenchmark((std::string("BM_HandButterflyRun/") + name).c_str(),
+                                 HandButterflyRun, kind)
+        ->Unit(benchmark::kMillisecond);
+  }
   benchmark::RegisterBenchmark("BM_Solve/rtol:1e-07", Solve, 1e-7, 1e-9)
       ->Unit(benchmark::kMillisecond);
   benchmark::RegisterBenchmark("BM_Solve/rtol:1e-10", Solve, 1e-10, 1e-12)
