@@ -14,6 +14,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 #include <numbers>
 #include <random>
 #include <stdexcept>
@@ -91,12 +92,19 @@ TEST(PointsHand, InterpolatesThePaperHandAndKeepsItsConvention) {
     worst = std::max(worst,
                      (poly.jet(poly.nearest(p), poly.piece_at(poly.nearest(p), +1)).c - p).norm());
   }
-  EXPECT_LT(worst, 1e-8);
-  // The convention: palm, tip, back and the mirrored tip where the polynomial has them.
+  EXPECT_LT(worst, 1e-7);  // 3.4e-8 m, near the junctions; O(h^3)
+  // The convention: palm, tip, back and the mirrored tip where the polynomial has them. At the tips
+  // the curvature converges as h^4 (7e-9 relative here). At the palm and the back the paper's
+  // outline has a jump in dkappa/ds (its mirror junctions), which the C4 spline through the
+  // mirrored points smooths over a few point spacings: its curvature there is off by O(h), 1.9 %
+  // with 200 points (7.9 % with 50, 0.94 % with 400, 0.47 % with 800); k* does not notice
+  // (PaperHandAsPointsHasThePolynomialsKStar).
   for (double s : {-1.0, 0.0, 1.0, 2.0}) {
     const CurveGeometry g = hand->geometry(s), gp = poly.geometry(s);
+    const bool junction = std::abs(s) == 1.0;
     EXPECT_NEAR((g.point - gp.point).norm(), 0.0, 1e-10) << "s=" << s;
-    EXPECT_NEAR(g.curvature, gp.curvature, 1e-5 * std::abs(gp.curvature)) << "s=" << s;
+    EXPECT_NEAR(g.curvature, gp.curvature, (junction ? 0.025 : 1e-7) * std::abs(gp.curvature))
+        << "s=" << s;
     EXPECT_NEAR((g.normal - gp.normal).norm(), 0.0, 1e-9) << "s=" << s;
   }
   EXPECT_EQ(hand->period(), 4.0);
@@ -121,7 +129,10 @@ TEST(PointsHand, ClosedOutlineInEitherOrientationFindsPalmAndBack) {
   // somewhere on the left half: the palm and back are found where it crosses x = 0.
   const PolynomialHand poly = paper_hand();
   std::vector<Vec2> loop;
-  for (int i = 0; i < 300; ++i) loop.push_back(poly.jet(2.6 - 4.0 * i / 300, 0).c);
+  for (int i = 0; i < 300; ++i) {
+    const double s = 2.6 - 4.0 * i / 300;
+    loop.push_back(poly.jet(s, poly.piece_at(s, +1)).c);
+  }
   PointsHandSpec spec;
   spec.points = loop;
   spec.closed = true;
@@ -129,7 +140,11 @@ TEST(PointsHand, ClosedOutlineInEitherOrientationFindsPalmAndBack) {
   for (double s : {-1.0, 0.0, 1.0, 2.0}) {
     const CurveGeometry g = hand->geometry(s), gp = poly.geometry(s);
     EXPECT_NEAR((g.point - gp.point).norm(), 0.0, 1e-10) << "s=" << s;
-    EXPECT_NEAR(g.curvature, gp.curvature, 1e-4 * std::abs(gp.curvature)) << "s=" << s;
+    // As for the open outline, the junctions' jump in dkappa/ds is smoothed: O(h), 2.5 % with 150
+    // points a half.
+    EXPECT_NEAR(g.curvature, gp.curvature,
+                (std::abs(s) == 1.0 ? 0.035 : 1e-6) * std::abs(gp.curvature))
+        << "s=" << s;
   }
   // Stated by index instead: the same curve. s_i = 2.6 - 4 i / 300, so the palm (s = -1) is
   // point 270 and the back (s = +1) point 120.
