@@ -133,18 +133,29 @@ std::array<double, 4> taylor_jet(const double* c, double h) {
 /// The integral of the bump 2772 x^5 (1 - x)^5 (of unit integral over [0, 1], its derivatives to
 /// the 4th zero at both ends) from 0 to x, and its first three derivatives (the bump, its first
 /// and second derivatives).
+/// Coefficients of 2772 x^5 (1 - x)^5 = sum_j c_j x^(5 + j), j = 0 .. 5, divided by `divisor(j)`.
+template <class Divisor>
+constexpr std::array<double, 6> bump_coefficients(Divisor divisor) {
+  constexpr double kBinomial[6] = {1, 5, 10, 10, 5, 1};
+  std::array<double, 6> c{};
+  for (int j = 0; j <= 5; ++j) c[j] = (j % 2 ? -2772.0 : 2772.0) * kBinomial[j] / divisor(j);
+  return c;
+}
+
 std::array<double, 4> unit_bump(double x) {
-  static constexpr double kBinomial[6] = {1, 5, 10, 10, 5, 1};
-  std::array<double, 4> b{0, 0, 0, 0};
-  double power = x * x * x;  // x^(3 + j)
-  for (int j = 0; j <= 5; ++j, power *= x) {
-    const double c = (j % 2 ? -2772.0 : 2772.0) * kBinomial[j];
-    b[3] += c * (5 + j) * (4 + j) * power;
-    b[2] += c * (5 + j) * power * x;
-    b[1] += c * power * x * x;
-    b[0] += c * power * x * x * x / (6 + j);
-  }
-  return b;
+  // Each of the four is x^p times a quintic in x, by Horner's rule on coefficients fixed at
+  // compile time (this runs in every evaluation of the hand's jet).
+  static constexpr auto kIntegral = bump_coefficients([](int j) { return 6.0 + j; });
+  static constexpr auto kBump = bump_coefficients([](int) { return 1.0; });
+  static constexpr auto kSlope = bump_coefficients([](int j) { return 1.0 / (5.0 + j); });
+  static constexpr auto kCurve =
+      bump_coefficients([](int j) { return 1.0 / ((5.0 + j) * (4.0 + j)); });
+  auto quintic = [x](const std::array<double, 6>& c) {
+    return ((((c[5] * x + c[4]) * x + c[3]) * x + c[2]) * x + c[1]) * x + c[0];
+  };
+  const double x2 = x * x, x3 = x2 * x, x4 = x2 * x2;
+  return {quintic(kIntegral) * x4 * x2, quintic(kBump) * x4 * x, quintic(kSlope) * x4,
+          quintic(kCurve) * x3};
 }
 
 /// Equal cells over [knots.front(), knots.back()), each holding the index of the span its start
