@@ -15,10 +15,11 @@ set(FLATLAND_LAYERS
   "vision:camera,sim"
   "calibration:vision,camera,sim"
   "control:sim"
+  "identify:sim"
   "drivers:control,vision,render,calibration,model,scene,camera,sim,files"
   "studies:drivers,control,vision,render,calibration,model,scene,camera,sim,files")
 # Modules whose headers must not include flatland/scene, flatland/model or flatland/render.
-set(FLATLAND_BELOW_MODEL files sim camera vision calibration control)
+set(FLATLAND_BELOW_MODEL files sim camera vision calibration control identify)
 # Modules that read the scene's sections but sit below the compiled Model: no flatland/model.
 set(FLATLAND_BELOW_MODEL_WITH_SCENE render api)
 

@@ -51,6 +51,8 @@
 #include "flatland/calibration/report.hpp"
 #include "flatland/calibration/session.hpp"
 
+#include "flatland/identify/identify.hpp"
+
 #include "flatland/control/choice.hpp"
 #include "flatland/control/controller.hpp"
 #include "flatland/control/estimator.hpp"
