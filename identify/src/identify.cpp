@@ -1,17 +1,278 @@
-// identify() and validate(): the multiple-shooting fit (docs/IDENTIFY.md, "Method").
+// identify(): the multiple-shooting least squares on Ceres, its covariance and the refusal of
+// what the data do not determine (docs/IDENTIFY.md, "Method").
 #include "flatland/identify/identify.hpp"
 
+#include "covariance.hpp"
+#include "shooting.hpp"
+
+#include "flatland/sim/format.hpp"
+
+#include <ceres/ceres.h>
+
+#include <chrono>
+#include <cmath>
+#include <memory>
 #include <stdexcept>
+#include <thread>
 
 namespace flatland::identify {
+namespace {
 
-IdentifyResult identify(const sim::SimulationSpec&, const std::vector<Recording>&,
-                        const IdentifyOptions&) {
-  throw std::logic_error("identify: not built yet");
+using detail::Segment;
+using detail::SegmentOutput;
+using detail::ShootingProblem;
+
+/// The difference step of a parameter of size x whose typical size is `typical`: relative
+/// kDifferenceStep. docs/IDENTIFY.md, "Derivatives", says how it was chosen against the
+/// integrator's tolerance.
+constexpr double kDifferenceStep = 1e-5;
+/// The same for a segment's initial s_h (dimensionless) and sdot_h (1/s).
+constexpr double kStateStepS = 1e-6, kStateStepSdot = 1e-5;
+
+/// One segment's residuals: its samples' (s_h_sim - s_h_meas) / sigma and, unless it is the
+/// last of its recording, the continuity of (s_h, sdot_h) with the next segment's initial state.
+/// Parameter blocks: the segment's state (2), the world (if any unknown), the next state (2, if
+/// any). Derivatives by central differences (one-sided at a bound), the next state's exactly.
+class SegmentCost final : public ceres::CostFunction {
+ public:
+  SegmentCost(const ShootingProblem& problem, std::size_t k) : problem_(problem), k_(k) {
+    const Segment& s = problem.segments()[k];
+    samples_ = static_cast<int>(s.end - s.first);
+    set_num_residuals(samples_ + (s.has_next ? 2 : 0));
+    mutable_parameter_block_sizes()->push_back(2);
+    worlds_ = static_cast<int>(problem.unknowns().size());
+    if (worlds_ > 0) mutable_parameter_block_sizes()->push_back(worlds_);
+    if (s.has_next) mutable_parameter_block_sizes()->push_back(2);
+  }
+
+  bool Evaluate(double const* const* parameters, double* residuals,
+                double** jacobians) const override {
+    const double* state = parameters[0];
+    const double* world = worlds_ > 0 ? parameters[1] : nullptr;
+    const double* next =
+        problem_.segments()[k_].has_next ? parameters[worlds_ > 0 ? 2 : 1] : nullptr;
+    if (!residuals_at(state[0], state[1], world, next, residuals)) return false;
+    if (!jacobians) return true;
+    const int n = num_residuals();
+    if (jacobians[0] && !state_jacobian(state, world, next, jacobians[0])) return false;
+    if (worlds_ > 0 && jacobians[1] && !world_jacobian(state, world, next, jacobians[1]))
+      return false;
+    if (next) {
+      double* J = jacobians[worlds_ > 0 ? 2 : 1];
+      if (J) {
+        std::fill(J, J + 2 * n, 0.0);
+        const std::size_t r = problem_.segments()[k_].recording;
+        J[(samples_)*2 + 0] = -1.0 / problem_.continuity_scale_s(r);
+        J[(samples_ + 1) * 2 + 1] = -1.0 / problem_.continuity_scale_sdot(r);
+      }
+    }
+    return true;
+  }
+
+ private:
+  bool residuals_at(double s, double sdot, const double* world, const double* next,
+                    double* out) const {
+    SegmentOutput o;
+    if (!problem_.simulate(k_, s, sdot, world, o)) return false;
+    const Segment& seg = problem_.segments()[k_];
+    const Recording& rec = problem_.recordings()[seg.recording];
+    for (int i = 0; i < samples_; ++i) {
+      const std::size_t j = seg.first + static_cast<std::size_t>(i);
+      out[i] = problem_.s_difference(o.s_h[static_cast<std::size_t>(i)], rec.s_h[j]) / rec.sigma[j];
+    }
+    if (next) {
+      out[samples_] =
+          problem_.s_difference(o.s_end, next[0]) / problem_.continuity_scale_s(seg.recording);
+      out[samples_ + 1] = (o.sdot_end - next[1]) / problem_.continuity_scale_sdot(seg.recording);
+    }
+    return true;
+  }
+
+  /// Column `col` of a row-major n x cols Jacobian from the residuals at +h and -h (or one side).
+  void store_column(const std::vector<double>& plus, const std::vector<double>& minus, double step,
+                    int col, int cols, double* J) const {
+    for (int i = 0; i < num_residuals(); ++i)
+      J[i * cols + col] =
+          (plus[static_cast<std::size_t>(i)] - minus[static_cast<std::size_t>(i)]) / step;
+  }
+
+  bool state_jacobian(const double* state, const double* world, const double* next,
+                      double* J) const {
+    const std::size_t n = static_cast<std::size_t>(num_residuals());
+    std::vector<double> plus(n), minus(n);
+    const double steps[2] = {kStateStepS, kStateStepSdot};
+    for (int c = 0; c < 2; ++c) {
+      double x[2] = {state[0], state[1]};
+      x[c] = state[c] + steps[c];
+      if (!residuals_at(x[0], x[1], world, next, plus.data())) return false;
+      x[c] = state[c] - steps[c];
+      if (!residuals_at(x[0], x[1], world, next, minus.data())) return false;
+      store_column(plus, minus, 2 * steps[c], c, 2, J);
+    }
+    return true;
+  }
+
+  bool world_jacobian(const double* state, const double* world, const double* next,
+                      double* J) const {
+    const std::size_t n = static_cast<std::size_t>(num_residuals());
+    std::vector<double> plus(n), minus(n), w(world, world + worlds_);
+    for (int c = 0; c < worlds_; ++c) {
+      const detail::Unknown& u = problem_.unknowns()[static_cast<std::size_t>(c)];
+      const double h = kDifferenceStep * std::max(std::abs(world[c]), u.typical);
+      // Central inside the bounds, one-sided where a side would leave them (a negative drag or
+      // a restitution above 1 is no world the simulator accepts).
+      const double hi = std::min(world[c] + h, u.bounds.upper);
+      const double lo = std::max(world[c] - h, u.bounds.lower);
+      w[static_cast<std::size_t>(c)] = hi;
+      if (!residuals_at(state[0], state[1], w.data(), next, plus.data())) return false;
+      w[static_cast<std::size_t>(c)] = lo;
+      if (!residuals_at(state[0], state[1], w.data(), next, minus.data())) return false;
+      w[static_cast<std::size_t>(c)] = world[c];
+      store_column(plus, minus, hi - lo, c, worlds_, J);
+    }
+    return true;
+  }
+
+  const ShootingProblem& problem_;
+  std::size_t k_;
+  int samples_ = 0, worlds_ = 0;
+};
+
+/// Reports each iteration to the caller's progress function.
+class ProgressCallback final : public ceres::IterationCallback {
+ public:
+  ProgressCallback(const IdentifyOptions& options, const ShootingProblem& problem,
+                   std::chrono::steady_clock::time_point start)
+      : options_(options), problem_(problem), start_(start) {}
+  ceres::CallbackReturnType operator()(const ceres::IterationSummary& summary) override {
+    Progress p;
+    p.iteration = summary.iteration;
+    p.cost = summary.cost;
+    p.simulations = problem_.simulations();
+    p.wall_time = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+    options_.progress(p);
+    return ceres::SOLVER_CONTINUE;
+  }
+
+ private:
+  const IdentifyOptions& options_;
+  const ShootingProblem& problem_;
+  std::chrono::steady_clock::time_point start_;
+};
+
+/// The world spec with the fitted values in place.
+sim::SimulationSpec fitted_world(const sim::SimulationSpec& world, const detail::WorldValues& v) {
+  sim::SimulationSpec out = world;
+  out.contact = v.law;
+  out.tilt = v.tilt;
+  return out;
 }
 
-PredictionCheck validate(const sim::SimulationSpec&, const Recording&, const ValidateOptions&) {
-  throw std::logic_error("identify::validate: not built yet");
+int hardware_threads() {
+  return std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+}
+
+}  // namespace
+
+namespace detail {
+
+IdentifyResult solve(const ShootingProblem& problem, const sim::SimulationSpec& world,
+                     const IdentifyOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  const std::size_t K = problem.unknowns().size();
+  std::vector<double> w(K);
+  for (std::size_t j = 0; j < K; ++j) w[j] = problem.unknowns()[j].initial;
+  std::vector<std::array<double, 2>> states(problem.segments().size());
+  for (std::size_t k = 0; k < states.size(); ++k)
+    states[k] = {problem.segments()[k].guess_s, problem.segments()[k].guess_sdot};
+  // The starting point must simulate: its failure is the user's world or data, said once.
+  for (std::size_t k = 0; k < states.size(); ++k) {
+    SegmentOutput o;
+    std::string why;
+    if (!problem.simulate(k, states[k][0], states[k][1], w.data(), o, &why))
+      throw std::runtime_error("identify: at the starting values, " + why);
+  }
+
+  ceres::Problem::Options problem_options;
+  problem_options.cost_function_ownership = ceres::TAKE_OWNERSHIP;
+  ceres::Problem cp(problem_options);
+  for (std::size_t k = 0; k < states.size(); ++k) {
+    std::vector<double*> blocks{states[k].data()};
+    if (K > 0) blocks.push_back(w.data());
+    if (problem.segments()[k].has_next) blocks.push_back(states[k + 1].data());
+    cp.AddResidualBlock(new SegmentCost(problem, k), nullptr, blocks);
+  }
+  if (K > 0) {
+    for (std::size_t j = 0; j < K; ++j) {
+      cp.SetParameterLowerBound(w.data(), static_cast<int>(j), problem.unknowns()[j].bounds.lower);
+      cp.SetParameterUpperBound(w.data(), static_cast<int>(j), problem.unknowns()[j].bounds.upper);
+    }
+  }
+  ceres::Solver::Options so;
+  so.linear_solver_type = ceres::DENSE_QR;
+  so.max_num_iterations = options.max_iterations;
+  so.num_threads = options.threads > 0 ? options.threads : hardware_threads();
+  // A relative change of the cost below 1e-6 moves chi^2 by far less than the 1 that a one-sigma
+  // change of a parameter makes; the events make the last digits of the cost ragged anyway.
+  so.function_tolerance = 1e-6;
+  so.gradient_tolerance = 1e-12;
+  so.parameter_tolerance = 1e-10;
+  so.logging_type = ceres::SILENT;
+  std::unique_ptr<ProgressCallback> callback;
+  if (options.progress) {
+    callback = std::make_unique<ProgressCallback>(options, problem, start);
+    so.callbacks.push_back(callback.get());
+  }
+  // First the segments' states with the world held at its starting values: the guesses from the
+  // data leave large gaps at the boundaries, and closing them while the world moves too sent the
+  // world far off (into another minimum) in trials; then everything together.
+  ceres::Solver::Summary summary;
+  int iterations = 0;
+  if (K > 0) {
+    cp.SetParameterBlockConstant(w.data());
+    ceres::Solve(so, &cp, &summary);
+    iterations += static_cast<int>(summary.iterations.size()) - 1;
+    cp.SetParameterBlockVariable(w.data());
+  }
+  ceres::Solve(so, &cp, &summary);
+  iterations += static_cast<int>(summary.iterations.size()) - 1;
+
+  IdentifyResult result;
+  result.iterations = iterations;
+  result.converged = summary.termination_type == ceres::CONVERGENCE;
+  result.termination = summary.message;
+  detail::report_fit(problem, cp, w, states, options, result);
+  for (std::size_t k = 0; k < states.size(); ++k) {
+    const Segment& seg = problem.segments()[k];
+    SegmentOutput o;
+    if (!seg.has_next || !problem.simulate(k, states[k][0], states[k][1], w.data(), o)) continue;
+    if (o.end_mode == sim::ContactMode::kFlight || o.end_mode == sim::ContactMode::kSliding)
+      result.warnings.push_back(problem.recordings()[seg.recording].name +
+                                ": at t = " + sim::format_number(seg.t_end) +
+                                " s the fitted run is in " + sim::to_string(o.end_mode) +
+                                " where a segment starts rolling: choose another segment_duration");
+  }
+  const detail::WorldValues v = problem.values(w.data());
+  result.world = fitted_world(world, v);
+  result.angle_offset = v.angle_offset;
+  result.time_offset = v.time_offset;
+  result.simulations = problem.simulations();
+  result.simulation_time = problem.simulation_time();
+  result.wall_time =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return result;
+}
+
+}  // namespace detail
+
+IdentifyResult identify(const sim::SimulationSpec& world, const std::vector<Recording>& recordings,
+                        const IdentifyOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  const ShootingProblem problem(world, recordings, options);
+  IdentifyResult result = detail::solve(problem, world, options);
+  result.wall_time =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return result;
 }
 
 }  // namespace flatland::identify

@@ -93,6 +93,8 @@ struct IdentifyOptions {
   /// Starting values that replace the world's, by parameter name (inside the bounds).
   std::map<std::string, double> initial;
   int max_iterations = 50;
+  /// Threads evaluating segments at once; 0: as many as the machine has.
+  int threads = 0;
   /// A parameter whose sigma exceeds this fraction of its bounds' width (or of |value| where
   /// that is larger) is reported as not determined.
   double max_relative_sigma = 0.5;
@@ -148,8 +150,15 @@ struct IdentifyResult {
   double simulation_time = 0;  ///< s of wall time spent inside the simulator
   bool converged = false;
   std::string termination;  ///< Ceres' message
-  /// The world with the fitted values in place (determined or not).
+  /// What the caller should know about the fit's validity, one line each: a segment boundary
+  /// where the fitted run is in flight or sliding (a segment starts rolling, so the continuity
+  /// there is not the whole state: choose another segment_duration).
+  std::vector<std::string> warnings;
+  /// The world with the fitted values in place (determined or not): contact law and tilt.
   sim::SimulationSpec world;
+  /// The fitted (or, when not among the unknowns, the starting) hand angle offset (rad) and
+  /// camera-to-joint time offset (s), which a SimulationSpec does not hold: for validate().
+  double angle_offset = 0, time_offset = 0;
 };
 
 /// Fit opts.unknowns of `world` (its hand, object, gravity, contact and integrator; its motion
@@ -169,12 +178,17 @@ struct PredictionCheck {
   double rms_error = 0, max_abs_error = 0;
   /// s: the first time the error exceeds 3 sigma, measured from the start (absent: never).
   std::optional<double> time_to_3_sigma;
+  /// Why the prediction ended before the recording did (the disk dropped, ...); empty when the
+  /// whole recording was predicted.
+  std::string stopped;
 };
 
 struct ValidateOptions {
   /// s: the span at the recording's start to which the initial state is fitted.
   double initial_window = 0.5;
   double rtol = 1e-10;
+  /// The hand's angle offset (rad) and the time offset (s) to apply (IdentifyResult's).
+  double angle_offset = 0, time_offset = 0;
 };
 
 /// Simulate `held_out` from its first state with `world` (as identify's result gives it) and
