@@ -103,7 +103,8 @@ Covariance covariance_of(const Eigen::MatrixXd& J) {
 /// Why parameter j (a column among the unknowns) is not determined, or "" when it is.
 std::string refusal(const Unknown& u, double value, double sigma, std::size_t j,
                     const Covariance& cov, const std::vector<Unknown>& unknowns,
-                    double max_relative_sigma) {
+                    double max_relative_sigma, int& partner) {
+  partner = -1;
   const auto name_of = [&](int column) {
     return column < static_cast<int>(unknowns.size())
                ? unknowns[static_cast<std::size_t>(column)].name
@@ -128,7 +129,6 @@ std::string refusal(const Unknown& u, double value, double sigma, std::size_t j,
                     sim::format_number(max_relative_sigma) +
                     (is_offset(u.name) ? " x a tenth of its range" : " x its value");
   // The unknown it is most correlated with, when that explains it.
-  int partner = -1;
   double best = 0;
   for (std::size_t m = 0; m < unknowns.size(); ++m) {
     if (m == j) continue;
@@ -140,6 +140,8 @@ std::string refusal(const Unknown& u, double value, double sigma, std::size_t j,
   if (partner >= 0 && std::abs(best) > kPartnerCorrelation)
     why += ": the data cannot separate it from " + name_of(partner) + " (correlation " +
            sim::format_significant(best, 3) + ")";
+  else
+    partner = -1;
   return why;
 }
 
@@ -195,6 +197,7 @@ void report_fit(const ShootingProblem& problem, ceres::Problem& solved, std::vec
 
   result.parameters.clear();
   std::vector<bool> determined(K, false);
+  std::vector<std::pair<std::size_t, int>> partners;  // (refused, the partner it names or -1)
   for (std::size_t j = 0; j < K; ++j) {
     ParameterEstimate e;
     e.name = unknowns[j].name;
@@ -203,13 +206,27 @@ void report_fit(const ShootingProblem& problem, ceres::Problem& solved, std::vec
     e.bounds = unknowns[j].bounds;
     const double sigma =
         std::sqrt(cov.C(static_cast<Eigen::Index>(j), static_cast<Eigen::Index>(j)));
+    int partner = -1;
     e.not_determined =
-        refusal(unknowns[j], e.value, sigma, j, cov, unknowns, options.max_relative_sigma);
+        refusal(unknowns[j], e.value, sigma, j, cov, unknowns, options.max_relative_sigma, partner);
     if (e.not_determined.empty()) {
       e.sigma = sigma;
       determined[j] = true;
     }
     result.parameters.push_back(e);
+    partners.emplace_back(j, partner);
+  }
+  // The data constrain a pair only through a combination: its partner is refused too, though its
+  // own sigma may pass (it is the one of the two the combination leans on less).
+  for (const auto& [j, m] : partners) {
+    if (m < 0 || !determined[static_cast<std::size_t>(m)]) continue;
+    ParameterEstimate& e = result.parameters[static_cast<std::size_t>(m)];
+    const auto jj = static_cast<Eigen::Index>(j), mm = static_cast<Eigen::Index>(m);
+    e.not_determined =
+        "the data cannot separate it from " + unknowns[j].name + " (correlation " +
+        sim::format_significant(cov.C(jj, mm) / std::sqrt(cov.C(jj, jj) * cov.C(mm, mm)), 3) + ")";
+    e.sigma.reset();
+    determined[static_cast<std::size_t>(m)] = false;
   }
   result.correlation =
       Eigen::MatrixXd::Constant(static_cast<Eigen::Index>(K), static_cast<Eigen::Index>(K), kNaN);

@@ -5,6 +5,7 @@
 
 #include "shooting.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -58,8 +59,13 @@ PredictionCheck validate(const sim::SimulationSpec& world, const Recording& held
     out.normalised_error.push_back(e / held_out.sigma[i]);
     sum2 += e * e;
     out.max_abs_error = std::max(out.max_abs_error, std::abs(e));
-    if (!out.time_to_3_sigma && std::abs(e) > 3 * held_out.sigma[i])
-      out.time_to_3_sigma = held_out.t[i] - held_out.t[0];
+  }
+  const std::size_t m = out.normalised_error.size();
+  for (std::size_t i = 0; i < m && !out.time_to_3_sigma; ++i) {
+    const std::size_t lo = i >= 2 ? i - 2 : 0, hi = std::min(m, i + 3);
+    double z2 = 0;
+    for (std::size_t j = lo; j < hi; ++j) z2 += out.normalised_error[j] * out.normalised_error[j];
+    if (z2 > 9.0 * static_cast<double>(hi - lo)) out.time_to_3_sigma = out.t[i] - out.t[0];
   }
   out.rms_error = predicted.empty() ? 0.0 : std::sqrt(sum2 / static_cast<double>(predicted.size()));
   return out;

@@ -176,7 +176,9 @@ struct PredictionCheck {
   /// Per sample: time, measured, predicted, error (predicted - measured) and error / sigma.
   std::vector<double> t, measured, predicted, error, normalised_error;
   double rms_error = 0, max_abs_error = 0;
-  /// s: the first time the error exceeds 3 sigma, measured from the start (absent: never).
+  /// s: the first time the error exceeds 3 sigma, measured from the start (absent: never): the
+  /// RMS of error / sigma over 5 samples centred there (so that a lone noisy sample, 3 sigma
+  /// off once in 370, does not count; pure noise reaches it with probability ~1e-8).
   std::optional<double> time_to_3_sigma;
   /// Why the prediction ended before the recording did (the disk dropped, ...); empty when the
   /// whole recording was predicted.
