@@ -24,10 +24,10 @@ using detail::ShootingProblem;
 
 /// The difference steps: relative 1e-3 of a parameter's size (or of its typical size, when
 /// smaller), 1e-5 of s_h and 1e-4 1/s of sdot_h. Measured on the throw recording of
-/// tests/identify at rtol 1e-10 against a step ten times larger: the world's derivatives differ
-/// by 2 % (drag, rolling resistance) at relative 1e-4, 20-50 % at 1e-5 (the integrator's error
-/// and the chattering bounces' events, which shift with a parameter by whole steps, dominate the
-/// quotient below that), and the states' by ~1 % from 1e-4 down to 1e-6. docs/IDENTIFY.md.
+/// tests/identify at rtol 1e-10 against relative 1e-3: the drag's derivatives differ by 1.6 %
+/// at 1e-4 and 21 % at 1e-5 (the integrator's error and the chattering bounces' events, which
+/// shift with a parameter by whole steps, dominate the quotient below that), the states' by ~1 %
+/// from 1e-4 down to 1e-6. docs/IDENTIFY.md, "Derivatives".
 constexpr double kDifferenceStep = 1e-3;
 constexpr double kStateStepS = 1e-5, kStateStepSdot = 1e-4;
 
