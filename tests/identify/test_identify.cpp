@@ -6,6 +6,7 @@
 #include "flatland/identify/identify.hpp"
 
 #include "identify/identify_support.hpp"
+#include "test_scale.hpp"
 
 #include <gtest/gtest.h>
 
@@ -100,7 +101,10 @@ TEST(Identify, NoiseFreeRecordingGivesTheTruth) {
 // The acceptance of issue 26: ten noise seeds of the same two recordings (rocking, throw).
 TEST(Identify, TruthWithinTwoSigmaInNineOfTenSeedsAndSigmaMatchesTheSpread) {
   const sim::SimulationSpec w = truth_world();
-  const int seeds = 10;
+  // Under the sanitizers (FLATLAND_TEST_SHORT) three seeds run the same code paths; the spread
+  // of three says little, so only the 2-sigma count is asserted there (at least two).
+  const bool short_run = flatland::test::short_tests();
+  const int seeds = short_run ? 3 : 10;
   const std::vector<std::string> names = four_unknowns().unknowns;
   std::vector<std::vector<double>> values(names.size()), sigmas(names.size());
   double chi2_per_dof = 0;
@@ -132,6 +136,10 @@ TEST(Identify, TruthWithinTwoSigmaInNineOfTenSeedsAndSigmaMatchesTheSpread) {
     std::printf(
         "[ identify ] %-18s truth %.6g: within 2 sigma %d/%d, spread %.3g, sigma %.3g..%.3g\n",
         names[j].c_str(), truth_of(names[j]), within, seeds, spread, sigma_lo, sigma_hi);
+    if (short_run) {
+      EXPECT_GE(within, seeds - 1) << names[j];
+      continue;
+    }
     EXPECT_GE(within, 9) << names[j];
     EXPECT_LE(sigma_hi, 2 * spread) << names[j];
     EXPECT_GE(sigma_lo, 0.5 * spread) << names[j];
