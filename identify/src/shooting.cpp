@@ -133,6 +133,22 @@ std::pair<double, double> local_state(const Recording& r, std::size_t i, double 
   return {c[0], c[1]};
 }
 
+/// The joint's log must cover the samples' times shifted by every time offset the fit may try:
+/// its spline's end pieces are not extrapolated into the recording.
+void check_joint_coverage(const Recording& rec, const std::vector<Unknown>& unknowns,
+                          double time_offset) {
+  double lo = time_offset, hi = time_offset;
+  for (const Unknown& u : unknowns)
+    if (u.name == "time_offset") lo = u.bounds.lower, hi = u.bounds.upper;
+  const double need0 = rec.t.front() + lo, need1 = rec.t.back() + hi;
+  if (rec.joint_t.front() > need0 || rec.joint_t.back() < need1)
+    throw std::invalid_argument(rec.name + ": joint_t: the joint's log covers [" +
+                                sim::format_number(rec.joint_t.front()) + ", " +
+                                sim::format_number(rec.joint_t.back()) + "] s; the samples need [" +
+                                sim::format_number(need0) + ", " + sim::format_number(need1) +
+                                "] s (their times plus the time offset's range)");
+}
+
 double median(std::vector<double> v) {
   std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
   return v[v.size() / 2];
@@ -170,6 +186,7 @@ ShootingProblem::ShootingProblem(const sim::SimulationSpec& world,
   for (std::size_t r = 0; r < recordings_.size(); ++r) {
     const Recording& rec = recordings_[r];
     check_recording(rec);
+    check_joint_coverage(rec, unknowns_, time_offset_);
     joints_.push_back(std::make_shared<JointLogMotion>(rec.joint_t, rec.joint_theta));
     std::vector<double> dt(rec.t.size() - 1);
     for (std::size_t i = 0; i + 1 < rec.t.size(); ++i) dt[i] = rec.t[i + 1] - rec.t[i];

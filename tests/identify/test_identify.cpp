@@ -225,6 +225,16 @@ TEST(Identify, RefusesBadInputNamingTheField) {
   identify::IdentifyOptions outside = o;
   outside.initial = {{"drag", -1.0}};
   EXPECT_NE(message(r, outside).find("initial.drag"), std::string::npos);
+  identify::IdentifyOptions offset = o;
+  offset.unknowns = {"drag", "time_offset"};  // the log covers 0.5 s either side; the bound is 0.2
+  offset.bounds = {{"time_offset", {-0.2, 0.2}}};
+  EXPECT_EQ(message(r, offset), "(accepted)");
+  bad = r;
+  bad.joint_t.resize(bad.joint_t.size() - 400);  // ends 0.1 s after the last sample
+  bad.joint_theta.resize(bad.joint_t.size());
+  EXPECT_NE(message(bad, offset).find("rocking: joint_t: the joint's log covers"),
+            std::string::npos)
+      << message(bad, offset);
   identify::IdentifyOptions segment = o;
   segment.segment_duration = 0;
   EXPECT_NE(message(r, segment).find("segment_duration"), std::string::npos);

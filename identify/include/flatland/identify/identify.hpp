@@ -32,7 +32,8 @@ struct Recording {
   /// The joint's log: times (s, the joint's clock) and hand angles (rad, 0 = palm up), strictly
   /// increasing in time, at least 4 entries, usually denser than the camera's samples. The hand
   /// motion is its interpolating cubic spline (JointLogMotion). It must cover the samples' times
-  /// shifted by any time offset within the bounds.
+  /// shifted by any time offset within the bounds (identify refuses it otherwise, naming
+  /// joint_t).
   std::vector<double> joint_t;
   std::vector<double> joint_theta;
 };
