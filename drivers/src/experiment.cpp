@@ -146,15 +146,7 @@ std::optional<control::Measurement> measure_frame(const CameraFrame& frame,
   if (!tr.ok() || !theta) return std::nullopt;
   const auto c = vision::pixel_to_contact(mapping, tr.center, *theta, guess, 0.5);
   if (!c) return std::nullopt;
-  // The tracker's 1-sigma per pixel coordinate, carried through the mapping by finite
-  // differences (a floor for what the tracker's own estimate leaves out).
-  const double sp = std::max(tr.sigma_px, 0.02);
-  const auto cx =
-      vision::pixel_to_contact(mapping, tr.center + cv::Point2d(sp, 0), *theta, c->s_h, 0.05);
-  const auto cy =
-      vision::pixel_to_contact(mapping, tr.center + cv::Point2d(0, sp), *theta, c->s_h, 0.05);
-  double sigma = 1e-4;
-  if (cx && cy) sigma = std::max(std::hypot(cx->s_h - c->s_h, cy->s_h - c->s_h), 1e-6);
+  const double sigma = vision::contact_sigma(mapping, tr.center, tr.sigma_px, *theta, c->s_h);
   flog.measured = true;
   flog.s_meas = c->s_h;
   flog.sigma_s = sigma;

@@ -5,6 +5,7 @@
 
 #include <opencv2/calib3d.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <vector>
@@ -140,6 +141,15 @@ std::optional<ContactEstimate> follow_contact(const HandMapping& m, cv::Point2d 
                                               double previous_s_h) {
   return std::isfinite(previous_s_h) ? pixel_to_contact(m, px, theta, previous_s_h, 0.5)
                                      : pixel_to_contact(m, px, theta, 0.0, 2.0);
+}
+
+double contact_sigma(const HandMapping& m, cv::Point2d px, double sigma_px, double theta,
+                     double s_h) {
+  const double sp = std::max(sigma_px, 0.02);
+  const auto cx = pixel_to_contact(m, px + cv::Point2d(sp, 0), theta, s_h, 0.05);
+  const auto cy = pixel_to_contact(m, px + cv::Point2d(0, sp), theta, s_h, 0.05);
+  if (!cx || !cy) return 1e-4;
+  return std::max(std::hypot(cx->s_h - s_h, cy->s_h - s_h), 1e-6);
 }
 
 }  // namespace flatland::vision

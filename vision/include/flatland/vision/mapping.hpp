@@ -63,4 +63,12 @@ std::optional<ContactEstimate> pixel_to_contact(const HandMapping& m, cv::Point2
 std::optional<ContactEstimate> follow_contact(const HandMapping& m, cv::Point2d px, double theta,
                                               double previous_s_h);
 
+/// The standard deviation of the s_h measured at a tracked centre px (contact s_h, hand angle
+/// theta): the tracker's 1-sigma per pixel coordinate, floored at 0.02 px (what the tracker's own
+/// estimate leaves out), carried through the mapping by finite differences; floored at 1e-6, and
+/// 1e-4 where a shifted centre does not map. The closed loop's measurements and identify's
+/// recordings from pixels both take it.
+double contact_sigma(const HandMapping& m, cv::Point2d px, double sigma_px, double theta,
+                     double s_h);
+
 }  // namespace flatland::vision
