@@ -65,6 +65,13 @@ constexpr CommandInfo kCommands[] = {
      "Robustness of the closed loop: N synthetic experiments per controller, each in a world "
      "perturbed from the scene (uniform draws seeded by --seed and the run number; the loop "
      "assumes the nominal scene). Prints the success counts with Wilson 95 % intervals."},
+    {"identify", true,
+     "Fit the world's parameters (friction, restitution, rolling resistance, drag, tilt, the "
+     "hand's angle and time offsets) to recordings of the disk on the hand, with Ceres on the "
+     "simulator (multiple shooting, weighted by the tracker's sigma): each value with its sigma "
+     "or why the data do not determine it, the correlations and chi^2; writes the scene with "
+     "the fitted values, the residuals and, with --validate, a held-out recording's prediction "
+     "error (docs/IDENTIFY.md)."},
     {"study", true,
      "Speed-accuracy studies (docs/ACCURACY.md). 'sim': the simulator's work-precision diagram "
      "(RK4 at several steps, dopri5 and dop853 at rtol 1e-3 ... 1e-13, general and reduced "

@@ -48,6 +48,7 @@ Command add_track_command(CLI::App& app);
 Command add_experiment_command(CLI::App& app);
 Command add_montecarlo_command(CLI::App& app);
 Command add_study_command(CLI::App& app);
+Command add_identify_command(CLI::App& app);
 
 /// The whole of main: parse, run the selected command, map exceptions to exit codes (0, 1, 2)
 /// and one-line errors. Every table entry is registered, in table order, through its entry in

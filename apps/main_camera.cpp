@@ -15,5 +15,6 @@ int main(int argc, char** argv) {
                   {"track", add_track_command},
                   {"experiment", add_experiment_command},
                   {"montecarlo", add_montecarlo_command},
+                  {"identify", add_identify_command},
                   {"study", add_study_command}});
 }
