@@ -31,6 +31,7 @@ struct IdentifyCliOptions {
   double segment = 1.0;
   double sigma = 0;
   int max_iterations = 50;
+  int threads = 0;
   bool json = false, force = false, no_plot = false;
   CLI::Option* sigma_opt = nullptr;
   std::string command_line;  // for the fitted scene's comment
@@ -265,6 +266,7 @@ Json report_json(const identify::IdentifyResult& r, const std::vector<LoadedReco
   j["simulations"] = r.simulations;
   j["wall_time"] = r.wall_time;
   j["simulation_time"] = r.simulation_time;
+  j["warnings"] = r.warnings;
   Json recs = Json::array();
   for (const LoadedRecording& l : loaded) {
     Json q;
@@ -298,7 +300,8 @@ Json validation_json(const identify::PredictionCheck& v) {
           {"samples", v.t.size()},
           {"rms_error", v.rms_error},
           {"max_abs_error", v.max_abs_error},
-          {"time_to_3_sigma", v.time_to_3_sigma ? Json(*v.time_to_3_sigma) : Json(nullptr)}};
+          {"time_to_3_sigma", v.time_to_3_sigma ? Json(*v.time_to_3_sigma) : Json(nullptr)},
+          {"stopped", v.stopped.empty() ? Json(nullptr) : Json(v.stopped)}};
 }
 
 std::string residuals_csv(const identify::IdentifyResult& r) {
@@ -319,6 +322,15 @@ std::string validation_csv(const identify::PredictionCheck& v) {
          format_number(v.predicted[i]) + "," + format_number(v.error[i]) + "," +
          format_number(v.normalised_error[i]) + "\n";
   return s;
+}
+
+/// A value to the digit of its sigma's second significant one (0.0172 +- 0.0035); the JSON and
+/// the scene file keep every digit.
+std::string value_text(double value, double sigma) {
+  if (!(sigma > 0) || value == 0 || !std::isfinite(value)) return format_number(value);
+  const int digits = static_cast<int>(std::floor(std::log10(std::abs(value)))) -
+                     static_cast<int>(std::floor(std::log10(sigma))) + 2;
+  return sim::format_significant(value, std::clamp(digits, 1, 17));
 }
 
 /// The human-readable report on stdout.
@@ -342,7 +354,7 @@ std::string report_text(const identify::IdentifyResult& r, const std::vector<Loa
   for (const auto& p : r.parameters) {
     os << "    " << p.name << std::string(width - p.name.size() + 2, ' ');
     if (p.sigma)
-      os << format_number(p.value) << " +- " << sim::format_significant(*p.sigma, 2) << "\n";
+      os << value_text(p.value, *p.sigma) << " +- " << sim::format_significant(*p.sigma, 2) << "\n";
     else
       os << "not determined: " << p.not_determined << "\n";
   }
@@ -369,13 +381,14 @@ std::string report_text(const identify::IdentifyResult& r, const std::vector<Loa
   os << "\n  fit                " << r.iterations << " iterations, " << r.simulations
      << " simulations, " << sim::format_significant(r.wall_time, 3) << " s; "
      << (r.converged ? "converged" : "NOT converged: " + r.termination) << "\n";
+  for (const std::string& w : r.warnings) os << "  warning            " << w << "\n";
   if (check) {
     os << "  validation         " << check->name << ": rms error "
        << format_number(check->rms_error) << ", max " << format_number(check->max_abs_error)
        << ", beyond 3 sigma "
        << (check->time_to_3_sigma ? "after " + format_number(*check->time_to_3_sigma) + " s"
                                   : std::string("never"))
-       << "\n";
+       << (check->stopped.empty() ? "" : "; stopped early: " + check->stopped) << "\n";
   }
   return os.str();
 }
@@ -401,7 +414,7 @@ void write_outputs(OutputSet& outputs, const fs::path& dir, const IdentifyCliOpt
           {"validation.gp", "validation.csv", "validation.png",
            "set title " + gnuplot_quote("prediction of " + check->name + " with the fitted world") +
                "\nset grid\nset xlabel 't (s)'\n"
-               "set multiplot layout 2,1\n"
+               "set multiplot layout 2,1\nset key top left\n"
                "set ylabel 's_h'\n"
                "plot datafile skip 1 using 1:2 with points pt 7 ps 0.4 title 'measured', "
                "datafile skip 1 using 1:3 with lines lw 2 title 'predicted'\n"
@@ -426,6 +439,9 @@ void run_identify(const IdentifyCliOptions& o) {
   if (o.max_iterations < 1 || o.max_iterations > 10000)
     throw UsageError("--max-iterations: must be in [1, 10000], got " +
                      std::to_string(o.max_iterations));
+  if (o.threads < 0 || o.threads > 1024)
+    throw UsageError("--threads: must be in [0, 1024], got " + std::to_string(o.threads));
+  options.threads = o.threads;
   options.segment_duration = o.segment;
   options.max_iterations = o.max_iterations;
   if (o.sigma_opt->count() && !(std::isfinite(o.sigma) && o.sigma > 0))
@@ -463,7 +479,12 @@ void run_identify(const IdentifyCliOptions& o) {
     }
   }
   std::optional<identify::PredictionCheck> check;
-  if (held_out) check = identify::validate(result.world, held_out->recording);
+  if (held_out) {
+    identify::ValidateOptions vo;
+    vo.angle_offset = result.angle_offset;
+    vo.time_offset = result.time_offset;
+    check = identify::validate(result.world, held_out->recording, vo);
+  }
 
   identify::FitProvenance provenance;
   provenance.scene_path = o.scene;
@@ -564,6 +585,8 @@ Command add_identify_command(CLI::App& app) {
                   "header), plain, experiment, track, pixels. Default: auto");
   cmd->add_option("--max-iterations", o->max_iterations,
                   "Ceres iterations at most (1 to 10000). Default: 50");
+  cmd->add_option("--threads", o->threads,
+                  "Segments simulated at once (0 to 1024; 0: every core). Default: 0");
   cmd->add_flag("--no-plot", o->no_plot, "Do not draw residuals.png (and validation.png)");
   add_force_option(*cmd, o->force);
   cmd->add_flag("--json", o->json,

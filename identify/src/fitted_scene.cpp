@@ -150,8 +150,9 @@ std::string provenance_block(const IdentifyResult& result, const FitProvenance& 
              : std::string("undefined"))
      << "), " << result.iterations << " iterations, "
      << (result.converged ? "converged" : "NOT converged: " + result.termination) << "\n"
-     << "#   contact.model is hybrid: the model the fit simulates.\n"
-     << "# Parameters (1-sigma; a parameter the data did not determine keeps the scene's value):\n";
+     << "#   contact.model is hybrid: the model the fit simulates.\n";
+  for (const std::string& w : result.warnings) os << "#   warning:         " << w << "\n";
+  os << "# Parameters (1-sigma; a parameter the data did not determine keeps the scene's value):\n";
   for (const ParameterEstimate& p : result.parameters) {
     const std::optional<SceneKey> key = scene_key(p.name);
     os << "#   " << p.name << ": ";

@@ -3,8 +3,16 @@
 #include "cli_support.hpp"
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
+#include <cmath>
+#include <random>
+#include <sstream>
+
+#include <algorithm>
+#include <cstdio>
 #include <filesystem>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -100,6 +108,100 @@ TEST_F(CliIdentify, AnExistingOutputDirectoryIsKept) {
   EXPECT_EQ(r.code, 2) << r.err;
   EXPECT_NE(r.err.find("--out"), std::string::npos) << r.err;
   EXPECT_EQ(flatland_test::read_text(dir_ / "out" / "keep.txt"), "mine");
+}
+
+/// The air-table world's own motion (flatland simulate, 4 s at 30 Hz) with Gaussian noise of
+/// sigma on s_h, as a plain recording: its truth is the scene's drag (0.015 N s/m) and rolling
+/// resistance (5e-5 m).
+void write_synthetic(const fs::path& dir, const std::string& trajectory, const std::string& name,
+                     unsigned seed, double sigma) {
+  std::stringstream in(flatland_test::read_text(dir / trajectory));
+  std::string line;
+  std::getline(in, line);
+  const auto columns = [](const std::string& row) {
+    std::vector<std::string> cells;
+    std::stringstream ss(row);
+    for (std::string cell; std::getline(ss, cell, ',');) cells.push_back(cell);
+    return cells;
+  };
+  const std::vector<std::string> header = columns(line);
+  const auto index = [&header](const std::string& n) {
+    return static_cast<std::size_t>(std::find(header.begin(), header.end(), n) - header.begin());
+  };
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> noise(0.0, sigma);
+  std::string out = "t[s],theta[rad],s_h,sigma\n";
+  while (std::getline(in, line)) {
+    const std::vector<std::string> c = columns(line);
+    out += c[index("t")] + "," + c[index("theta")] + "," +
+           std::to_string(std::stod(c[index("s_h")]) + noise(rng)) + "," + std::to_string(sigma) +
+           "\n";
+  }
+  write_text(dir / name, out);
+}
+
+TEST_F(CliIdentify, FitsTheWorldOfASyntheticRecordingAndWritesItsScene) {
+  const double sigma = 1e-3;
+  ASSERT_EQ(run("simulate --scene " + scene() +
+                " --duration 4 --sample-dt 0.0333333333333333 --out traj.csv")
+                .code,
+            0);
+  write_synthetic(dir_, "traj.csv", "fit.csv", 1, sigma);
+  write_synthetic(dir_, "traj.csv", "held.csv", 2, sigma);
+  const Result r =
+      run("identify " + scene() +
+          " fit.csv --unknowns drag,rolling_resistance --validate held.csv --out out --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  const nlohmann::json report =
+      nlohmann::json::parse(flatland_test::read_text(dir_ / "out" / "report.json"));
+  EXPECT_EQ(j["parameters"], report["parameters"]);
+  // Truth (the scene's values) within 3 sigma; both determined.
+  const std::map<std::string, double> truth = {{"drag", 0.015}, {"rolling_resistance", 5e-5}};
+  ASSERT_EQ(j["parameters"].size(), 2u);
+  for (const auto& p : j["parameters"]) {
+    ASSERT_TRUE(p["determined"].get<bool>()) << p;
+    const double value = p["value"], sd = p["sigma"];
+    EXPECT_GT(sd, 0.0);
+    EXPECT_LT(std::abs(value - truth.at(p["name"])), 3 * sd) << p;
+  }
+  // chi^2 of noise of the stated sigma: its dof within a generous 5 sigma of sqrt(2 dof).
+  const double dof = j["degrees_of_freedom"];
+  EXPECT_LT(std::abs(j["chi2"].get<double>() - dof), 5 * std::sqrt(2 * dof)) << j["chi2"];
+  EXPECT_EQ(j["correlation"].size(), 2u);
+  EXPECT_DOUBLE_EQ(j["correlation"][0][0].get<double>(), 1.0);
+  EXPECT_DOUBLE_EQ(j["correlation"][0][1].get<double>(), j["correlation"][1][0].get<double>());
+  // residuals.csv: one row per sample, the residual its definition.
+  const auto rows =
+      flatland_test::lines_of(flatland_test::read_text(dir_ / "out" / "residuals.csv"));
+  ASSERT_EQ(rows.size(), 1 + j["recordings"][0]["samples"].get<std::size_t>());
+  EXPECT_EQ(rows[0], "recording,t,measured,fitted,normalised_residual");
+  for (std::size_t i = 1; i < rows.size(); ++i) {
+    double rec, t, measured, fitted, normalised;
+    ASSERT_EQ(std::sscanf(rows[i].c_str(), "%lf,%lf,%lf,%lf,%lf", &rec, &t, &measured, &fitted,
+                          &normalised),
+              5);
+    EXPECT_NEAR(normalised, (fitted - measured) / sigma, 1e-6);
+  }
+  // The prediction check.
+  const nlohmann::json v = j["validation"];
+  ASSERT_TRUE(v.is_object());
+  EXPECT_EQ(v["recording"], "held.csv");
+  EXPECT_GT(v["samples"].get<int>(), 100);
+  EXPECT_GE(v["max_abs_error"].get<double>(), v["rms_error"].get<double>());
+  for (const char* f : {"fitted.yaml", "residuals.csv", "residuals.png", "report.json",
+                        "validation.csv", "validation.png"})
+    EXPECT_TRUE(fs::exists(dir_ / "out" / f)) << f;
+  // The fitted scene runs, and carries the fitted values to the last bit.
+  EXPECT_EQ(run("simulate --scene out/fitted.yaml --duration 0.5").code, 0);
+  const std::string fitted = flatland_test::read_text(dir_ / "out" / "fitted.yaml");
+  for (const auto& p : j["parameters"]) {
+    const std::string key = "\n  " + p["name"].get<std::string>() + ": ";
+    const auto at = fitted.find(key);
+    ASSERT_NE(at, std::string::npos) << key << "\n" << fitted;
+    EXPECT_EQ(std::stod(fitted.substr(at + key.size())), p["value"].get<double>()) << key;
+  }
+  EXPECT_NE(fitted.find("#   command:         flatland identify"), std::string::npos);
 }
 
 TEST_F(CliIdentify, IsListedAndHasHelp) {
