@@ -48,7 +48,7 @@ from ._flatland import (ControlInput, ControllerContext, ControlOutput, Estimate
 __all__ = [
     "Model", "load", "default_scene_path", "solve", "simulate", "Simulation", "time_optimal",
     "locus", "surface", "Renderer", "Tracker", "calibrate", "render_calibration", "experiment",
-    "Experiment", "montecarlo", "study", "read_camera_file", "write_camera_file", "project",
+    "Experiment", "montecarlo", "study", "identify", "validate_world", "read_camera_file", "write_camera_file", "project",
     "Env", "Box", "success_reward", "Plan", "ControllerContext", "ControlInput", "ControlOutput", "JointReading",
     "Measurement", "Estimate", "HandInput", "UpdateReport", "EstimatorCounts",
 ]
@@ -586,6 +586,113 @@ def study(name: str, scene: SceneLike = None, *, quick: bool = False) -> Dict[st
     tracker, airtable-feedback.yaml for closed-loop; calibration takes none)."""
     text = _flatland.study(_text("name", name), _scene("scene", scene), _flag("quick", quick))
     return _csv_columns(text)
+
+
+_RECORDING_KEYS = ("t", "theta", "s_h", "sigma", "joint_t", "joint_theta", "name")
+
+
+def _recording(name: str, value: Any) -> Dict[str, Any]:
+    """A recording as the native module takes it: float arrays t, s_h, sigma, joint_t,
+    joint_theta and a name (docs/PYTHON.md, "Identifying the world")."""
+    rec = _mapping(name, value)
+    for key in rec:
+        if key not in _RECORDING_KEYS:
+            raise ValueError(f"{name}: unknown key {key!r} (known: {', '.join(_RECORDING_KEYS)})")
+
+    def array(key: str) -> np.ndarray:
+        if key not in rec:
+            raise ValueError(f"{name}.{key}: missing")
+        try:
+            a = np.asarray(rec[key], dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"{name}.{key}: an array of numbers, got a {_type_name(rec[key])}") from None
+        if a.ndim != 1:
+            raise ValueError(f"{name}.{key}: a 1-D array, got shape {a.shape}")
+        return a
+
+    t, s_h = array("t"), array("s_h")
+    if "sigma" not in rec:
+        raise ValueError(f"{name}.sigma: missing (s_h's standard deviation weights the fit; "
+                         "an array, or one number for every sample)")
+    if np.ndim(rec["sigma"]) == 0:
+        sigma = np.full(t.shape, _number(f"{name}.sigma", rec["sigma"]))
+    else:
+        sigma = array("sigma")
+    if "joint_t" in rec or "joint_theta" in rec:
+        if "theta" in rec:
+            raise ValueError(f"{name}: theta or joint_t and joint_theta, not both")
+        joint_t, joint_theta = array("joint_t"), array("joint_theta")
+    else:
+        joint_t, joint_theta = t, array("theta")
+        if joint_theta.shape != t.shape:
+            raise ValueError(f"{name}.theta: {joint_theta.size} values for {t.size} times")
+    label = _text(f"{name}.name", rec.get("name", name))
+    return {"name": label, "t": t, "s_h": s_h, "sigma": sigma, "joint_t": joint_t,
+            "joint_theta": joint_theta}
+
+
+def identify(scene: SceneLike, recordings: Any, unknowns: Sequence[str], *,
+             segment: float = 1.0, bounds: Optional[Dict[str, Tuple[float, float]]] = None,
+             initial: Optional[Dict[str, float]] = None, max_iterations: int = 50,
+             threads: int = 0, validate: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
+    """Fit the world's parameters ``unknowns`` to ``recordings`` (``flatland identify``,
+    docs/IDENTIFY.md): "mu_static", "mu_kinetic", "restitution", "rolling_resistance" (m),
+    "drag" (N s/m), "drag_angular" (N m s/rad), "tilt" (rad), "angle_offset" (rad),
+    "time_offset" (s).
+
+    ``scene``: the world to start from (a Model, a path or None). ``recordings``: a dict or a
+    list of dicts, each with numpy arrays ``t`` (s), ``s_h`` and ``sigma`` (s_h's standard
+    deviation, an array or one number) and either ``theta`` (rad, the hand angle at each t) or
+    the joint's own log ``joint_t``, ``joint_theta``; optional ``name``. ``segment``: the
+    shooting segments' length (s). ``bounds``: {name: (low, high)} replacing the defaults;
+    ``initial``: {name: value} to start from. ``validate``: a held-out recording, simulated from
+    its first state with the fitted world (and its fitted offsets). ``threads``: segments
+    simulated at once (0: every core).
+
+    Returns a dict: ``names``, ``values`` and ``sigmas`` (numpy, in ``unknowns``' order; sigma
+    NaN where the data do not determine the parameter), ``determined`` (bool array),
+    ``not_determined`` ({name: why}), ``correlation`` (K x K, NaN rows for undetermined ones),
+    ``chi2``, ``degrees_of_freedom``, ``iterations``, ``converged``, ``fits`` (per recording:
+    t, measured, fitted, normalised_residual), ``segments``, ``warnings``, ``scene`` (the fitted scene file's
+    text, None when the scene is not a file) and ``validation`` (t, measured, predicted, error,
+    normalised_error, rms_error, max_abs_error, time_to_3_sigma, stopped; None without
+    ``validate``)."""
+    if isinstance(recordings, dict):
+        recordings = [recordings]
+    if not isinstance(recordings, (list, tuple)) or not recordings:
+        raise ValueError(f"recordings: a dict or a non-empty list of dicts, got a {_type_name(recordings)}")
+    recs = [_recording(f"recordings[{i}]", r) for i, r in enumerate(recordings)]
+    names = _texts("unknowns", unknowns)
+    bounds = _mapping("bounds", bounds, True) or {}
+    native_bounds = {}
+    for key, pair in bounds.items():
+        _text("bounds key", key)
+        if not isinstance(pair, (list, tuple)) or len(pair) != 2:
+            raise ValueError(f"bounds.{key}: a pair (low, high)")
+        native_bounds[key] = (_number(f"bounds.{key}[0]", pair[0]), _number(f"bounds.{key}[1]", pair[1]))
+    initial = _mapping("initial", initial, True) or {}
+    native_initial = {_text("initial key", key): _number(f"initial.{key}", value)
+                      for key, value in initial.items()}
+    held_out = None if validate is None else _recording("validate", validate)
+    segment = _number("segment", segment)
+    command = (f"flatland.identify(unknowns={names!r}, segment={segment!r}, "
+               f"recordings={[r['name'] for r in recs]!r})")
+    return _flatland.identify(_scene("scene", scene), recs, names, segment, native_bounds,
+                              native_initial, _integer("max_iterations", max_iterations, 1, 10000),
+                              _integer("threads", threads, 0, 1024), held_out, command)
+
+
+def validate_world(scene: SceneLike, recording: Dict[str, Any], *, angle_offset: float = 0.0,
+                   time_offset: float = 0.0) -> Dict[str, Any]:
+    """How far the world of ``scene`` (a fitted scene, say) predicts ``recording`` (arrays as
+    for :func:`identify`): simulated from its first state, the error over time (``identify
+    --validate``). ``angle_offset`` (rad) and ``time_offset`` (s): the joint's offsets, as
+    identify fitted them. Returns t, measured, predicted, error, normalised_error, rms_error,
+    max_abs_error, time_to_3_sigma (None: never beyond 3 sigma) and stopped (why the prediction
+    ended early, or None)."""
+    return _flatland.validate_world(_scene("scene", scene), _recording("recording", recording),
+                                    _number("angle_offset", angle_offset),
+                                    _number("time_offset", time_offset))
 
 
 def _csv_columns(text: str) -> Dict[str, np.ndarray]:

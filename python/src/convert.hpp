@@ -118,5 +118,7 @@ void bind_loop_types(py::module_& m);
 /// The native half of flatland.Env (env_bindings.cpp).
 void bind_env(py::module_& m);
 void bind_studies(py::module_& m);
+/// flatland.identify and flatland.validate_world (identify_bindings.cpp).
+void bind_identify(py::module_& m);
 
 }  // namespace flatland::python

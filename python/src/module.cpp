@@ -12,6 +12,7 @@ PYBIND11_MODULE(_flatland, m) {
   flatland::python::bind_loop(m);
   flatland::python::bind_env(m);
   flatland::python::bind_studies(m);
+  flatland::python::bind_identify(m);
   m.def(
       "_noop", [] {}, "A call that does nothing: the binding's own overhead (benchmarks).");
 }
