@@ -1,6 +1,8 @@
 // flatland identify on the command line: bad input is one line naming the option or file:line,
 // exit 2, nothing written (docs/CLI.md, docs/IDENTIFY.md).
 #include "cli_support.hpp"
+#include "flatland/camera/camera_file.hpp"
+#include "flatland/scene/scene.hpp"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -202,6 +204,72 @@ TEST_F(CliIdentify, FitsTheWorldOfASyntheticRecordingAndWritesItsScene) {
     EXPECT_EQ(std::stod(fitted.substr(at + key.size())), p["value"].get<double>()) << key;
   }
   EXPECT_NE(fitted.find("#   command:         flatland identify"), std::string::npos);
+}
+
+/// Pixel centres with a camera file: the simulated disk's top-face centre projected by a pinhole
+/// camera straight above the pivot (written here in closed form: u = cx + fx X/Z, v = cy + fy
+/// Y/Z), with 0.1 px of noise, become s_h through the camera file and are fitted like any
+/// recording: the scene's drag and rolling resistance within 3 sigma.
+TEST_F(CliIdentify, PixelCentresWithACameraFileAreFitted) {
+  const flatland::Scene world = flatland::load_scene(scene());
+  const double fx = 900, cx = 639.5, cy = 479.5, height = 1.2, sigma_px = 0.1;
+  flatland::camera::CameraFile file;
+  file.camera.width = 1280;
+  file.camera.height = 960;
+  file.camera.K = cv::Matx33d(fx, 0, cx, 0, fx, cy, 0, 0, 1);
+  // Looking down at the table: camera x = table x, camera y = -table y, z = -table z.
+  file.camera.R = cv::Matx33d(1, 0, 0, 0, -1, 0, 0, 0, -1);
+  file.camera.t = cv::Vec3d(0, 0, height);
+  file.has_table_pose = true;
+  flatland::camera::write_camera_file((dir_ / "camera.yaml").string(), file);
+  ASSERT_EQ(run("simulate --scene " + scene() +
+                " --duration 4 --sample-dt 0.0333333333333333 --out traj.csv")
+                .code,
+            0);
+  std::stringstream in(flatland_test::read_text(dir_ / "traj.csv"));
+  std::string line;
+  std::getline(in, line);
+  std::vector<std::string> header;
+  {
+    std::stringstream ss(line);
+    for (std::string c; std::getline(ss, c, ',');) header.push_back(c);
+  }
+  const auto col = [&header](const std::string& n) {
+    return static_cast<std::size_t>(std::find(header.begin(), header.end(), n) - header.begin());
+  };
+  std::mt19937 rng(7);
+  std::normal_distribution<double> noise(0.0, sigma_px);
+  std::string csv = "t,u,v,theta,sigma_px\n";
+  int rows = 0;
+  while (std::getline(in, line)) {
+    std::vector<std::string> c;
+    std::stringstream ss(line);
+    for (std::string cell; std::getline(ss, cell, ',');) c.push_back(cell);
+    const double x = std::stod(c[col("x")]), y = std::stod(c[col("y")]);
+    const double depth = height - world.render.disk_thickness;  // the tracked top face
+    const double u = cx + fx * x / depth + noise(rng), v = cy + fx * (-y) / depth + noise(rng);
+    char row[200];
+    std::snprintf(row, sizeof row, "%s,%.17g,%.17g,%s,%g\n", c[col("t")].c_str(), u, v,
+                  c[col("theta")].c_str(), sigma_px);
+    csv += row;
+    ++rows;
+  }
+  write_text(dir_ / "px.csv", csv);
+  const Result r = run("identify " + scene() +
+                       " px.csv --camera camera.yaml --unknowns drag,rolling_resistance --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["recordings"][0]["format"], "pixels");
+  EXPECT_EQ(j["recordings"][0]["samples"].get<int>(), rows);
+  const std::map<std::string, double> truth = {{"drag", 0.015}, {"rolling_resistance", 5e-5}};
+  for (const auto& p : j["parameters"]) {
+    ASSERT_TRUE(p["determined"].get<bool>()) << p;
+    EXPECT_LT(std::abs(p["value"].get<double>() - truth.at(p["name"])),
+              3 * p["sigma"].get<double>())
+        << p;
+  }
+  const double dof = j["degrees_of_freedom"];
+  EXPECT_LT(std::abs(j["chi2"].get<double>() - dof), 5 * std::sqrt(2 * dof)) << j["chi2"];
 }
 
 TEST_F(CliIdentify, IsListedAndHasHelp) {
