@@ -13,6 +13,9 @@ import flatland
 from conftest import SCENES
 
 CAMERA = SCENES / "butterfly-camera.yaml"
+AIRTABLE = SCENES / "airtable-5deg.yaml"
+# A valid recording (identify, validate_world): arrays of t, theta, s_h and one sigma.
+A_RECORDING = {"t": np.linspace(0, 1, 8), "theta": np.zeros(8), "s_h": -np.ones(8), "sigma": 1e-3}
 A_CAMERA = {"width": 640, "height": 480, "K": [[900, 0, 319.5], [0, 900, 239.5], [0, 0, 1]],
             "dist": [0, 0, 0, 0, 0], "R": np.eye(3), "t": [0, 0, 1.2]}
 
@@ -43,6 +46,9 @@ WRONG = {
     "dict": [[1], "info", 5, None],
     "action": ["1.2", True, None, [1.0, 2.0], float("nan"), {"a": 1}],
     "render_mode": [5, "human", True],
+    "recordings": [5, "run.csv", None, [5], [{"t": [0.0]}, "run.csv"]],
+    "recording": [5, "run.csv", None, [1]],
+    "optional_recording": [[1], "run.csv", 5],
 }
 
 INTEGRATOR = {"method": "optional_text", "rtol": "optional_number", "atol": "optional_number",
@@ -118,6 +124,13 @@ PUBLIC = {
         "path": "/nonexistent-dir/camera.yaml", "camera": A_CAMERA}, {
         "path": "path", "camera": "camera", "camera_name": "text", "table_pose": "flag",
         "joint": "optional_dict", "unsupported": "texts", "force": "flag"}),
+    "identify": (lambda: flatland.identify, {"scene": AIRTABLE, "recordings": A_RECORDING, "unknowns": ["drag"]}, {
+        "scene": "scene", "recordings": "recordings", "unknowns": "texts", "segment": "number",
+        "bounds": "optional_dict", "initial": "optional_dict", "max_iterations": "integer",
+        "threads": "integer", "validate": "optional_recording"}),
+    "validate_world": (lambda: flatland.validate_world, {"scene": AIRTABLE, "recording": A_RECORDING}, {
+        "scene": "scene", "recording": "recording", "angle_offset": "number",
+        "time_offset": "number"}),
     "project": (lambda: flatland.project,
                 {"camera": A_CAMERA, "points": np.zeros((1, 3))},
                 {"camera": "camera", "points": "points"}),
@@ -136,6 +149,7 @@ CALLABLES = {
     "study": flatland.study, "read_camera_file": flatland.read_camera_file,
     "write_camera_file": flatland.write_camera_file, "project": flatland.project,
     "default_scene_path": flatland.default_scene_path,
+    "identify": flatland.identify, "validate_world": flatland.validate_world,
 }
 
 
