@@ -150,7 +150,7 @@ class RecordingLoader {
     if (format == Format::kTrack) {
       const std::string& encoder = o_.encoders[next_encoder_++];
       try {
-        joint = identify::read_joint_log(encoder);
+        joint = identify::thin_joint_log(identify::read_joint_log(encoder));
       } catch (const std::invalid_argument& e) {
         throw UsageError(std::string("--encoder: ") + e.what());
       }

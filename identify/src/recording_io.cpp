@@ -286,6 +286,29 @@ JointLog read_joint_log(const std::string& path, const FileLimits& limits) {
   return log;
 }
 
+JointLog thin_joint_log(const JointLog& log, double spacing) {
+  if (!(spacing >= 0) || !std::isfinite(spacing))
+    throw std::invalid_argument("joint_spacing: must be >= 0 and finite, got " +
+                                sim::format_number(spacing));
+  if (log.t.size() < 3) return log;
+  // A tick's time is a sum of increments: 20 ticks of 1 ms may add up to a hair under 20 ms.
+  const double at_least = spacing * (1 - 1e-9);
+  JointLog out;
+  for (std::size_t i = 0; i + 1 < log.t.size(); ++i)
+    if (out.t.empty() || log.t[i] - out.t.back() >= at_least) {
+      out.t.push_back(log.t[i]);
+      out.theta.push_back(log.theta[i]);
+    }
+  // The last reading closes the span; the one kept before it goes if it is closer than spacing.
+  if (out.t.size() > 1 && log.t.back() - out.t.back() < at_least) {
+    out.t.pop_back();
+    out.theta.pop_back();
+  }
+  out.t.push_back(log.t.back());
+  out.theta.push_back(log.theta.back());
+  return out;
+}
+
 Recording read_plain_recording(const std::string& path, std::optional<double> sigma,
                                ReadSummary* summary, const FileLimits& limits) {
   if (sigma && !(std::isfinite(*sigma) && *sigma > 0))
@@ -318,7 +341,7 @@ Recording read_plain_recording(const std::string& path, std::optional<double> si
 }
 
 Recording read_experiment_recording(const std::string& path, ReadSummary* summary,
-                                    const FileLimits& limits) {
+                                    const FileLimits& limits, double joint_spacing) {
   const fs::path given(path);
   const fs::path dir = fs::is_directory(given) ? given : given.parent_path();
   const std::string log_path = (fs::is_directory(given) ? dir / "log.csv" : given).string();
@@ -331,8 +354,10 @@ Recording read_experiment_recording(const std::string& path, ReadSummary* summar
   for (std::size_t i = 1; i < log.rows(); ++i)
     require_increasing_time(log_path, log.line[i], "t", tick_t[i - 1], tick_t[i]);
   require_rows(log_path, log.rows(), "ticks");
-  r.joint_t = tick_t;
-  r.joint_theta = tick_theta;
+  const JointLog joint = thin_joint_log({tick_t, tick_theta}, joint_spacing);
+  require_rows(log_path, joint.t.size(), "ticks " + sim::format_number(joint_spacing) + " s apart");
+  r.joint_t = joint.t;
+  r.joint_theta = joint.theta;
   // The samples: the frames that became measurements.
   const CsvTable frames = read_csv_table(frames_path,
                                          {{"t_capture"},

@@ -272,6 +272,32 @@ TEST_F(CliIdentify, PixelCentresWithACameraFileAreFitted) {
   EXPECT_LT(std::abs(j["chi2"].get<double>() - dof), 5 * std::sqrt(2 * dof)) << j["chi2"];
 }
 
+/// A synthetic closed-loop experiment (rendered frames, the tracker's centres mapped to s_h with
+/// their sigma, the 1 kHz joint log thinned to 20 ms) fitted as recorded: the world's drag and
+/// rolling resistance within 3 sigma of the scene's, chi^2 near its degrees of freedom. (The fit
+/// converges in about 70 iterations here, hence --max-iterations.)
+TEST_F(CliIdentify, AnExperimentsRecordingIsFittedToItsWorld) {
+  const std::string world = std::string(FLATLAND_ASSET_DIR) + "/scenes/airtable-feedback.yaml";
+  const Result e = run("experiment --scene " + world + " --out run --no-plot");
+  ASSERT_EQ(e.code, 0) << e.err;
+  const Result r = run("identify " + world +
+                       " run --unknowns drag,rolling_resistance --max-iterations 200 --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["recordings"][0]["format"], "experiment");
+  EXPECT_GT(j["recordings"][0]["samples"].get<int>(), 100);
+  EXPECT_TRUE(j["converged"].get<bool>()) << j["termination"];
+  const std::map<std::string, double> truth = {{"drag", 0.015}, {"rolling_resistance", 5e-5}};
+  for (const auto& p : j["parameters"]) {
+    ASSERT_TRUE(p["determined"].get<bool>()) << p;
+    EXPECT_LT(std::abs(p["value"].get<double>() - truth.at(p["name"])),
+              3 * p["sigma"].get<double>())
+        << p;
+  }
+  const double dof = j["degrees_of_freedom"];
+  EXPECT_LT(std::abs(j["chi2"].get<double>() - dof), 5 * std::sqrt(2 * dof)) << j["chi2"];
+}
+
 TEST_F(CliIdentify, IsListedAndHasHelp) {
   const Result list = run("--help");
   EXPECT_NE(list.out.find("identify"), std::string::npos);

@@ -135,6 +135,24 @@ TEST_F(RecordingFiles, FilesAreBoundedInSizeLinesAndRows) {
             std::string::npos);
 }
 
+TEST(JointLogThinning, KeepsReadingsAtLeastTheSpacingApartAndBothEnds) {
+  JointLog log;
+  for (int i = 0; i <= 1000; ++i) {  // 1 s at 1 ms, times as a 1 kHz loop accumulates them
+    log.t.push_back(0.001 * i);
+    log.theta.push_back(std::sin(0.001 * i));
+  }
+  const JointLog thin = thin_joint_log(log, 0.02);
+  EXPECT_EQ(thin.t.front(), 0.0);
+  EXPECT_EQ(thin.t.back(), 1.0);
+  for (std::size_t k = 1; k < thin.t.size(); ++k) {
+    EXPECT_GE(thin.t[k] - thin.t[k - 1], 0.02 - 1e-12) << k;
+    EXPECT_LT(thin.t[k] - thin.t[k - 1], 0.04) << k;
+  }
+  for (std::size_t k = 0; k < thin.t.size(); ++k) EXPECT_EQ(thin.theta[k], std::sin(thin.t[k]));
+  EXPECT_EQ(thin_joint_log(log, 0.0).t, log.t);
+  EXPECT_THROW(thin_joint_log(log, -1.0), std::invalid_argument);
+}
+
 TEST_F(RecordingFiles, JointLogTakesAnOptionalHeader) {
   const std::string with = write("enc.csv", "t,theta\n0,0\n0.001,1e-6\n0.002,4e-6\n0.003,9e-6\n");
   const JointLog a = read_joint_log(with);
@@ -179,10 +197,20 @@ TEST_F(RecordingFiles, ExperimentLogAsTheLoopWritesIt) {
   write("run/frames.csv", flatland::drivers::frame_log_csv(frames));
   ReadSummary summary;
   const Recording r = read_experiment_recording((dir_ / "run").string(), &summary);
-  ASSERT_EQ(r.joint_t.size(), ticks.size());
+  // The joint's readings, every 20th (20 ms apart, kJointLogSpacing), and the last (199) in
+  // place of the 180th, which is closer to it than that.
+  ASSERT_EQ(r.joint_t.size(), 10u);
+  for (std::size_t k = 0; k < 9; ++k) {
+    EXPECT_EQ(r.joint_t[k], ticks[20 * k].t);
+    EXPECT_EQ(r.joint_theta[k], ticks[20 * k].theta);
+  }
+  EXPECT_EQ(r.joint_t.back(), ticks.back().t);
+  // Unthinned on request.
+  const Recording all = read_experiment_recording((dir_ / "run").string(), nullptr, {}, 0.0);
+  ASSERT_EQ(all.joint_t.size(), ticks.size());
   for (std::size_t i = 0; i < ticks.size(); ++i) {
-    EXPECT_EQ(r.joint_t[i], ticks[i].t);
-    EXPECT_EQ(r.joint_theta[i], ticks[i].theta);
+    EXPECT_EQ(all.joint_t[i], ticks[i].t);
+    EXPECT_EQ(all.joint_theta[i], ticks[i].theta);
   }
   // Frames 1, 3, 4, 5: frame 0 precedes the log, 2 is not measured, 6 follows the log.
   ASSERT_EQ(r.t.size(), 4u);

@@ -70,6 +70,18 @@ struct JointLog {
 };
 JointLog read_joint_log(const std::string& path, const FileLimits& limits = {});
 
+/// s: the spacing a joint log read from a file is thinned to before the fit's spline goes through
+/// it. A spline through every reading of a 1 kHz log differentiates the encoder's quantisation
+/// twice: q / dt^2 = 6 rad/s^2 of noise in theta'' for a 20-bit encoder (q = 6e-6 rad) at 1 ms,
+/// more than the hand's own accelerations, and the simulated disk then fails (measured on a
+/// synthetic experiment: the fit's runs stopped at 0.75 s at 1 ms, at 1.75 s at 10 ms, and ran
+/// through at 20 ms and 33 ms with the same fitted values); at 20 ms the noise is 0.016 rad/s^2.
+constexpr double kJointLogSpacing = 0.02;
+
+/// The log's readings at least `spacing` s apart (the first always, the last always), for the
+/// spline through them; the log itself when it is already that sparse.
+JointLog thin_joint_log(const JointLog& log, double spacing = kJointLogSpacing);
+
 /// What a reader kept and left out, for the command's report.
 struct ReadSummary {
   long rows = 0;     ///< data rows in the file(s)
@@ -90,10 +102,11 @@ Recording read_plain_recording(const std::string& path, std::optional<double> si
                                ReadSummary* summary = nullptr, const FileLimits& limits = {});
 
 /// An experiment's output directory (or its log.csv): the joint's log is log.csv's t and theta
-/// (the readings the loop took, 1 kHz); the samples are frames.csv's measured frames
-/// (t_capture, s_meas, sigma_s) inside the joint log's span.
+/// (the readings the loop took, 1 kHz), thinned to `joint_spacing` (thin_joint_log); the samples
+/// are frames.csv's measured frames (t_capture, s_meas, sigma_s) inside the joint log's span.
 Recording read_experiment_recording(const std::string& path, ReadSummary* summary = nullptr,
-                                    const FileLimits& limits = {});
+                                    const FileLimits& limits = {},
+                                    double joint_spacing = kJointLogSpacing);
 
 /// Tracked disk centres (px) per frame, with the tracker's sigma_px and, for a plain pixel CSV,
 /// the hand angle of each frame.
