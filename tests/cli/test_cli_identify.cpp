@@ -298,6 +298,33 @@ TEST_F(CliIdentify, AnExperimentsRecordingIsFittedToItsWorld) {
   EXPECT_LT(std::abs(j["chi2"].get<double>() - dof), 5 * std::sqrt(2 * dof)) << j["chi2"];
 }
 
+/// The track format end to end: the world rendered (its camera file and 1 kHz encoder log
+/// beside the video), tracked with flatland track, fitted from track.csv: drag and rolling
+/// resistance within 3 sigma of the scene's.
+TEST_F(CliIdentify, ARenderedAndTrackedVideoIsFittedToItsWorld) {
+  const std::string world = std::string(FLATLAND_ASSET_DIR) + "/scenes/airtable-feedback.yaml";
+  ASSERT_EQ(run("render --scene " + world + " --out vid.mp4").code, 0);
+  ASSERT_EQ(run("track --video vid.mp4 --camera vid.camera.yaml --encoder vid.encoder.csv "
+                "--scene " +
+                world + " --out track.csv")
+                .code,
+            0);
+  const Result r = run("identify " + world +
+                       " track.csv --encoder vid.encoder.csv --camera vid.camera.yaml "
+                       "--unknowns drag,rolling_resistance --max-iterations 200 --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["recordings"][0]["format"], "track");
+  EXPECT_GT(j["recordings"][0]["samples"].get<int>(), 100);
+  const std::map<std::string, double> truth = {{"drag", 0.015}, {"rolling_resistance", 5e-5}};
+  for (const auto& p : j["parameters"]) {
+    ASSERT_TRUE(p["determined"].get<bool>()) << p;
+    EXPECT_LT(std::abs(p["value"].get<double>() - truth.at(p["name"])),
+              3 * p["sigma"].get<double>())
+        << p;
+  }
+}
+
 TEST_F(CliIdentify, IsListedAndHasHelp) {
   const Result list = run("--help");
   EXPECT_NE(list.out.find("identify"), std::string::npos);
