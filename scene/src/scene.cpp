@@ -54,17 +54,47 @@ void read_gravity(const MapReader& root, sim::SimulationSpec& spec) {
   spec.tilt = tilt_deg == 90.0 ? 0.5 * std::numbers::pi : tilt_deg * kDegToRad;
 }
 
+// hand.shape's keys: each shape's own, the others refused by name.
+struct HandShapeKeys {
+  const char* shape;
+  std::initializer_list<const char*> keys;
+};
+constexpr std::array<HandShapeKeys, 3> kHandShapeKeys{{
+    {"polynomial", {"a", "b", "c", "d"}},
+    {"line", {"angle_deg", "origin"}},
+    {"circle", {"radius", "center"}},
+}};
+
 void read_hand(const MapReader& root, sim::SimulationSpec& spec) {
-  const MapReader h = root.section("hand", {"shape", "a", "b", "c", "d", "e", "f"});
+  const MapReader h = root.section(
+      "hand", {"shape", "a", "b", "c", "d", "e", "f", "angle_deg", "origin", "radius", "center"});
   // e and f are fixed by closing the outline (x(+-1) = 0, y'(+-1) = 0); a given value could only
   // disagree with a, b, c, d.
   h.reject_if_present("e", "is derived (e = -(a + c)), remove it");
   h.reject_if_present("f", "is derived (f = -(b + 3 d) / 5), remove it");
-  h.choice("shape", {"polynomial"});
-  spec.hand.a = h.number("a");
-  spec.hand.b = h.number("b");
-  spec.hand.c = h.number("c");
-  spec.hand.d = h.number("d");
+  const std::string shape = h.choice("shape", {"polynomial", "line", "circle"});
+  for (const HandShapeKeys& other : kHandShapeKeys)
+    if (shape != other.shape)
+      for (const char* key : other.keys)
+        h.reject_if_present(key, std::string("only for shape: ") + other.shape);
+  sim::HandSpec& hand = spec.hand;
+  if (shape == "polynomial") {
+    hand.shape = sim::HandSpec::Shape::kPolynomial;
+    hand.a = h.number("a");
+    hand.b = h.number("b");
+    hand.c = h.number("c");
+    hand.d = h.number("d");
+  } else if (shape == "line") {
+    hand.shape = sim::HandSpec::Shape::kLine;
+    hand.line_angle = h.number_or("angle_deg", 0.0) * kDegToRad;
+    const auto origin = h.numbers_or<2>("origin", "[x, y] (m)", {0.0, 0.0});
+    hand.line_origin = sim::Vec2(origin[0], origin[1]);
+  } else {
+    hand.shape = sim::HandSpec::Shape::kCircle;
+    hand.well_radius = h.positive("radius");
+    const auto center = h.numbers_or<2>("center", "[x, y] (m)", {0.0, 0.0});
+    hand.well_center = sim::Vec2(center[0], center[1]);
+  }
 }
 
 void read_ellipse_axes(const MapReader& o, sim::ObjectSpec& obj) {

@@ -168,6 +168,7 @@ LineCurve::LineCurve(Vec2 origin, Vec2 direction) : origin_(origin), direction_(
 }
 PieceInterval LineCurve::piece_interval(int) const { return {-kInf, kInf}; }
 double LineCurve::reach() const { return kInf; }
+double LineCurve::period() const { return kInf; }
 CurveJet LineCurve::jet(double s, int) const {
   return {origin_ + s * direction_, direction_, Vec2::Zero(), Vec2::Zero()};
 }
@@ -195,6 +196,13 @@ std::string CircleCurve::describe() const {
   return std::string(side_ == Side::kConvexBody ? "circle" : "circular well") + " of radius " +
          format_significant(radius_) + " m";
 }
+
+// ---------------------------------------------------------------------------------------------
+CircleWellHand::CircleWellHand(Vec2 center, double radius)
+    : center_(center), well_(center, radius, CircleCurve::Side::kConcaveWell) {
+  if (!center.allFinite()) throw std::invalid_argument("circular well: centre must be finite");
+}
+double CircleWellHand::period() const { return 2.0 * std::numbers::pi; }
 
 // ---------------------------------------------------------------------------------------------
 EllipseCurve::EllipseCurve(double ax, double ay) : ax_(ax), ay_(ay) {

@@ -271,12 +271,23 @@ SolveReport solve_k_from(const SimulationSpec& spec,
 }
 }  // namespace
 
+namespace {
+// The problem a search runs on: every search starts the disk in the palm and asks for the back.
+std::shared_ptr<const RollingProblem> searched_problem(const SimulationSpec& s,
+                                                       const std::string& search) {
+  auto problem = build_problem(s);
+  require_palm_and_back(s.hand, *problem->hand, search);
+  return problem;
+}
+}  // namespace
+
 SolveReport solve_k(const SimulationSpec& spec, double period, const SearchSettings& set) {
   check_period(period);
   SimulationSpec s = paper_model(spec);
   s.motion.kind = MotionSpec::Kind::kButterfly;
   s.motion.period = period;
-  return solve_k_from(s, build_problem(s), period, spec.motion.k, set);
+  return solve_k_from(s, searched_problem(s, "the search for k (solve)"), period, spec.motion.k,
+                      set);
 }
 
 SolveReport solve_d(const SimulationSpec& spec, double period, double k,
@@ -286,7 +297,11 @@ SolveReport solve_d(const SimulationSpec& spec, double period, double k,
   s.motion.kind = MotionSpec::Kind::kButterfly;
   s.motion.period = period;
   s.motion.k = k;
-  build_problem(s);  // the starting shape must be valid
+  if (s.hand.shape != HandSpec::Shape::kPolynomial)
+    throw std::invalid_argument(std::string("hand.shape: ") + to_string(s.hand.shape) +
+                                ": the search for d varies the polynomial hand's d (hand.shape: "
+                                "polynomial)");
+  searched_problem(s, "the search for d (solve)");  // the starting shape must be valid
   int sims = 0;
   long rhs = 0;
   auto f = [&](double d) {
@@ -324,7 +339,7 @@ std::vector<SolveReport> locus(const SimulationSpec& spec, double from, double t
   if (n > 1 && !(to > from)) throw std::invalid_argument("to: must be larger than from");
   SimulationSpec s = paper_model(spec);
   s.motion.kind = MotionSpec::Kind::kButterfly;
-  const auto base = build_problem(s);
+  const auto base = searched_problem(s, "locus");
   std::vector<SolveReport> out;
   double k0 = spec.motion.k;
   for (int i = 0; i < n; ++i) {
@@ -359,7 +374,7 @@ SurfaceResult surface(const SimulationSpec& spec, double k_lo, double k_hi, int 
   if (!(p_hi > p_lo)) throw std::invalid_argument("period-to: must be larger than period-from");
   SimulationSpec s = paper_model(spec);
   s.motion.kind = MotionSpec::Kind::kButterfly;
-  const auto base = build_problem(s);
+  const auto base = searched_problem(s, "surface");
   SurfaceResult res;
   for (int i = 0; i < nk; ++i) res.k.push_back(k_lo + (k_hi - k_lo) * i / (nk - 1));
   for (int j = 0; j < np; ++j) res.period.push_back(p_lo + (p_hi - p_lo) * j / (np - 1));
@@ -403,7 +418,7 @@ TimeOptimalReport time_optimal(const SimulationSpec& spec, double lo, double hi,
   if (!(hi > lo)) throw std::invalid_argument("to: must be larger than from");
   SimulationSpec s = paper_model(spec);
   s.motion.kind = MotionSpec::Kind::kButterfly;
-  const auto base = build_problem(s);
+  const auto base = searched_problem(s, "time-optimal");
   const bool friction = s.contact.mu.has_value();
   TimeOptimalReport rep;
   double k0 = spec.motion.k;

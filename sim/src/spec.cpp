@@ -96,19 +96,87 @@ RollingDisk equivalent_disk(const ObjectSpec& o) {
   return disk;
 }
 
+const char* to_string(HandSpec::Shape shape) {
+  switch (shape) {
+    case HandSpec::Shape::kPolynomial:
+      return "polynomial";
+    case HandSpec::Shape::kLine:
+      return "line";
+    case HandSpec::Shape::kCircle:
+      return "circle";
+  }
+  return "unknown";
+}
+
+HandPtr build_hand(const HandSpec& spec) {
+  switch (spec.shape) {
+    case HandSpec::Shape::kPolynomial:
+      return std::make_shared<PolynomialHand>(spec.a, spec.b, spec.c, spec.d);
+    case HandSpec::Shape::kLine:
+      if (!std::isfinite(spec.line_angle))
+        throw std::invalid_argument("hand.angle_deg: must be finite");
+      if (!spec.line_origin.allFinite()) throw std::invalid_argument("hand.origin: must be finite");
+      return std::make_shared<LineCurve>(
+          spec.line_origin, Vec2(std::cos(spec.line_angle), std::sin(spec.line_angle)));
+    case HandSpec::Shape::kCircle:
+      if (!(spec.well_radius > 0) || !std::isfinite(spec.well_radius))
+        throw std::invalid_argument("hand.radius: must be positive and finite, got " +
+                                    format_significant(spec.well_radius));
+      if (!spec.well_center.allFinite()) throw std::invalid_argument("hand.center: must be finite");
+      return std::make_shared<CircleWellHand>(spec.well_center, spec.well_radius);
+  }
+  throw std::logic_error("build_hand: unknown hand shape");
+}
+
+void require_palm_and_back(const HandSpec& spec, const Curve& hand, const std::string& needed_by) {
+  const auto* h = dynamic_cast<const HandCurve*>(&hand);
+  if (h && h->has_palm_and_back()) return;
+  throw std::invalid_argument(std::string("hand.shape: ") + to_string(spec.shape) + " (" +
+                              hand.describe() + ") has no palm and back wells (s_h = -1 and +1), " +
+                              "which " + needed_by +
+                              " needs; simulate and render take any hand shape");
+}
+
+namespace {
+// The checks of the hand against the object: a disk of `radius` (the largest radius of curvature
+// of the object's boundary, for an ellipse) must fit every concave part of the outline.
+void validate_hand_for_object(const HandSpec& spec, const HandCurve& hand, double radius) {
+  switch (spec.shape) {
+    case HandSpec::Shape::kPolynomial:
+      validate_hand_for_disk(static_cast<const PolynomialHand&>(hand), radius);
+      return;
+    case HandSpec::Shape::kLine:
+      if (!(radius > 0) || !std::isfinite(radius))
+        throw std::invalid_argument("object.radius: must be positive and finite, got " +
+                                    format_significant(radius));
+      return;  // a straight edge has no concave part
+    case HandSpec::Shape::kCircle:
+      if (!(radius > 0) || !std::isfinite(radius))
+        throw std::invalid_argument("object.radius: must be positive and finite, got " +
+                                    format_significant(radius));
+      if (!(radius < spec.well_radius))
+        throw std::invalid_argument(
+            "hand.radius: the well (radius " + format_significant(spec.well_radius) +
+            " m) must be wider than the object (radius of curvature up to " +
+            format_significant(radius) + " m), which rolls inside it");
+      return;
+  }
+}
+}  // namespace
+
 std::shared_ptr<const RollingProblem> build_problem(const SimulationSpec& spec) {
   if (!(spec.gravity > 0) || !std::isfinite(spec.gravity))
     throw std::invalid_argument("gravity.g: must be positive and finite");
   if (!(spec.tilt > 0) || !(spec.tilt <= 0.5 * std::numbers::pi + 1e-12))
     throw std::invalid_argument("gravity.tilt_deg: must be in (0, 90] degrees");
   auto pb = std::make_shared<RollingProblem>();
-  auto hand = std::make_shared<PolynomialHand>(spec.hand.a, spec.hand.b, spec.hand.c, spec.hand.d);
+  const HandPtr hand = build_hand(spec.hand);
   const ObjectSpec& o = spec.object;
   if (o.round()) {
     const RollingDisk disk = equivalent_disk(o);
     pb->object = make_disk(disk.radius, o.mass, disk.inertia);
     pb->object.kind = kind_name(o.kind);
-    validate_hand_for_disk(*hand, disk.radius);
+    validate_hand_for_object(spec.hand, *hand, disk.radius);
   } else {
     pb->object = make_uniform_ellipse(o.semi_axis_x, o.semi_axis_y, o.mass);
     if (o.inertia) {
@@ -119,7 +187,7 @@ std::shared_ptr<const RollingProblem> build_problem(const SimulationSpec& spec) 
     // An ellipse touches the hand with its flattest part at most; check with its largest
     // radius of curvature, max(ax^2/ay, ay^2/ax).
     const double ax = o.semi_axis_x, ay = o.semi_axis_y;
-    validate_hand_for_disk(*hand, std::max(ax * ax / ay, ay * ay / ax));
+    validate_hand_for_object(spec.hand, *hand, std::max(ax * ax / ay, ay * ay / ax));
   }
   pb->hand = hand;
   if (spec.motion.kind == MotionSpec::Kind::kButterfly)

@@ -477,8 +477,8 @@ TEST(SceneTest, UnknownEnumValues) {
   expect_field_error(with(kBase, "type: disk", "type: square"), "object.type", "disk, ring, ball, ellipse");
   expect_field_error(with(kBase, "type: butterfly", "type: wave"), "motion.type",
                      "butterfly, fixed");
-  expect_field_error(with(kBase, "shape: polynomial", "shape: circle"), "hand.shape",
-                     "allowed: polynomial");
+  expect_field_error(with(kBase, "shape: polynomial", "shape: spiral"), "hand.shape",
+                     "allowed: polynomial, line, circle");
 }
 
 TEST(SceneTest, DerivedCoefficientsCannotBeGiven) {
@@ -976,3 +976,91 @@ TEST_F(SceneFileTest, DirectoryIsUnreadable) {
 }
 
 }  // namespace
+
+// --------------------------------------------------------------------------------------------
+// Hand shapes: line and circle
+
+namespace {
+const std::string kLineHand = "hand:\n  shape: line\n  angle_deg: 30\n  origin: [0.01, -0.02]\n";
+const std::string kCircleHand = "hand:\n  shape: circle\n  radius: 0.25\n  center: [0, 0.1]\n";
+}  // namespace
+
+TEST(SceneHandShapes, ALineIsAnOpenHandThroughItsOriginAtItsAngle) {
+  const Scene s = parse_scene(with(kBase, kHandSection, kLineHand), "t.yaml");
+  EXPECT_EQ(s.sim.hand.shape, sim::HandSpec::Shape::kLine);
+  EXPECT_NEAR(s.sim.hand.line_angle, kPi / 6, 1e-15);
+  const auto problem = sim::build_problem(s.sim);
+  const auto* line = dynamic_cast<const sim::HandCurve*>(problem->hand.get());
+  ASSERT_NE(line, nullptr);
+  EXPECT_FALSE(line->has_palm_and_back());
+  EXPECT_TRUE(std::isinf(line->period()));
+  // c(s) = origin + s (cos 30, sin 30); the object's side is above it.
+  const sim::CurveGeometry g = line->geometry(0.5);
+  EXPECT_NEAR(g.point.x(), 0.01 + 0.5 * std::cos(kPi / 6), 1e-15);
+  EXPECT_NEAR(g.point.y(), -0.02 + 0.5 * std::sin(kPi / 6), 1e-15);
+  EXPECT_NEAR(g.normal.x(), -std::sin(kPi / 6), 1e-15);
+  EXPECT_NEAR(g.normal.y(), std::cos(kPi / 6), 1e-15);
+  // The defaults: angle 0 through the pivot.
+  const Scene d = parse_scene(with(kBase, kHandSection, "hand:\n  shape: line\n"), "t.yaml");
+  EXPECT_EQ(d.sim.hand.line_angle, 0.0);
+  EXPECT_EQ(d.sim.hand.line_origin, sim::Vec2::Zero());
+}
+
+TEST(SceneHandShapes, ACircleIsAWellWithItsBottomAtSZero) {
+  const Scene s = parse_scene(with(kBase, kHandSection, kCircleHand), "t.yaml");
+  EXPECT_EQ(s.sim.hand.shape, sim::HandSpec::Shape::kCircle);
+  const auto problem = sim::build_problem(s.sim);
+  const auto* well = dynamic_cast<const sim::CircleWellHand*>(problem->hand.get());
+  ASSERT_NE(well, nullptr);
+  EXPECT_FALSE(well->has_palm_and_back());
+  EXPECT_NEAR(well->period(), 2 * kPi, 1e-15);
+  // s = 0 at the bottom, the outward normal (out of the body, into the well) pointing up, and the
+  // well concave where the object touches it: curvature -1/R.
+  const sim::CurveGeometry g = well->geometry(0.0);
+  EXPECT_NEAR(g.point.x(), 0.0, 1e-15);
+  EXPECT_NEAR(g.point.y(), 0.1 - 0.25, 1e-15);
+  EXPECT_NEAR(g.normal.y(), 1.0, 1e-15);
+  EXPECT_NEAR(g.curvature, -1 / 0.25, 1e-12);
+}
+
+TEST(SceneHandShapes, EachShapesKeysOnlyAndTheObjectMustFitTheWell) {
+  expect_field_error(with(kBase, kHandSection, "hand:\n  shape: circle\n"), "hand.radius",
+                     "missing");
+  expect_field_error(with(kBase, kHandSection, "hand:\n  shape: circle\n  radius: 0.04\n"),
+                     "hand.radius", "wider than the object");
+  expect_field_error(with(kBase, kHandSection, "hand:\n  shape: circle\n  radius: 0\n"),
+                     "hand.radius", "positive");
+  expect_field_error(with(kBase, kHandSection, "hand:\n  shape: line\n  radius: 0.3\n"),
+                     "hand.radius", "only for shape: circle");
+  expect_field_error(with(kBase, kHandSection, "hand:\n  shape: circle\n  radius: 0.3\n  d: 1\n"),
+                     "hand.d", "only for shape: polynomial");
+  expect_field_error(with(kBase, "  d: 0.216\n", "  d: 0.216\n  angle_deg: 3\n"), "hand.angle_deg",
+                     "only for shape: line");
+  expect_field_error(with(kBase, kHandSection, "hand:\n  shape: line\n  origin: [1, 2, 3]\n"),
+                     "hand.origin", "list of 2");
+  expect_field_error(with(kBase, kHandSection, "hand:\n  shape: line\n  angle_deg: .inf\n"),
+                     "hand.angle_deg", "finite");
+  expect_field_error(with(kBase, kHandSection, "hand:\n  shape: oval\n"), "hand.shape");
+  // An ellipse must fit the well with its flattest part: radius of curvature ax^2/ay = 0.288 m.
+  const std::string ellipse = with(with(kBase, kHandSection, kCircleHand), "  radius: 0.051\n",
+                                   "  semi_axes: [0.12, 0.05]\n");
+  expect_field_error(with(ellipse, "type: disk", "type: ellipse"), "hand.radius");  // 0.25 < 0.288
+}
+
+TEST(SceneHandShapes, TheSearchesRefuseAHandWithoutPalmAndBack) {
+  for (const std::string& hand : {kLineHand, kCircleHand}) {
+    const Scene s = parse_scene(with(kBase, kHandSection, hand), "t.yaml");
+    const auto problem = sim::build_problem(s.sim);
+    try {
+      sim::require_palm_and_back(s.sim.hand, *problem->hand, "solve");
+      ADD_FAILURE() << "accepted " << hand;
+    } catch (const std::invalid_argument& e) {
+      const std::string msg = e.what();
+      EXPECT_EQ(msg.rfind("hand.shape: ", 0), 0u) << msg;
+      EXPECT_NE(msg.find("solve"), std::string::npos) << msg;
+    }
+  }
+  const Scene paper = parse_scene(kBase, "t.yaml");
+  EXPECT_NO_THROW(
+      sim::require_palm_and_back(paper.sim.hand, *sim::build_problem(paper.sim)->hand, "solve"));
+}

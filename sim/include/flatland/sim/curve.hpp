@@ -136,8 +136,9 @@ class PolynomialHand final : public HandCurve {
 };
 
 /// A straight line through `origin` along unit `direction`, s in metres. Outward normal is the
-/// direction turned +90 degrees (for direction +x the free side is +y).
-class LineCurve final : public Curve {
+/// direction turned +90 degrees (for direction +x the free side is +y). As a hand (`hand.shape:
+/// line`, an incline) it is open: no period, no palm and back wells.
+class LineCurve final : public HandCurve {
  public:
   LineCurve(Vec2 origin, Vec2 direction);
   int piece_at(double, int) const override { return 0; }
@@ -147,6 +148,10 @@ class LineCurve final : public Curve {
   std::string describe() const override;
   double nearest(const Vec2& p) const override { return (p - origin_).dot(direction_); }
   double reach() const override;
+  double period() const override;
+  bool has_palm_and_back() const override { return false; }
+  const Vec2& origin() const { return origin_; }
+  const Vec2& direction() const { return direction_; }
 
  private:
   Vec2 origin_, direction_;
@@ -175,6 +180,30 @@ class CircleCurve final : public Curve {
   Vec2 center_;
   double radius_;
   Side side_;
+};
+
+/// A circular well as a hand (`hand.shape: circle`): the body is outside the circle of radius R
+/// about `center` and the object rolls inside it, c(s) = center + R (sin s, -cos s), s the angle in
+/// radians from the bottom (CircleCurve's kConcaveWell, whose formulas it uses). Closed with period
+/// 2 pi, but with no palm and back wells in the butterfly's sense.
+class CircleWellHand final : public HandCurve {
+ public:
+  CircleWellHand(Vec2 center, double radius);
+  double radius() const { return well_.radius(); }
+  const Vec2& center() const { return center_; }
+  int piece_at(double s, int direction) const override { return well_.piece_at(s, direction); }
+  PieceInterval piece_interval(int piece) const override { return well_.piece_interval(piece); }
+  CurveJet jet(double s, int piece) const override { return well_.jet(s, piece); }
+  int normal_side() const override { return well_.normal_side(); }
+  std::string describe() const override { return well_.describe(); }
+  double nearest(const Vec2& p) const override { return well_.nearest(p); }
+  double reach() const override { return well_.reach(); }
+  double period() const override;
+  bool has_palm_and_back() const override { return false; }
+
+ private:
+  Vec2 center_;
+  CircleCurve well_;
 };
 
 /// Ellipse with semi-axes (ax, ay) about the origin, c(s) = (ax cos s, ay sin s), convex body,

@@ -11,9 +11,24 @@
 namespace flatland::sim {
 
 struct HandSpec {
+  /// The outline (scene `hand.shape`); each shape reads its own fields below.
+  enum class Shape { kPolynomial, kLine, kCircle };
+  Shape shape = Shape::kPolynomial;
   // The paper's polynomial hand (section 4.1), metres; e and f are derived.
   double a = 0.18, b = -0.18, c = -0.252, d = 0.216;
+  // A line (an incline): through `line_origin` (m, hand frame), along the direction at
+  // `line_angle` (rad, counter-clockwise from the hand's +x); the object rolls on the side the
+  // direction turned +90 degrees points to (above it for |line_angle| < 90 degrees).
+  Vec2 line_origin = Vec2::Zero();
+  double line_angle = 0;
+  // A circular well: the object rolls inside the circle of radius `well_radius` (m) about
+  // `well_center` (m, hand frame); s_h is the angle from the well's bottom.
+  double well_radius = 0.2;
+  Vec2 well_center = Vec2::Zero();
 };
+
+/// The scene's word for a shape: "polynomial", "line", "circle".
+const char* to_string(HandSpec::Shape shape);
 
 /// The rolling object's physical description (the scene's `object`); build_problem converts it
 /// into the rigid object the dynamics see (equivalent_disk for the round ones).
@@ -73,6 +88,15 @@ struct SimulationSpec {
   /// Simulated time span: `duration` or the default above.
   double end_time() const;
 };
+
+/// The hand's outline of a spec (no check against the object; build_problem does that). Throws
+/// std::invalid_argument naming the field for values no outline has (a non-positive radius).
+HandPtr build_hand(const HandSpec& spec);
+
+/// Refuses a hand without the butterfly's palm and back wells (HandCurve::has_palm_and_back: a
+/// line, a circular well): `needed_by` (a command, "the closed loop's plan") starts in the palm
+/// and ends in the back. Throws std::invalid_argument naming hand.shape, one line.
+void require_palm_and_back(const HandSpec& spec, const Curve& hand, const std::string& needed_by);
 
 /// Build (and validate) the problem: checks the hand shape for a disk (validate_hand_for_disk),
 /// positive radius/mass, the motion's parameters. Throws std::invalid_argument naming the field.
