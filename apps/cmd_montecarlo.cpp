@@ -172,6 +172,7 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
   // The scene as every controller assumes it compiles before anything is printed: a bad type or
   // config is the one line of bad input.
   const auto nominal = model::compile(scene);
+  drivers::require_plannable(*nominal);
   for (const std::string& name : o.controllers)
     model::compile(drivers::scene_for_controller(scene, name, "--controller"));
 

@@ -73,12 +73,15 @@ sim::SimulationSpec& start_period_search(Scene& scene, const IntegratorOverrides
   return scene.sim;
 }
 
-/// ... and last: mu, and the lossless problem at the bracket's start.
+/// ... and last: mu, and the lossless problem at the bracket's start, whose hand must have the
+/// palm and back the search goes between (`command` names the search).
 void finish_period_search(sim::SimulationSpec& spec, std::optional<double> mu, double from,
-                          Spelling spelling) {
+                          Spelling spelling, const std::string& command) {
   if (mu) apply_mu(*mu, spec, spelling);
   spec.motion.period = from;
-  build_problem_checked(sim::paper_model(spec), {{"contact.mu", option_name("mu", spelling)}});
+  const auto problem =
+      build_problem_checked(sim::paper_model(spec), {{"contact.mu", option_name("mu", spelling)}});
+  sim::require_palm_and_back(spec.hand, *problem->hand, command);
 }
 
 }  // namespace
@@ -181,7 +184,12 @@ sim::SimulationSpec prepare_solve(Scene scene, const SolveRequest& r, Spelling s
   std::vector<std::pair<std::string, std::string>> given;
   if (r.k) given.emplace_back("motion.k", name("k"));
   if (r.period) given.emplace_back("motion.period", name("period"));
-  build_problem_checked(spec, given);  // the scene with the overrides must be valid
+  // The scene with the overrides must be valid, and its hand have the palm and the back.
+  const auto problem = build_problem_checked(spec, given);
+  sim::require_palm_and_back(spec.hand, *problem->hand, "solve");
+  if (r.solve_for == "d" && spec.hand.shape != sim::HandSpec::Shape::kPolynomial)
+    throw UsageError(name("solve_for") + ": d is the polynomial hand's coefficient; the scene's " +
+                     "hand.shape is " + sim::to_string(spec.hand.shape));
   return spec;
 }
 
@@ -292,7 +300,7 @@ sim::SimulationSpec prepare_time_optimal(Scene scene, const TimeOptimalRequest& 
   sim::SimulationSpec& spec = start_period_search(scene, r.integrator, r.from, r.to, spelling);
   require_positive(name("period_tolerance"), r.period_tolerance, "s");
   require_positive(name("tolerance"), r.tolerance, "");
-  finish_period_search(spec, r.mu, r.from, spelling);
+  finish_period_search(spec, r.mu, r.from, spelling, "time-optimal");
   return spec;
 }
 
@@ -310,7 +318,7 @@ sim::SimulationSpec prepare_locus(Scene scene, const LocusRequest& r, Spelling s
                      ": must be in [1, 10000] (each is a solve of ~10 simulations), got " +
                      std::to_string(r.n));
   require_positive(name("tolerance"), r.tolerance, "");
-  finish_period_search(spec, r.mu, r.from, spelling);
+  finish_period_search(spec, r.mu, r.from, spelling, "locus");
   return spec;
 }
 
@@ -348,7 +356,7 @@ sim::SimulationSpec prepare_surface(Scene scene, const SurfaceRequest& r, Spelli
                      std::to_string(r.threads));
   spec.motion.period = r.period_from;
   spec.motion.k = r.k_from;
-  sim::build_problem(spec);
+  sim::require_palm_and_back(spec.hand, *sim::build_problem(spec)->hand, "surface");
   return spec;
 }
 

@@ -45,13 +45,24 @@ class AngleHistory {
 
 }  // namespace
 
-PlanInfo make_plan(const model::Model& nominal_model) {
+void require_plannable(const model::Model& nominal_model) {
   const Scene& nominal = nominal_model.spec;
   const sim::SimulationSpec& spec = nominal.sim;
   if (spec.motion.kind != sim::MotionSpec::Kind::kButterfly)
     throw std::invalid_argument(nominal.origin +
                                 ": motion: the closed loop follows a butterfly plan "
                                 "(motion.type: butterfly)");
+  try {  // the plan goes from the palm to the back
+    sim::require_palm_and_back(spec.hand, *nominal_model.plant->hand, "the closed loop's plan");
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(nominal.origin + ": " + e.what());
+  }
+}
+
+PlanInfo make_plan(const model::Model& nominal_model) {
+  require_plannable(nominal_model);
+  const Scene& nominal = nominal_model.spec;
+  const sim::SimulationSpec& spec = nominal.sim;
   PlanInfo info;
   info.period = spec.motion.period;
   info.k = spec.motion.k;

@@ -35,6 +35,11 @@ struct PlanInfo {
   bool solved = false;
 };
 PlanInfo make_plan(const model::Model& nominal);
+/// What make_plan needs of the scene, checked without planning (a command checks it before it
+/// prints or writes anything): a butterfly motion, and a hand with the palm and back wells the
+/// plan goes between (sim::require_palm_and_back). Throws std::invalid_argument, one line naming
+/// the field.
+void require_plannable(const model::Model& nominal);
 
 /// One row of the 1 kHz log.
 struct TickLog {
