@@ -111,7 +111,7 @@ cv::Mat to_bgr8(const cv::Mat& image) {
 /// = f_n n + f_t t (n the hand's outward normal, t its tangent towards increasing s_h, both rotated
 /// by theta into the table frame) is drawn from the projected contact point, 0.1 m on the table per
 /// in-plane weight m g sin(tilt).
-void draw_overlay(cv::Mat& bgr, const camera::CameraModel& camera, const sim::PolynomialHand& hand,
+void draw_overlay(cv::Mat& bgr, const camera::CameraModel& camera, const sim::HandCurve& hand,
                   double disk_radius, const sim::Sample& s, const render::FrameTruth& truth) {
   const double c = std::cos(s.theta), sn = std::sin(s.theta);
   const auto rotate = [&](const sim::Vec2& v) {
@@ -401,6 +401,7 @@ void run_render(const RenderOptions& o) {
   const render::GlBackend backend = render::parse_backend(scene.render.backend);
   const std::shared_ptr<const model::Model> compiled = model::compile(scene);
   sim::resolve_formulation(*compiled->plant, spec.run.formulation);
+  if (o.solve) sim::require_palm_and_back(spec.hand, *compiled->hand, "render --solve");
   // The frames the run will write, known before it runs: bounded, like every output.
   const double frames_wanted = std::floor((spec.end_time() - spec.initial.t0) * camera.fps) + 1;
   if (frames_wanted > kMaxRenderFrames)
@@ -489,7 +490,7 @@ void run_render(const RenderOptions& o) {
 
   // ---- render
   const long n = static_cast<long>(std::floor((t_end - t0) * fps + 1e-9)) + 1;
-  const sim::PolynomialHand& hand = *compiled->hand;
+  const sim::HandCurve& hand = *compiled->hand;
   std::string truth_csv = std::string(kTruthColumns) + "\n";
   long written = 0, dropped = 0;
   std::vector<unsigned char> png;

@@ -104,14 +104,13 @@ camera::Board default_board(const camera::CameraModel& camera) {
   return b;
 }
 
-// The hand turned to `angle`: its outline's axis-aligned bounding box in the table frame,
-// widened by `margin`.
-cv::Rect2d hand_box(const sim::PolynomialHand& hand, double angle, double margin) {
+// The hand turned to `angle`: its drawn plate's (render::hand_plate_outline) axis-aligned bounding
+// box in the table frame, widened by `margin`.
+cv::Rect2d hand_box(const sim::HandCurve& hand, double angle, double margin, double table_extent) {
   double x0 = 1e9, y0 = 1e9, x1 = -1e9, y1 = -1e9;
   const double c = std::cos(angle), s = std::sin(angle);
-  for (int i = 0; i < 400; ++i) {
-    const sim::Vec2 p = hand.geometry(-1.0 + 4.0 * i / 400).point;
-    const double x = c * p.x() - s * p.y(), y = s * p.x() + c * p.y();
+  for (const cv::Point2d& p : render::hand_plate_outline(hand, table_extent)) {
+    const double x = c * p.x - s * p.y, y = s * p.x + c * p.y;
     x0 = std::min(x0, x);
     x1 = std::max(x1, x);
     y0 = std::min(y0, y);
@@ -181,8 +180,8 @@ std::string numbered(const std::string& dir, const std::string& stem, int i) {
 std::vector<TablePlacement> spread_placements(const SessionRenderer& sr, const camera::Board& board,
                                               double hand_angle, int n, std::mt19937_64& rng) {
   const Scene& scene = sr.scene;
-  const cv::Rect2d hand = hand_box(*sr.model.hand, hand_angle, board.square);
   const double extent = scene.render.table_extent;
+  const cv::Rect2d hand = hand_box(*sr.model.hand, hand_angle, board.square, extent);
   const double board_z = 0.0005;  // a printed sheet: half a millimetre thick
   std::uniform_real_distribution<double> U(0.0, 1.0);
   std::vector<TablePlacement> candidates;

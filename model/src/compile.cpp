@@ -210,7 +210,7 @@ vision::HandMapping hand_mapping(const Model& model, const camera::CameraModel& 
   mapping.plane_z = scene.render.disk_thickness;
   // The centre rides the hand's outline at the rolling radius (a ball on rails': below R).
   mapping.disk_radius = *model.plant->object.disk_radius;
-  mapping.hand = *model.hand;
+  mapping.hand = model.hand;
   return mapping;
 }
 
@@ -223,8 +223,8 @@ std::shared_ptr<const Model> compile(Scene scene) {
   m->spec = std::move(scene);
   const Scene& s = m->spec;
   m->plant = sim::build_problem(s.sim);
-  m->hand = std::dynamic_pointer_cast<const sim::PolynomialHand>(m->plant->hand);
-  if (!m->hand) throw std::logic_error("compile: the plant's hand is not the polynomial hand");
+  m->hand = std::dynamic_pointer_cast<const sim::HandCurve>(m->plant->hand);
+  if (!m->hand) throw std::logic_error("compile: the plant's hand is not a hand's outline");
   // The paper's model differs from the scene's in its contact law alone (no losses): the same
   // hand, object and motion, not built (and checked) twice.
   auto paper = std::make_shared<sim::RollingProblem>(*m->plant);

@@ -342,9 +342,11 @@ std::optional<PolygonMesh> banded_triangulation(const std::vector<cv::Point2d>& 
   return out;
 }
 
-Mesh hand_mesh(const sim::PolynomialHand& hand, double thickness) {
-  // Right half from the tip (u = 0) to the middle of the palm/back (u = 1); the paper's shape is
-  // symmetric about the x axis within a half (x even, y odd in u) and the halves mirror x -> -x.
+// The paper's polynomial hand's outline, counter-clockwise: the right half sampled from the tip
+// (u = 0) to the middle of the palm/back (u = 1) and mirrored; the shape is symmetric about the x
+// axis within a half (x even, y odd in u) and the halves mirror x -> -x, so the drawn outline is
+// exactly symmetric too.
+std::vector<cv::Point2d> polynomial_outline(const sim::PolynomialHand& hand) {
   const std::vector<double> u = adaptive_samples(hand, 0, 0.0, 1.0, kOutlineTolerance);
   std::vector<cv::Point2d> half;  // (x(u), |y(u)|)
   for (std::size_t i = 0; i < u.size(); ++i) {
@@ -359,14 +361,129 @@ Mesh hand_mesh(const sim::PolynomialHand& hand, double thickness) {
   for (std::size_t i = 1; i <= last; ++i) outline.emplace_back(half[i].x, half[i].y);
   for (std::size_t i = last; i-- > 0;) outline.emplace_back(-half[i].x, half[i].y);
   for (std::size_t i = 1; i < last; ++i) outline.emplace_back(-half[i].x, -half[i].y);
+  return outline;
+}
+
+double signed_area(const std::vector<cv::Point2d>& polygon) {
+  double area = 0;
+  for (std::size_t i = 0; i < polygon.size(); ++i)
+    area += polygon[i].cross(polygon[(i + 1) % polygon.size()]) / 2;
+  return area;
+}
+
+// Any other closed hand's outline over one period from s = -1 (the palm's middle), each piece
+// sampled by its own formula, counter-clockwise (hands are traversed clockwise, so reversed).
+std::vector<cv::Point2d> closed_outline(const sim::HandCurve& hand) {
+  const double s_begin = -1.0, s_end = s_begin + hand.period();
+  std::vector<cv::Point2d> outline;
+  for (double s = s_begin; s < s_end;) {
+    const int piece = hand.piece_at(s, +1);
+    const double end = std::min(hand.piece_interval(piece).hi, s_end);
+    if (!(end > s)) throw std::logic_error("render: a hand piece that does not advance s");
+    const std::vector<double> u = adaptive_samples(hand, piece, s, end, kOutlineTolerance);
+    for (std::size_t i = 0; i + 1 < u.size(); ++i) {  // the end is the next piece's start
+      const sim::Vec2 p = hand.geometry(u[i], piece).point;
+      outline.emplace_back(p.x(), p.y());
+    }
+    s = end;
+  }
+  if (signed_area(outline) < 0) std::reverse(outline.begin(), outline.end());
+  return outline;
+}
+
+// Where an open hand leaves the disk of radius `reach` about the pivot, walking from s in
+// `direction` (+1/-1) in steps of 1 cm along it; or where the curve ends.
+double open_hand_end(const sim::HandCurve& hand, double s, int direction, double reach) {
+  for (int i = 0; i < 1000000; ++i) {
+    const int piece = hand.piece_at(s, direction);
+    const sim::PieceInterval iv = hand.piece_interval(piece);
+    const sim::CurveGeometry g = hand.geometry(s, piece);
+    if (g.point.norm() >= reach) return s;
+    const double end = direction > 0 ? iv.hi : iv.lo;
+    double next = s + direction * 0.01 / g.speed;
+    if (direction * (next - end) >= 0) {
+      if (hand.piece_at(end, direction) == piece) return end;  // the curve's own end
+      next = end;
+    }
+    s = next;
+  }
+  return s;
+}
+
+// The distance from the pivot an open hand is drawn out to: the table's corners (at
+// sqrt(2) table_extent) lie well inside it whatever the hand's angle.
+double open_hand_reach(double table_extent) { return 2 * table_extent; }
+
+// An open hand (a line): its curve from where it enters to where it leaves the disk of radius
+// 2 table_extent about the pivot, closed by a back edge 4 table_extent deep in the body (along the
+// inward normal at each end), counter-clockwise.
+std::vector<cv::Point2d> open_outline(const sim::HandCurve& hand, double table_extent) {
+  const double reach = open_hand_reach(table_extent);
+  const double middle = hand.nearest(sim::Vec2::Zero());
+  const double lo = open_hand_end(hand, middle, -1, reach);
+  const double hi = open_hand_end(hand, middle, +1, reach);
+  std::vector<cv::Point2d> edge;
+  for (double s = lo; s < hi;) {
+    const int piece = hand.piece_at(s, +1);
+    const double end = std::min(hand.piece_interval(piece).hi, hi);
+    if (!(end > s)) throw std::logic_error("render: a hand piece that does not advance s");
+    const std::vector<double> u = adaptive_samples(hand, piece, s, end, kOutlineTolerance);
+    for (std::size_t i = 0; i + 1 < u.size() || (end == hi && i < u.size()); ++i) {
+      const sim::Vec2 p = hand.geometry(u[i], piece).point;
+      edge.emplace_back(p.x(), p.y());
+    }
+    s = end;
+  }
+  const double depth = 2 * reach;
+  for (double s : {hi, lo}) {
+    const sim::CurveGeometry g = hand.geometry(s, hand.piece_at(s, s == hi ? -1 : +1));
+    const sim::Vec2 back = g.point - depth * g.normal;
+    edge.emplace_back(back.x(), back.y());
+  }
+  if (signed_area(edge) < 0) std::reverse(edge.begin(), edge.end());
+  return edge;
+}
+
+// How far a circular well's drawn ring reaches beyond the well: its outer radius is this times
+// the well's radius.
+constexpr double kWellRingOuter = 1.25;
+
+// A circle of `radius` about `center` in as many segments as keep the chord within the outline
+// tolerance of the circle, counter-clockwise.
+std::vector<cv::Point2d> circle_points(const sim::Vec2& center, double radius, int segments) {
+  std::vector<cv::Point2d> out;
+  for (int i = 0; i < segments; ++i) {
+    const double a = 2 * std::numbers::pi * i / segments;
+    out.emplace_back(center.x() + radius * std::cos(a), center.y() + radius * std::sin(a));
+  }
+  return out;
+}
+int circle_segments(double radius) {
+  const double step = 2 * std::acos(std::max(0.0, 1 - kOutlineTolerance / radius));
+  return std::clamp(static_cast<int>(std::ceil(2 * std::numbers::pi / step)), 32, 4096);
+}
+
+// The hand plate's pivot: a short cylinder on top of the plate at the origin.
+void add_pivot(Mesh& m, double thickness) {
+  constexpr int kSeg = 32;
+  const double pr = 0.012, pz = thickness + 0.004;
+  for (int i = 0; i < kSeg; ++i) {
+    const double a0 = 2 * std::numbers::pi * i / kSeg, a1 = 2 * std::numbers::pi * (i + 1) / kSeg;
+    add_triangle(m, {0, 0, pz}, {pr * std::cos(a0), pr * std::sin(a0), pz},
+                 {pr * std::cos(a1), pr * std::sin(a1), pz}, {0, 0, 1}, kPivot);
+  }
+}
+
+// A plate of `thickness` whose top face is the simple polygon `outline` (counter-clockwise), with
+// its side walls and, where the pivot is on the plate, the pivot (a line's plate may pass beside
+// it).
+Mesh plate_mesh(const std::vector<cv::Point2d>& outline, double thickness) {
   Mesh m;
   const double z0 = 0.0005, z1 = thickness;
   // The top face. Band depth and key spacing scale with the hand (about 8 mm and 33 mm for the
   // paper's hand: band triangles a few pixels long, inner ones tens of pixels); the depth is
   // halved until the band fits the outline's curvature, and plain ear clipping is the fallback.
-  double area = 0;
-  for (std::size_t i = 0; i < outline.size(); ++i)
-    area += outline[i].cross(outline[(i + 1) % outline.size()]) / 2;
+  const double area = signed_area(outline);
   std::optional<PolygonMesh> top;
   for (double depth = 0.04 * std::sqrt(area); !top && depth > 1e-4; depth /= 2)
     top = banded_triangulation(outline, depth, 4 * depth);
@@ -384,15 +501,38 @@ Mesh hand_mesh(const sim::PolynomialHand& hand, double thickness) {
     const cv::Vec3d normal(d.y / len, -d.x / len, 0);  // outward for a counter-clockwise outline
     add_quad(m, {a.x, a.y, z0}, {b.x, b.y, z0}, {b.x, b.y, z1}, {a.x, a.y, z1}, normal, kAluminium);
   }
-  // The pivot: a short cylinder on top of the hand plate at the origin.
-  constexpr int kSeg = 32;
-  const double pr = 0.012, pz = z1 + 0.004;
-  for (int i = 0; i < kSeg; ++i) {
-    const double a0 = 2 * std::numbers::pi * i / kSeg, a1 = 2 * std::numbers::pi * (i + 1) / kSeg;
-    add_triangle(m, {0, 0, pz}, {pr * std::cos(a0), pr * std::sin(a0), pz},
-                 {pr * std::cos(a1), pr * std::sin(a1), pz}, {0, 0, 1}, kPivot);
+  std::vector<cv::Point2f> polygon(outline.begin(), outline.end());
+  if (cv::pointPolygonTest(polygon, cv::Point2f(0, 0), false) >= 0) add_pivot(m, thickness);
+  return m;
+}
+
+// A circular well drawn as a ring: the plate between the well's circle and kWellRingOuter times
+// it, walls inside and out. No pivot cap: it would stand in the well, over the object.
+Mesh well_ring_mesh(const sim::CircleWellHand& well, double thickness) {
+  Mesh m;
+  const double z0 = 0.0005, z1 = thickness;
+  const double r_in = well.radius(), r_out = kWellRingOuter * r_in;
+  const int n = circle_segments(r_out);
+  const std::vector<cv::Point2d> in = circle_points(well.center(), r_in, n);
+  const std::vector<cv::Point2d> out = circle_points(well.center(), r_out, n);
+  for (int i = 0; i < n; ++i) {
+    const int j = (i + 1) % n;
+    add_quad(m, {in[i].x, in[i].y, z1}, {out[i].x, out[i].y, z1}, {out[j].x, out[j].y, z1},
+             {in[j].x, in[j].y, z1}, {0, 0, 1}, kAluminium);
+    const double a = 2 * std::numbers::pi * (i + 0.5) / n;
+    const cv::Vec3d radial(std::cos(a), std::sin(a), 0);
+    add_quad(m, {out[i].x, out[i].y, z0}, {out[j].x, out[j].y, z0}, {out[j].x, out[j].y, z1},
+             {out[i].x, out[i].y, z1}, radial, kAluminium);
+    add_quad(m, {in[i].x, in[i].y, z0}, {in[j].x, in[j].y, z0}, {in[j].x, in[j].y, z1},
+             {in[i].x, in[i].y, z1}, -radial, kAluminium);
   }
   return m;
+}
+
+Mesh hand_mesh(const sim::HandCurve& hand, double thickness, double table_extent) {
+  if (const auto* well = dynamic_cast<const sim::CircleWellHand*>(&hand))
+    return well_ring_mesh(*well, thickness);
+  return plate_mesh(hand_plate_outline(hand, table_extent), thickness);
 }
 
 // The disk's rubber side wall (its top is drawn by kDiskFragmentShader on disk_top_quad), and a
@@ -538,6 +678,20 @@ cv::Matx33d rot_z(double a) {
 
 }  // namespace
 
+std::vector<cv::Point2d> hand_plate_outline(const sim::HandCurve& hand, double table_extent) {
+  if (const auto* polynomial = dynamic_cast<const sim::PolynomialHand*>(&hand))
+    return polynomial_outline(*polynomial);
+  if (const auto* well = dynamic_cast<const sim::CircleWellHand*>(&hand))
+    return circle_points(well->center(), kWellRingOuter * well->radius(),
+                         circle_segments(kWellRingOuter * well->radius()));
+  if (!std::isfinite(hand.period())) {
+    if (!(table_extent > 0) || !std::isfinite(table_extent))
+      throw std::invalid_argument("render.table_extent: must be positive and finite");
+    return open_outline(hand, table_extent);
+  }
+  return closed_outline(hand);
+}
+
 SceneState SceneState::from_spatial_sample(const sim::SpatialSample& s,
                                            const sim::HandPose3& hand) {
   SceneState st;
@@ -643,7 +797,7 @@ struct Renderer::Impl {
           kBodyQuads, kBodyQuads / 2, kBall, 8, kBallCell));
     }
     table = upload(table_mesh(s.render.table_extent));
-    if (s.hand) hand = upload(hand_mesh(*s.hand, s.render.hand_thickness));
+    if (s.hand) hand = upload(hand_mesh(*s.hand, s.render.hand_thickness, s.render.table_extent));
     disk = upload(disk_side_mesh(disk_radius, s.render.disk_thickness, hole_radius));
     disk_top = upload(disk_top_quad(disk_radius, s.render.disk_thickness));
     for (const camera::PlacedBoard& b : s.boards) targets.push_back(make_target(b));

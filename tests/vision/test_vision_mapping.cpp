@@ -31,7 +31,8 @@ vision::HandMapping mapping_for(const Scene& s, const camera::CameraModel& camer
   m.camera = camera;
   m.plane_z = s.render.disk_thickness;  // the truth (and the tracked edge) is the top face
   m.disk_radius = s.sim.object.radius;
-  m.hand = sim::PolynomialHand(s.sim.hand.a, s.sim.hand.b, s.sim.hand.c, s.sim.hand.d);
+  m.hand =
+      std::make_shared<sim::PolynomialHand>(s.sim.hand.a, s.sim.hand.b, s.sim.hand.c, s.sim.hand.d);
   return m;
 }
 

@@ -79,7 +79,7 @@ cv::Point2d table_to_hand(cv::Point2d p_table, cv::Point2d axis_table, double th
 namespace {
 
 // Squared distance from p to the offset point of piece `piece` at s.
-double offset_distance2(const sim::PolynomialHand& hand, double r, const sim::Vec2& p, double s,
+double offset_distance2(const sim::HandCurve& hand, double r, const sim::Vec2& p, double s,
                         int piece) {
   const sim::CurveGeometry g = hand.geometry(s, piece);
   return (g.point + r * g.normal - p).squaredNorm();
@@ -87,14 +87,25 @@ double offset_distance2(const sim::PolynomialHand& hand, double r, const sim::Ve
 
 }  // namespace
 
-ContactEstimate contact_parameter(const sim::PolynomialHand& hand, double disk_radius,
+namespace {
+// The open hand's scale of s: s per metre along the curve at s.
+double parameter_per_metre(const sim::HandCurve& hand, double s) {
+  return 1.0 / hand.geometry(s, hand.piece_at(s, +1)).speed;
+}
+}  // namespace
+
+ContactEstimate contact_parameter(const sim::HandCurve& hand, double disk_radius,
                                   cv::Point2d p_hand, double guess, double half_window) {
   const sim::Vec2 p(p_hand.x, p_hand.y);
   const double lo = guess - half_window, hi = guess + half_window;
   // The grid is fine enough that the offset curve cannot fold between two nodes for the paper's
-  // hand (its tip has curvature radius of a few cm, the offset distance 5 cm), so the best node's
-  // cell brackets the minimum.
-  const double h = 0.01;
+  // hand (its tip has curvature radius of a few cm, the offset distance 5 cm; a 400th of the
+  // period is 0.01 in s, about 3 mm along it), so the best node's cell brackets the minimum. An
+  // open hand has no period: a 20th of the disk's radius along the curve (2.6 mm for the paper's
+  // disk).
+  const double period = hand.period();
+  const double h =
+      std::isfinite(period) ? period / 400 : 0.05 * disk_radius * parameter_per_metre(hand, guess);
   const int n = std::max(2, static_cast<int>(std::ceil((hi - lo) / h)));
   double best_s = guess, best_d = std::numeric_limits<double>::infinity();
   for (int i = 0; i <= n; ++i) {
@@ -133,14 +144,25 @@ std::optional<ContactEstimate> pixel_to_contact(const HandMapping& m, cv::Point2
                                                 double guess, double half_window) {
   const std::optional<cv::Point2d> table = pixel_to_table(m.camera, px, m.plane_z);
   if (!table) return std::nullopt;
-  return contact_parameter(m.hand, m.disk_radius, table_to_hand(*table, m.axis_table, theta), guess,
-                           half_window);
+  return contact_parameter(*m.hand, m.disk_radius, table_to_hand(*table, m.axis_table, theta),
+                           guess, half_window);
 }
 
 std::optional<ContactEstimate> follow_contact(const HandMapping& m, cv::Point2d px, double theta,
                                               double previous_s_h) {
-  return std::isfinite(previous_s_h) ? pixel_to_contact(m, px, theta, previous_s_h, 0.5)
-                                     : pixel_to_contact(m, px, theta, 0.0, 2.0);
+  const double period = m.hand->period();
+  if (std::isfinite(period))
+    return std::isfinite(previous_s_h) ? pixel_to_contact(m, px, theta, previous_s_h, period / 8)
+                                       : pixel_to_contact(m, px, theta, 0.0, period / 2);
+  // An open hand: no wrap, and no period to search over; the nearest point of the curve to the
+  // centre is the contact's for a disk touching a curve without concave parts tighter than it.
+  const std::optional<cv::Point2d> table = pixel_to_table(m.camera, px, m.plane_z);
+  if (!table) return std::nullopt;
+  const cv::Point2d p = table_to_hand(*table, m.axis_table, theta);
+  const double guess =
+      std::isfinite(previous_s_h) ? previous_s_h : m.hand->nearest(sim::Vec2(p.x, p.y));
+  return contact_parameter(*m.hand, m.disk_radius, p, guess,
+                           3 * m.disk_radius * parameter_per_metre(*m.hand, guess));
 }
 
 double contact_sigma(const HandMapping& m, cv::Point2d px, double sigma_px, double theta,

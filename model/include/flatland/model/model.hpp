@@ -31,9 +31,9 @@ struct Model {
 
   /// The scene's rolling problem (sim::build_problem of spec.sim): the world.
   std::shared_ptr<const sim::RollingProblem> plant;
-  /// The plant's hand: the right half of the paper's polynomial hand, mirrored (meshes, the
-  /// pixel -> s_h mapping).
-  std::shared_ptr<const sim::PolynomialHand> hand;
+  /// The plant's hand (scene `hand.shape`: the paper's polynomial, a line, a circular well), the
+  /// same object as plant->hand: meshes, the pixel -> s_h mapping, the calibration session.
+  sim::HandPtr hand;
   /// The same without losses (sim::paper_model): what the plan and the estimator assume.
   std::shared_ptr<const sim::RollingProblem> paper_plant;
 

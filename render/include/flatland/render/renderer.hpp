@@ -66,14 +66,21 @@ struct SpatialBodies {
   sim::SurfacePatch hand_extent;
 };
 
+/// The outline of the hand's plate as drawn (m, hand frame, counter-clockwise; its top face, the
+/// hand's thickness high): a closed hand's outline over one period (the paper's polynomial hand's
+/// right half sampled and mirrored); an open hand's (a line's) curve out to 2 table_extent from
+/// the pivot, closed 4 table_extent deep into the body, so that it covers the table at any angle;
+/// a circular well's ring (the well to 1.25 times its radius): the ring's outer circle.
+std::vector<cv::Point2d> hand_plate_outline(const sim::HandCurve& hand, double table_extent);
+
 /// What a Renderer draws, and how: a compiled scene's part (model::render_setup), or put together
 /// by hand.
 struct RenderSetup {
   camera::CameraModel camera;
-  std::shared_ptr<const sim::PolynomialHand> hand;  ///< the hand's outline (extruded)
-  std::vector<camera::PlacedBoard> boards;          ///< calibration boards on the table
-  sim::ObjectSpec object;  ///< a disk, ring (annulus) or ball (its equatorial disk): radii
-  RenderSpec render;       ///< backend, thicknesses, table extent
+  sim::HandPtr hand;                        ///< the hand's outline (hand_plate_outline, extruded)
+  std::vector<camera::PlacedBoard> boards;  ///< calibration boards on the table
+  sim::ObjectSpec object;                   ///< a disk, ring (annulus) or ball (its equatorial disk): radii
+  RenderSpec render;                        ///< backend, thicknesses, table extent
   EffectsSpec effects;
   /// A spatial scene: these bodies instead of the hand and the disk (no table); `hand` and
   /// `object` are then unused. Frames come from render_linear / render_8u with SceneState::spatial.

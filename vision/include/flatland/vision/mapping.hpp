@@ -7,6 +7,7 @@
 
 #include <opencv2/core.hpp>
 
+#include <memory>
 #include <optional>
 #include <vector>
 
@@ -40,8 +41,10 @@ struct ContactEstimate {
 /// The hand parameter s whose offset point q(s) = c(s) + r n(s) (the centre of a disk of radius r
 /// touching the hand at c(s), n the outward normal) is nearest to p_hand: a grid scan over
 /// [guess - half_window, guess + half_window], then Brent's minimiser on |q(s) - p|^2 in the best
-/// grid cell, each piece by its own formula.
-ContactEstimate contact_parameter(const sim::PolynomialHand& hand, double disk_radius,
+/// grid cell, each piece by its own formula. The grid's step is a 400th of a closed hand's period
+/// (0.01 for the butterfly hands); on an open hand (a line) it is 1/20 of the disk's radius along
+/// the curve at the guess.
+ContactEstimate contact_parameter(const sim::HandCurve& hand, double disk_radius,
                                   cv::Point2d p_hand, double guess, double half_window = 1.0);
 
 /// Everything needed to map a tracked centre to s_h.
@@ -50,7 +53,8 @@ struct HandMapping {
   cv::Point2d axis_table{0, 0};  ///< m, joint axis in the table frame
   double plane_z = 0;            ///< m, height of the tracked point (the disk's top face)
   double disk_radius = 0;        ///< m
-  sim::PolynomialHand hand{0.18, -0.18, -0.252, 0.216};
+  /// The hand's outline (a compiled scene's model.hand); default: the paper's polynomial hand.
+  sim::HandPtr hand = std::make_shared<sim::PolynomialHand>(0.18, -0.18, -0.252, 0.216);
 };
 
 /// Pixel -> s_h at hand angle theta. nullopt if the ray misses the plane.
@@ -58,8 +62,11 @@ std::optional<ContactEstimate> pixel_to_contact(const HandMapping& m, cv::Point2
                                                 double guess, double half_window = 1.0);
 
 /// The contact of a tracked frame in a sequence: searched near the previous frame's s_h when
-/// there is one (half a piece either side), else over a whole period of the closed outline
-/// (s is periodic with period 4). `previous_s_h`: NaN for the first frame or after a lost one.
+/// there is one (an eighth of the period either side: half a piece of the butterfly hands, whose
+/// period is 4), else over a whole period of the closed outline about s = 0. On an open hand (a
+/// line: no period, no wrap) the first search starts at the hand's point nearest to the centre
+/// (HandCurve::nearest) and each search spans 3 disk radii along the curve either side.
+/// `previous_s_h`: NaN for the first frame or after a lost one.
 std::optional<ContactEstimate> follow_contact(const HandMapping& m, cv::Point2d px, double theta,
                                               double previous_s_h);
 
