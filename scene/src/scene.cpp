@@ -59,20 +59,92 @@ struct HandShapeKeys {
   const char* shape;
   std::initializer_list<const char*> keys;
 };
-constexpr std::array<HandShapeKeys, 3> kHandShapeKeys{{
+constexpr std::array<HandShapeKeys, 5> kHandShapeKeys{{
     {"polynomial", {"a", "b", "c", "d"}},
     {"line", {"angle_deg", "origin"}},
     {"circle", {"radius", "center"}},
+    {"points", {"file", "units", "closed", "smoothing", "palm_point", "back_point"}},
+    {"polar", {"phi_deg", "r", "cos", "sin", "palm_phi_deg"}},
 }};
+
+// A list of finite numbers of at most `max_length` (a table or a series is short; the bound keeps
+// a scene's memory bounded).
+std::vector<double> number_list(const MapReader& m, const char* key, std::size_t max_length) {
+  if (!m.has(key)) m.fail_at(key, "missing required key");
+  const YAML::Node n = m.node(key);
+  if (!n.IsSequence()) m.fail_at(key, "expected a list of numbers, got " + describe(n));
+  if (n.size() > max_length)
+    m.fail_at(
+        key, "at most " + std::to_string(max_length) + " numbers, got " + std::to_string(n.size()));
+  std::vector<double> v;
+  for (std::size_t i = 0; i < n.size(); ++i)
+    v.push_back(m.to_number(n[i], m.field(key) + "[" + std::to_string(i) + "]"));
+  return v;
+}
+
+// A measured outline: the CSV's points are read now, relative to the scene file's folder.
+void read_points_hand(const MapReader& h, sim::PointsHandSpec& points) {
+  namespace fs = std::filesystem;
+  const std::string file = h.text("file");
+  fs::path path(file);
+  if (path.is_relative()) path = fs::path(h.origin()).parent_path() / path;
+  const std::string units = h.choice_or("units", {"m", "cm", "mm"}, "m");
+  const double scale = units == "mm" ? 1e-3 : units == "cm" ? 1e-2 : 1.0;
+  try {
+    points.points = sim::read_hand_points_csv(path.string(), scale);
+  } catch (const std::invalid_argument& e) {
+    h.fail_at("file", e.what());
+  }
+  points.source = file;
+  points.closed = h.boolean_or("closed", false);
+  points.smoothing = h.number_or("smoothing", 0.0);
+  if (points.smoothing < 0)
+    h.fail_at("smoothing", "must be >= 0, got " + h.node("smoothing").Scalar());
+  const long long palm = h.integer_or("palm_point", 0, 99999, -1);
+  const long long back = h.integer_or("back_point", 0, 99999, -1);
+  if ((palm < 0) != (back < 0))
+    h.fail_at(palm < 0 ? "back_point" : "palm_point",
+              "give both palm_point and back_point, or neither");
+  if (palm >= 0 && !points.closed)
+    h.fail_at("palm_point", "only for closed: true (an open half runs from the palm to the back)");
+  if (palm >= 0) {
+    points.palm_point = static_cast<std::size_t>(palm);
+    points.back_point = static_cast<std::size_t>(back);
+  }
+}
+
+// A polar frame: r(phi) as a table (phi_deg, r) or a Fourier series (cos, sin).
+void read_polar_hand(const MapReader& h, sim::PolarHandSpec& polar) {
+  constexpr std::size_t kMaxTableRows = 10000, kMaxTerms = 64;
+  polar.palm_phi = h.number_or("palm_phi_deg", 90.0) * kDegToRad;
+  if (h.has("phi_deg") || h.has("r")) {
+    h.reject_if_present("cos", "a Fourier series instead of the table (phi_deg, r), not both");
+    h.reject_if_present("sin", "a Fourier series instead of the table (phi_deg, r), not both");
+    polar.form = sim::PolarHandSpec::Form::kTable;
+    polar.phi = number_list(h, "phi_deg", kMaxTableRows);
+    for (double& phi : polar.phi) phi *= kDegToRad;
+    polar.r = number_list(h, "r", kMaxTableRows);
+    if (polar.r.size() != polar.phi.size())
+      h.fail_at("r", "one radius per angle of phi_deg (" + std::to_string(polar.phi.size()) +
+                         "), got " + std::to_string(polar.r.size()));
+  } else {
+    polar.form = sim::PolarHandSpec::Form::kFourier;
+    polar.cos_terms = number_list(h, "cos", kMaxTerms + 1);
+    if (h.has("sin")) polar.sin_terms = number_list(h, "sin", kMaxTerms);
+  }
+}
 
 void read_hand(const MapReader& root, sim::SimulationSpec& spec) {
   const MapReader h = root.section(
-      "hand", {"shape", "a", "b", "c", "d", "e", "f", "angle_deg", "origin", "radius", "center"});
+      "hand",
+      {"shape",      "a",       "b",      "c",    "d",     "e",           "f",         "angle_deg",
+       "origin",     "radius",  "center", "file", "units", "closed",      "smoothing", "palm_point",
+       "back_point", "phi_deg", "r",      "cos",  "sin",   "palm_phi_deg"});
   // e and f are fixed by closing the outline (x(+-1) = 0, y'(+-1) = 0); a given value could only
   // disagree with a, b, c, d.
   h.reject_if_present("e", "is derived (e = -(a + c)), remove it");
   h.reject_if_present("f", "is derived (f = -(b + 3 d) / 5), remove it");
-  const std::string shape = h.choice("shape", {"polynomial", "line", "circle"});
+  const std::string shape = h.choice("shape", {"polynomial", "line", "circle", "points", "polar"});
   for (const HandShapeKeys& other : kHandShapeKeys)
     if (shape != other.shape)
       for (const char* key : other.keys)
@@ -89,11 +161,17 @@ void read_hand(const MapReader& root, sim::SimulationSpec& spec) {
     hand.line_angle = h.number_or("angle_deg", 0.0) * kDegToRad;
     const auto origin = h.numbers_or<2>("origin", "[x, y] (m)", {0.0, 0.0});
     hand.line_origin = sim::Vec2(origin[0], origin[1]);
-  } else {
+  } else if (shape == "circle") {
     hand.shape = sim::HandSpec::Shape::kCircle;
     hand.well_radius = h.positive("radius");
     const auto center = h.numbers_or<2>("center", "[x, y] (m)", {0.0, 0.0});
     hand.well_center = sim::Vec2(center[0], center[1]);
+  } else if (shape == "points") {
+    hand.shape = sim::HandSpec::Shape::kPoints;
+    read_points_hand(h, hand.points);
+  } else {
+    hand.shape = sim::HandSpec::Shape::kPolar;
+    read_polar_hand(h, hand.polar);
   }
 }
 

@@ -104,6 +104,10 @@ const char* to_string(HandSpec::Shape shape) {
       return "line";
     case HandSpec::Shape::kCircle:
       return "circle";
+    case HandSpec::Shape::kPoints:
+      return "points";
+    case HandSpec::Shape::kPolar:
+      return "polar";
   }
   return "unknown";
 }
@@ -124,6 +128,10 @@ HandPtr build_hand(const HandSpec& spec) {
                                     format_significant(spec.well_radius));
       if (!spec.well_center.allFinite()) throw std::invalid_argument("hand.center: must be finite");
       return std::make_shared<CircleWellHand>(spec.well_center, spec.well_radius);
+    case HandSpec::Shape::kPoints:
+      return make_points_hand(spec.points);
+    case HandSpec::Shape::kPolar:
+      return make_polar_hand(spec.polar);
   }
   throw std::logic_error("build_hand: unknown hand shape");
 }
@@ -143,7 +151,9 @@ namespace {
 void validate_hand_for_object(const HandSpec& spec, const HandCurve& hand, double radius) {
   switch (spec.shape) {
     case HandSpec::Shape::kPolynomial:
-      validate_hand_for_disk(static_cast<const PolynomialHand&>(hand), radius);
+    case HandSpec::Shape::kPoints:
+    case HandSpec::Shape::kPolar:
+      validate_hand_for_disk(hand, radius);
       return;
     case HandSpec::Shape::kLine:
       if (!(radius > 0) || !std::isfinite(radius))

@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 #include <Eigen/Dense>
+#include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -348,6 +349,86 @@ TEST_F(CliHandShapesRender, TrackMapsALineHandsFrames) {
   }
   // The disk rolled down the slope: the mapping followed it over more than a centimetre.
   EXPECT_LT(truth.at("s_h").back(), truth.at("s_h").front() - 0.01);
+}
+
+// The paper's hand given as points (issue 26's acceptance, through the CLI): the right half
+// sampled at 200 points, from the palm's middle over the tip to the back's middle, in a CSV
+// relative to the scene file. `solve` finds the k of the polynomial for 2T = 1.181 s within 1e-5.
+TEST_F(CliHandShapes, ThePapersHandAsPointsSolvesToThePolynomialsK) {
+  const double a = 0.18, b = -0.18, c = -0.252, d = 0.216, e = -(a + c), f = -(b + 3 * d) / 5;
+  fs::create_directories(dir_ / "hands");
+  std::ostringstream csv;
+  csv << "x,y\n";
+  csv.precision(17);
+  for (int i = 0; i < 200; ++i) {
+    const double u = -1.0 + 2.0 * i / 199;
+    const double u2 = u * u;
+    csv << a + c * u2 + e * u2 * u2 << ',' << b * u + d * u2 * u + f * u2 * u2 * u << "\n";
+  }
+  write_text(dir_ / "hands" / "paper.csv", csv.str());
+  const std::string motion = "{type: butterfly, period: 1.181, k: -1.1393}";
+  const fs::path points = dir_ / "hands" / "points.yaml";
+  write_text(points,
+             "gravity: {g: 9.8}\nhand: {shape: points, file: paper.csv}\n"
+             "object: {type: disk, radius: 0.051}\nmotion: " +
+                 motion + "\n");
+  const fs::path paper = dir_ / "paper.yaml";
+  write_text(paper,
+             "gravity: {g: 9.8}\nhand: {shape: polynomial, a: 0.18, b: -0.18, c: -0.252, "
+             "d: 0.216}\nobject: {type: disk, radius: 0.051}\nmotion: " +
+                 motion + "\n");
+  const Result rp = run("solve --scene " + quote(points.string()) + " --json");
+  const Result rq = run("solve --scene " + quote(paper.string()) + " --json");
+  ASSERT_EQ(rp.code, 0) << rp.err;
+  ASSERT_EQ(rq.code, 0) << rq.err;
+  const double k_points = nlohmann::json::parse(rp.out).at("k").get<double>();
+  const double k_paper = nlohmann::json::parse(rq.out).at("k").get<double>();
+  EXPECT_NEAR(k_points, k_paper, 1e-5);
+  // A bad row of the file is one line naming the file and its line.
+  write_text(dir_ / "hands" / "paper.csv", csv.str() + "0.1,abc\n");
+  expect_refused("simulate --scene " + quote(points.string()) + " --out x.csv", "paper.csv:202",
+                 "x.csv");
+}
+
+TEST_F(CliHandShapesRender, APointsHandIsDrawnWhereItsOutlineIs) {
+  // The paper's right half as 60 points (cm): drawn, the plate covers (0.1, 0) and not (0.3, 0)
+  // or (0, 0.2) at theta = 0 (the butterfly starts there).
+  const double a = 0.18, b = -0.18, c = -0.252, d = 0.216, e = -(a + c), f = -(b + 3 * d) / 5;
+  std::ostringstream csv;
+  csv.precision(17);
+  for (int i = 0; i < 60; ++i) {
+    const double u = -1.0 + 2.0 * i / 59, u2 = u * u;
+    csv << 100 * (a + c * u2 + e * u2 * u2) << ',' << 100 * (b * u + d * u2 * u + f * u2 * u2 * u)
+        << "\n";
+  }
+  write_text(dir_ / "hand.csv", csv.str());
+  const fs::path p =
+      camera_scene("points", "{shape: points, file: hand.csv, units: cm}", "{s_h: -1, sdot_h: 0}");
+  std::string text = read_text(p);
+  text.replace(text.find("motion: {type: fixed, angle_deg: 0}"), 35,
+               "motion: {type: butterfly, period: 4.0, k: -1.1393}");
+  write_text(p, text);
+  const Result r = run("render --scene " + quote(p.string()) + " --out frames --duration 0.1");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const cv::Mat img = cv::imread((dir_ / "frames" / "frame_000000.png").string(), cv::IMREAD_COLOR);
+  ASSERT_FALSE(img.empty());
+  EXPECT_GT(grey(img, pixel(0.1, 0.0)), 120);
+  EXPECT_LT(grey(img, pixel(0.3, 0.0)), 90);
+  EXPECT_LT(grey(img, pixel(0.0, 0.2)), 90);
+}
+
+// A polar frame r = a - b cos 2 phi (the butterfly frame) with its dips as palm and back:
+// simulate rolls the disk from the palm (s_h = -1) and stays in contact for a short while.
+TEST_F(CliHandShapes, APolarFrameSimulates) {
+  const fs::path p = scene("polar", 90, "{shape: polar, cos: [0.2, 0, -0.05], palm_phi_deg: 0}",
+                           "{type: fixed, angle_deg: 0}", "{s_h: -0.95}", 0.2);
+  const Result r = run("simulate --scene " + quote(p.string()) + " --json");
+  EXPECT_EQ(r.code, 0) << r.err;
+  expect_refused(
+      "simulate --scene " + quote(scene("bad", 90, "{shape: polar, cos: [0.2], phi_deg: [0, 10]}",
+                                        "{type: fixed}", "{s_h: -1}", 0.2)
+                                      .string()),
+      "hand.");
 }
 
 }  // namespace

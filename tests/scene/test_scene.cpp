@@ -1064,3 +1064,20 @@ TEST(SceneHandShapes, TheSearchesRefuseAHandWithoutPalmAndBack) {
   EXPECT_NO_THROW(
       sim::require_palm_and_back(paper.sim.hand, *sim::build_problem(paper.sim)->hand, "solve"));
 }
+
+TEST(SceneHandShapes, PointsAndPolarKeysAreCheckedWhereTheSceneSaysThem) {
+  expect_field_error(with(kBase, kHandSection, "hand:\n  shape: points\n"), "hand.file", "missing");
+  expect_field_error(
+      with(kBase, kHandSection, "hand:\n  shape: points\n  file: /nonexistent/flatland-hand.csv\n"),
+      "hand.file", "/nonexistent/flatland-hand.csv");
+  expect_field_error(with(kBase, kHandSection, "hand:\n  shape: points\n  file: h.csv\n  r: [1]\n"),
+                     "hand.r", "only for shape: polar");
+  expect_field_error(with(kBase, kHandSection, "hand:\n  shape: polar\n  units: mm\n"),
+                     "hand.units", "only for shape: points");
+  expect_field_error(with(kBase, kHandSection, "hand:\n  shape: polar\n"), "hand.cos", "missing");
+  expect_field_error(
+      with(kBase, kHandSection, "hand:\n  shape: polar\n  phi_deg: [0, 90]\n  r: [0.1]\n"),
+      "hand.r", "one radius per angle");
+  expect_field_error(with(kBase, kHandSection, "hand:\n  shape: polar\n  r: [0.1]\n  cos: [0.1]\n"),
+                     "hand.cos", "not both");
+}

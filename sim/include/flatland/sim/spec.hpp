@@ -3,6 +3,7 @@
 #pragma once
 
 #include "flatland/sim/object.hpp"
+#include "flatland/sim/hand_shapes.hpp"
 #include "flatland/sim/simulate.hpp"
 
 #include <numbers>
@@ -12,7 +13,7 @@ namespace flatland::sim {
 
 struct HandSpec {
   /// The outline (scene `hand.shape`); each shape reads its own fields below.
-  enum class Shape { kPolynomial, kLine, kCircle };
+  enum class Shape { kPolynomial, kLine, kCircle, kPoints, kPolar };
   Shape shape = Shape::kPolynomial;
   // The paper's polynomial hand (section 4.1), metres; e and f are derived.
   double a = 0.18, b = -0.18, c = -0.252, d = 0.216;
@@ -25,9 +26,14 @@ struct HandSpec {
   // `well_center` (m, hand frame); s_h is the angle from the well's bottom.
   double well_radius = 0.2;
   Vec2 well_center = Vec2::Zero();
+  /// A measured outline (make_points_hand): the points themselves, read from the scene's
+  /// `hand.file` when the scene is loaded, so that a spec never reads a file again.
+  PointsHandSpec points;
+  /// A polar frame r(phi) (make_polar_hand).
+  PolarHandSpec polar;
 };
 
-/// The scene's word for a shape: "polynomial", "line", "circle".
+/// The scene's word for a shape: "polynomial", "line", "circle", "points", "polar".
 const char* to_string(HandSpec::Shape shape);
 
 /// The rolling object's physical description (the scene's `object`); build_problem converts it
