@@ -61,6 +61,7 @@ Json report_json(const drivers::ControllerReport& c) {
           {"runs", c.runs},
           {"successes", c.successes},
           {"numerical_failures", c.numerical_failures},
+          {"invalid_worlds", c.invalid_worlds},
           {"ci95", Json::array({c.ci.lo, c.ci.hi})},
           {"outcomes", c.outcomes},
           {"safe_stops", c.safe_stops},
@@ -80,7 +81,7 @@ void print_report(std::ostream& os, const drivers::ControllerReport& c, std::siz
   const auto padded = [&](const std::string& text) {
     return text + std::string(width > text.size() ? width - text.size() : 0, ' ');
   };
-  const int counted = c.runs - c.numerical_failures;
+  const int counted = c.runs - c.numerical_failures - c.invalid_worlds;
   const double pct = counted > 0 ? 100.0 * c.successes / counted : 0.0;
   os << "  " << padded(c.name) << "  " << c.successes << " / " << counted << " succeeded ("
      << std::lround(pct) << " %; 95 % interval " << std::lround(100 * c.ci.lo) << " .. "
@@ -88,10 +89,14 @@ void print_report(std::ostream& os, const drivers::ControllerReport& c, std::siz
   if (c.numerical_failures > 0)
     os << "; " << c.numerical_failures << " world" << (c.numerical_failures == 1 ? "" : "s")
        << " failed numerically, not counted";
+  if (c.invalid_worlds > 0)
+    os << "; " << c.invalid_worlds << " world" << (c.invalid_worlds == 1 ? "" : "s")
+       << " drawn could not exist, not counted";
   os << "\n";
   std::string failures;
   for (const auto& [kind, n] : c.outcomes) {
-    if (kind == "success" || kind == "numerical_failure" || n == 0) continue;
+    if (kind == "success" || kind == "numerical_failure" || kind == "invalid_world" || n == 0)
+      continue;
     failures += (failures.empty() ? "" : ", ") + std::to_string(n) + " " + kind;
     if (kind == "safe_stop") {
       std::string causes;
@@ -210,6 +215,13 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
       failed.push_back(
           {{"run", x.run}, {"seed", x.seed}, {"controller", x.controller}, {"failure", x.failure}});
   j["numerical_failure_runs"] = failed;
+  // Worlds the draw made impossible (a rule of the scene broken): each with the seed that draws it.
+  Json invalid = Json::array();
+  for (const drivers::RunRecord& x : r.records)
+    if (x.outcome == drivers::Outcome::kInvalidWorld)
+      invalid.push_back(
+          {{"run", x.run}, {"seed", x.seed}, {"controller", x.controller}, {"failure", x.failure}});
+  j["invalid_world_runs"] = invalid;
   // Every controller's report and every pair's paired comparison (drivers::compare_controllers);
   // "outcomes" (how the runs ended, per controller) is older than "summaries" and kept.
   const drivers::ControllerComparison comparison = drivers::compare_controllers(r);

@@ -26,8 +26,9 @@ def mcnemar(only_a, only_b):
 
 
 def controller_row(common, summary):
-    counted = summary["runs"] - summary["numerical_failures"]
-    failures = {k: v for k, v in summary["outcomes"].items() if k != "success" and v}
+    counted = summary["runs"] - summary["numerical_failures"] - summary.get("invalid_worlds", 0)
+    failures = {k: v for k, v in summary["outcomes"].items()
+                if k not in ("success", "invalid_world") and v}
     return {**common, "controller": summary["controller"], "successes": summary["successes"],
             "counted": counted,
             "success_rate": summary["successes"] / counted if counted else float("nan"),
@@ -68,7 +69,8 @@ def gather_cell(work, cell, rows, pairs):
             rows.append(controller_row(common, summary))
         with open(os.path.join(cell_dir, s, "runs.csv"), newline="") as f:
             for rec in csv.DictReader(f):
-                ok = None if rec["outcome"] == "numerical_failure" else rec["success"] == "1"
+                ok = (None if rec["outcome"] in ("numerical_failure", "invalid_world")
+                      else rec["success"] == "1")
                 success[(rec["controller"], int(rec["run"]))] = ok
     for i, a in enumerate(names):
         for b in names[i + 1:]:

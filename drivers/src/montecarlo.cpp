@@ -81,6 +81,8 @@ Scene perturb(const Scene& nominal, const Perturbations& p, std::uint64_t seed, 
   s.sim.initial.s_h = d.s_h0;
   s.sim.tilt = d.tilt_deg * kDeg;
   s.sim.object.radius = d.radius;
+  // A ring drawn larger or smaller as a whole; a disk's inner radius is 0 and stays 0.
+  s.sim.object.inner_radius *= d.radius / nominal.sim.object.radius;
   s.joint.viscous *= d.friction_scale;
   s.joint.coulomb *= d.friction_scale;
   s.effects.noise_read_dn = p.noise_dn;
@@ -96,6 +98,19 @@ Scene perturb(const Scene& nominal, const Perturbations& p, std::uint64_t seed, 
   s.camera->latency_jitter = p.latency_jitter;
   if (drawn) *drawn = d;
   return s;
+}
+
+std::shared_ptr<const model::Model> compile_world(const Scene& nominal, const Perturbations& p,
+                                                  std::uint64_t seed, int run,
+                                                  DrawnPerturbation* drawn, const WorldEdit& edit) {
+  Scene world = perturb(nominal, p, seed, run, drawn);
+  if (edit) edit(world, run);
+  try {
+    return model::compile(std::move(world));
+  } catch (const std::invalid_argument& e) {
+    throw InvalidWorld("world (seed " + std::to_string(seed) + ", run " + std::to_string(run) +
+                       ") cannot exist: " + e.what());
+  }
 }
 
 Interval wilson_interval(long k, long n, double z) {
@@ -183,12 +198,19 @@ MonteCarloResult run_montecarlo(const model::Model& nominal_model, const Perturb
         rec.seed = seed;
         rec.controller = controllers[ci].name;
         // Each world is its perturbed scene compiled anew (as MuJoCo edits a spec and recompiles).
-        Scene world = perturb(nominal, p, seed, run, &rec.drawn);
-        if (edit) edit(world, run);
-        if (world.sim.contact.mu) rec.mu = *world.sim.contact.mu;
         SyntheticResult r;
         try {
-          r = run_synthetic(*setups[ci], model::compile(std::move(world)));
+          const std::shared_ptr<const model::Model> world =
+              compile_world(nominal, p, seed, run, &rec.drawn, edit);
+          if (world->spec.sim.contact.mu) rec.mu = *world->spec.sim.contact.mu;
+          r = run_synthetic(*setups[ci], world);
+        } catch (const InvalidWorld& e) {
+          // A draw the scene's rules refuse is no world: recorded with its (seed, run), and the
+          // study goes on.
+          rec.outcome = Outcome::kInvalidWorld;
+          rec.failure = e.what();
+          out.records[static_cast<std::size_t>(job)] = std::move(rec);
+          return;
         } catch (const std::runtime_error& e) {
           // One world whose simulation fails does not end the study: it is recorded, with the
           // (seed, run) that rebuilds it, and counted apart from the physical outcomes.
@@ -225,9 +247,10 @@ MonteCarloResult run_montecarlo(const model::Model& nominal_model, const Perturb
     for (const RunRecord& r : out.records) {
       if (r.controller != c.name) continue;
       sum.numerical_failures += r.outcome == Outcome::kNumericalFailure;
+      sum.invalid_worlds += r.outcome == Outcome::kInvalidWorld;
       sum.successes += r.success;
     }
-    sum.ci = wilson_interval(sum.successes, n - sum.numerical_failures);
+    sum.ci = wilson_interval(sum.successes, n - sum.numerical_failures - sum.invalid_worlds);
     if (c.name == "open-loop") {
       out.success_open_loop = sum.successes;
       out.numerical_failures_open_loop = sum.numerical_failures;
@@ -281,8 +304,9 @@ namespace {
 
 /// Every outcome, in the enum's order: the reports list them all, zeros included.
 constexpr Outcome kOutcomes[] = {
-    Outcome::kSuccess,    Outcome::kDropped,  Outcome::kSlidOff,     Outcome::kWrongWell,
-    Outcome::kNotSettled, Outcome::kSafeStop, Outcome::kNotFinished, Outcome::kNumericalFailure};
+    Outcome::kSuccess,     Outcome::kDropped,          Outcome::kSlidOff,
+    Outcome::kWrongWell,   Outcome::kNotSettled,       Outcome::kSafeStop,
+    Outcome::kNotFinished, Outcome::kNumericalFailure, Outcome::kInvalidWorld};
 
 ControllerReport report_of(const std::string& name, const std::vector<const RunRecord*>& runs) {
   ControllerReport rep;
@@ -292,8 +316,8 @@ ControllerReport report_of(const std::string& name, const std::vector<const RunR
   std::vector<double> duration, fn_min, friction;
   for (const RunRecord* r : runs) {
     ++rep.outcomes[to_string(r->outcome)];
-    if (r->outcome == Outcome::kNumericalFailure) {
-      ++rep.numerical_failures;
+    if (!has_physical_outcome(r->outcome)) {
+      ++(r->outcome == Outcome::kInvalidWorld ? rep.invalid_worlds : rep.numerical_failures);
       continue;
     }
     if (r->outcome == Outcome::kSafeStop)
@@ -305,7 +329,7 @@ ControllerReport report_of(const std::string& name, const std::vector<const RunR
     if (std::isfinite(r->mu_max) && std::isfinite(r->mu) && r->mu > 0)
       friction.push_back(r->mu_max / r->mu);
   }
-  rep.ci = wilson_interval(rep.successes, rep.runs - rep.numerical_failures);
+  rep.ci = wilson_interval(rep.successes, rep.runs - rep.numerical_failures - rep.invalid_worlds);
   rep.duration_s = spread(duration);
   rep.fn_min_ratio = spread(fn_min);
   rep.friction_use = spread(friction);
@@ -341,7 +365,7 @@ ControllerComparison compare_controllers(const MonteCarloResult& result) {
     }
     out.controllers.push_back(report_of(result.summaries[c].name, runs));
   }
-  const auto counted = [](const RunRecord* r) { return r->outcome != Outcome::kNumericalFailure; };
+  const auto counted = [](const RunRecord* r) { return has_physical_outcome(r->outcome); };
   for (std::size_t a = 0; a < nc; ++a)
     for (std::size_t b = a + 1; b < nc; ++b) {
       PairedComparison pair;

@@ -55,8 +55,14 @@ std::string to_string(Outcome o) {
       return "not_finished";
     case Outcome::kNumericalFailure:
       return "numerical_failure";
+    case Outcome::kInvalidWorld:
+      return "invalid_world";
   }
   return "?";
+}
+
+bool has_physical_outcome(Outcome o) {
+  return o != Outcome::kNumericalFailure && o != Outcome::kInvalidWorld;
 }
 
 SimWorld::SimWorld(std::shared_ptr<const model::Model> truth_model, double t_start)

@@ -188,6 +188,7 @@ py::dict montecarlo_binding(const py::object& scene, int runs, std::uint64_t see
     d["runs"] = c.runs;
     d["successes"] = c.successes;
     d["numerical_failures"] = c.numerical_failures;
+    d["invalid_worlds"] = c.invalid_worlds;
     d["ci95"] = py::make_tuple(c.ci.lo, c.ci.hi);
     d["outcomes"] = c.outcomes;
     d["safe_stops"] = c.safe_stops;

@@ -135,8 +135,13 @@ CellResult run_cell(const Scene& nominal, const Cell& cell, int n, unsigned thre
         RunSummary s;
         drivers::SyntheticResult r;
         try {
-          r = drivers::run_synthetic(
-              setup, model::compile(drivers::perturb(camera, p, kSeed, run, &s.drawn)));
+          r = drivers::run_synthetic(setup,
+                                     drivers::compile_world(camera, p, kSeed, run, &s.drawn));
+        } catch (const drivers::InvalidWorld&) {
+          // A draw that cannot exist is no world: recorded, not counted, and the study goes on.
+          s.outcome = drivers::Outcome::kInvalidWorld;
+          out.runs[static_cast<std::size_t>(run)] = std::move(s);
+          return;
         } catch (const std::runtime_error&) {
           // A world whose simulation fails is recorded and the study goes on (counted apart).
           s.outcome = drivers::Outcome::kNumericalFailure;
@@ -165,6 +170,8 @@ CellResult run_cell(const Scene& nominal, const Cell& cell, int n, unsigned thre
       ++out.successes;
     else if (r.outcome == drivers::Outcome::kNumericalFailure)
       ++out.numerical_failures;
+    else if (r.outcome == drivers::Outcome::kInvalidWorld)
+      ++out.invalid_worlds;
     else
       ++out.failures[failure_class(r)];
     frames += r.frames;
@@ -173,7 +180,7 @@ CellResult run_cell(const Scene& nominal, const Cell& cell, int n, unsigned thre
       out.fn_min_min = std::isnan(out.fn_min_min) ? r.fn_min : std::min(out.fn_min_min, r.fn_min);
   }
   // A world that failed numerically has no physical outcome: the rate is over the others.
-  out.ci = drivers::wilson_interval(out.successes, n - out.numerical_failures);
+  out.ci = drivers::wilson_interval(out.successes, n - out.numerical_failures - out.invalid_worlds);
   out.fn_min_mean = mean_finite(out.runs, &RunSummary::fn_min, true);
   out.duration_mean = mean_finite(out.runs, &RunSummary::duration, true);
   out.est_rms = mean_finite(out.runs, &RunSummary::est_rms);
@@ -201,7 +208,7 @@ std::string csv_row(const CellResult& c, int n) {
     s += format_number(v);
   }
   s += "," + c.cell.controller + "," + std::to_string(n) + "," + std::to_string(c.successes);
-  const int counted = n - c.numerical_failures;
+  const int counted = n - c.numerical_failures - c.invalid_worlds;
   for (double v :
        {counted > 0 ? static_cast<double>(c.successes) / counted : NAN, c.ci.lo, c.ci.hi}) {
     s += ',';

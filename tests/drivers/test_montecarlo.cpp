@@ -290,3 +290,66 @@ TEST(MonteCarloRun, AWorldThatFailsNumericallyIsRecordedAndTheStudyGoesOn) {
   ASSERT_TRUE(world.sim.contact.mu);
   EXPECT_EQ(bad.mu, *world.sim.contact.mu);
 }
+
+// A world the draw makes impossible (here an inertia its body cannot hold, set by an edit as a
+// radius draw below the given inertia's would) is recorded with its (seed, run), left out of the
+// rates like a numerical failure, and the other worlds are what they are without it.
+TEST(MonteCarloRun, AWorldThatCannotExistIsRecordedAndTheStudyGoesOn) {
+  const Scene s0 = nominal();
+  const auto model = flatland::model::compile(s0);
+  const int runs = flatland::test::short_tests() ? 2 : 3;
+  const drivers::WorldEdit impossible = [](Scene& world, int run) {
+    if (run == 1) {
+      const double R = world.sim.object.radius;
+      world.sim.object.inertia = 1.01 * world.sim.object.mass * R * R;  // above m R^2
+    }
+  };
+  const auto clean = drivers::run_montecarlo(*model, {}, runs, 77, {"open-loop"}, 2);
+  const auto r = drivers::run_montecarlo(*model, {}, runs, 77, {"open-loop"}, 2, {}, impossible);
+  ASSERT_EQ(r.records.size(), static_cast<std::size_t>(runs));
+  const drivers::RunRecord& bad = r.records[1];
+  EXPECT_EQ(bad.outcome, drivers::Outcome::kInvalidWorld);
+  EXPECT_FALSE(bad.success);
+  EXPECT_NE(bad.failure.find("seed 77, run 1"), std::string::npos) << bad.failure;
+  EXPECT_NE(bad.failure.find("object.inertia"), std::string::npos) << bad.failure;
+  EXPECT_TRUE(std::isnan(bad.mu));  // never compiled
+  ASSERT_EQ(r.summaries.size(), 1u);
+  EXPECT_EQ(r.summaries[0].invalid_worlds, 1);
+  EXPECT_EQ(r.summaries[0].numerical_failures, 0);
+  for (int i = 0; i < runs; ++i) {
+    if (i == 1) continue;
+    EXPECT_EQ(r.records[i].outcome, clean.records[i].outcome) << "run " << i;
+    EXPECT_EQ(r.records[i].s_end, clean.records[i].s_end) << "run " << i;
+  }
+  int ok = 0;
+  for (const auto& rec : r.records) ok += rec.success;
+  const auto ci = drivers::wilson_interval(ok, runs - 1);  // over the worlds that could exist
+  EXPECT_EQ(r.ci_open_loop.lo, ci.lo);
+  EXPECT_EQ(r.ci_open_loop.hi, ci.hi);
+  const drivers::ControllerComparison cmp = drivers::compare_controllers(r);
+  ASSERT_EQ(cmp.controllers.size(), 1u);
+  EXPECT_EQ(cmp.controllers[0].invalid_worlds, 1);
+  EXPECT_EQ(cmp.controllers[0].outcomes.at("invalid_world"), 1);
+  EXPECT_NE(drivers::runs_csv(r).find(",invalid_world,"), std::string::npos);
+}
+
+// A ring is drawn larger or smaller as a whole: its inner radius keeps its ratio to the drawn
+// outer one (so a draw never puts the hole outside the ring); a ball's rail gap, the hand's, stays.
+TEST(MonteCarloPerturb, ARingKeepsItsProportionsAndTheRailsTheirGap) {
+  Scene ring = nominal();
+  ring.sim.object.kind = sim::ObjectSpec::Kind::kRing;
+  ring.sim.object.inner_radius = 0.05;  // 0.98 of the outer 0.051: a 2 % draw would cross it
+  Scene ball = nominal();
+  ball.sim.object.kind = sim::ObjectSpec::Kind::kBall;
+  ball.sim.object.rail_gap = 0.08;
+  drivers::Perturbations p;
+  p.radius_rel = 0.05;
+  for (int run = 0; run < 50; ++run) {
+    const Scene s = drivers::perturb(ring, p, 5, run);
+    EXPECT_NEAR(s.sim.object.inner_radius / s.sim.object.radius, 0.05 / 0.051, 1e-15);
+    EXPECT_LT(s.sim.object.inner_radius, s.sim.object.radius);
+    const Scene b = drivers::perturb(ball, p, 5, run);
+    EXPECT_EQ(b.sim.object.radius, s.sim.object.radius);  // the same draw
+    EXPECT_EQ(*b.sim.object.rail_gap, 0.08);
+  }
+}

@@ -210,7 +210,7 @@ TEST(MonteCarloCompare, ReportsCountOutcomesCausesAndTheSuccessesMargins) {
     EXPECT_EQ(rep.ci.lo, ci.lo);
     EXPECT_EQ(rep.ci.hi, ci.hi);
     // Every outcome is listed, and the counts add up to the worlds.
-    EXPECT_EQ(rep.outcomes.size(), 8u);
+    EXPECT_EQ(rep.outcomes.size(), 9u);  // success ... numerical_failure, invalid_world
     for (const auto& [kind, n] : rep.outcomes) outcome_total += n;
     EXPECT_EQ(outcome_total, 300);
     EXPECT_EQ(rep.outcomes.at("success"), successes);

@@ -13,7 +13,9 @@
 #include <cstdint>
 #include <functional>
 #include <map>
+#include <memory>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -54,7 +56,11 @@ struct DrawnPerturbation {
 /// alone (std::seed_seq of their 32-bit halves, so the draws do not depend on anything else and
 /// are the same on every platform), applied to the nominal scene; the sensor settings (noise,
 /// latency, drops) are set; effects.seed is drawn too so that every run sees its own noise and
-/// drops. Throws std::invalid_argument for invalid perturbations or a scene without a camera.
+/// drops. The object's radius is drawn; a ring's inner radius follows it (the ring drawn larger or
+/// smaller as a whole, its proportions and so its inertia's form kept), while a ball's rail gap
+/// (the hand's) and a given inertia (measured apart) stay: a draw they no longer fit is a world
+/// that cannot exist (compile_world). Throws std::invalid_argument for invalid perturbations or a
+/// scene without a camera.
 Scene perturb(const Scene& nominal, const Perturbations& p, std::uint64_t seed, int run,
               DrawnPerturbation* drawn = nullptr);
 
@@ -108,7 +114,9 @@ struct ControllerSummary {
   /// Worlds whose simulation failed (Outcome::kNumericalFailure): they have no physical outcome
   /// and are left out of the rate's denominator.
   int numerical_failures = 0;
-  Interval ci;  ///< Wilson 95 %, over the runs that did not fail
+  Interval ci;  ///< Wilson 95 %, over the runs that did not fail and could exist
+  /// Worlds that cannot exist (Outcome::kInvalidWorld): left out of the denominator too.
+  int invalid_worlds = 0;
 };
 
 struct MonteCarloResult {
@@ -133,6 +141,21 @@ using MonteCarloProgress = std::function<void(long done, long total)>;
 /// more parameter, or a fault to inject); called from the worker threads.
 using WorldEdit = std::function<void(Scene& world, int run)>;
 
+/// A perturbed world that cannot exist: its drawn values break a rule of the scene (a ball that
+/// falls between its rails, an inertia its drawn radius cannot hold, a disk too large for a well).
+/// Recorded as Outcome::kInvalidWorld, with the (seed, run) that draws it, and the study goes on.
+struct InvalidWorld : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+/// World `run`: perturb(nominal, p, seed, run, drawn), then `edit`, compiled. InvalidWorld
+/// ("world (seed S, run R) cannot exist: <the rule, naming its field>") when the compile refuses
+/// it; the nominal scene compiled, so a refusal is the draw's doing.
+std::shared_ptr<const model::Model> compile_world(const Scene& nominal, const Perturbations& p,
+                                                  std::uint64_t seed, int run,
+                                                  DrawnPerturbation* drawn = nullptr,
+                                                  const WorldEdit& edit = {});
+
 /// `n` runs of each of `controllers` (names at most once each) on `threads` std::threads (0:
 /// std::thread::hardware_concurrency()). Run i's world obeys perturb(nominal.spec, p, seed, i),
 /// compiled; the loop assumes `nominal` with the controller's type and mode (or the caller's
@@ -140,8 +163,9 @@ using WorldEdit = std::function<void(Scene& world, int run)>;
 /// and each result is stored at its index, so the records do not depend on the thread count. A run
 /// that fails — contact lost, safe stop — is a result; so is a world whose simulation fails (a
 /// std::runtime_error in it: Outcome::kNumericalFailure with its message, and the study goes
-/// on). Any other exception stops the others and is rethrown. std::invalid_argument for n < 1,
-/// an unknown or repeated controller, invalid perturbations.
+/// on), and a world that cannot exist (compile_world's InvalidWorld: Outcome::kInvalidWorld). Any
+/// other exception stops the others and is rethrown. std::invalid_argument for n < 1, an unknown or
+/// repeated controller, invalid perturbations.
 MonteCarloResult run_montecarlo(const model::Model& nominal_model, const Perturbations& p, int n,
                                 std::uint64_t seed,
                                 const std::vector<MonteCarloController>& controllers,
@@ -180,9 +204,10 @@ double mcnemar_exact_p(long only_a, long only_b);
 struct ControllerReport {
   std::string name;
   int runs = 0;                ///< worlds
-  int numerical_failures = 0;  ///< worlds without a physical outcome (left out of the rate)
+  int numerical_failures = 0;  ///< worlds whose simulation failed (left out of the rate)
+  int invalid_worlds = 0;      ///< worlds that cannot exist (left out of the rate)
   int successes = 0;
-  Interval ci;  ///< Wilson 95 % over runs - numerical_failures
+  Interval ci;  ///< Wilson 95 % over runs - numerical_failures - invalid_worlds
   /// How the runs ended: to_string(Outcome) -> count, every outcome listed (zeros included).
   std::map<std::string, int> outcomes;
   /// The safe stops by what triggered them: control::to_string(StopCause) -> count (the causes

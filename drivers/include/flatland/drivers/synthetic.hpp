@@ -62,8 +62,15 @@ enum class Outcome {
   /// The world's simulation failed (its energy balance broke, or its integrator gave up): not a
   /// physical outcome; what the disk would have done is unknown.
   kNumericalFailure,
+  /// A Monte Carlo world whose drawn values the scene's rules refuse (a ball that falls between
+  /// its rails, an inertia its drawn radius cannot hold, a disk too large for a well): it cannot
+  /// exist, so it has no outcome, physical or numerical.
+  kInvalidWorld,
 };
 std::string to_string(Outcome o);
+/// False for the outcomes that say nothing about the controller (kNumericalFailure,
+/// kInvalidWorld): rates and comparisons leave those worlds out.
+bool has_physical_outcome(Outcome o);
 
 /// std::invalid_argument naming contact.mu unless the scene sets it: a synthetic world counts
 /// friction always (unlimited friction would hide slips).

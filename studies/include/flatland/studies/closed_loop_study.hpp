@@ -68,6 +68,9 @@ struct ClosedLoopCellResult {
   /// Worlds whose simulation failed (drivers::Outcome::kNumericalFailure): counted apart, and
   /// left out of the success rate's denominator.
   int numerical_failures = 0;
+  /// Worlds whose draw cannot exist (drivers::Outcome::kInvalidWorld, drivers::compile_world):
+  /// left out of the denominator too.
+  int invalid_worlds = 0;
   /// Over the successes: the smallest normal force ratio's mean and minimum, the mean duration;
   /// over every run that servoed: the estimate's RMS error and mean NEES in the servo stage.
   double fn_min_mean = NAN, fn_min_min = NAN, duration_mean = NAN, est_rms = NAN, nees = NAN;
