@@ -2,6 +2,7 @@
 
 #include "flatland/sim/format.hpp"
 #include "flatland/sim/hybrid.hpp"
+#include "flatland/sim/object.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -165,6 +166,31 @@ Json locus_json(const std::vector<sim::SolveReport>& points, const sim::Simulati
   return j;
 }
 
+Json object_json(const sim::ObjectSpec& o) {
+  Json j;
+  j["mass"] = number(o.mass);
+  if (o.round()) {
+    // What the planar dynamics roll: a ball on rails rolls below its own radius with its own
+    // inertia (sim::equivalent_disk, the conversion build_problem makes).
+    const sim::RollingDisk disk = sim::equivalent_disk(o);
+    const char* type = o.kind == sim::ObjectSpec::Kind::kRing   ? "ring"
+                       : o.kind == sim::ObjectSpec::Kind::kBall ? "ball"
+                                                                : "disk";
+    j["type"] = type;
+    j["radius"] = number(o.radius);
+    j["rolling_radius"] = number(disk.radius);
+    j["inertia"] = number(disk.inertia);
+  } else {
+    j["type"] = "ellipse";
+    j["radius"] = nullptr;
+    j["rolling_radius"] = nullptr;  // its radius of curvature changes along its outline
+    j["inertia"] =
+        number(o.inertia ? *o.inertia
+                         : sim::make_uniform_ellipse(o.semi_axis_x, o.semi_axis_y, o.mass).inertia);
+  }
+  return j;
+}
+
 Json simulate_json(const sim::SimulationSpec& spec, const sim::RunResult& r) {
   const bool butterfly = spec.motion.kind == sim::MotionSpec::Kind::kButterfly;
   Json j;
@@ -200,6 +226,7 @@ Json simulate_json(const sim::SimulationSpec& spec, const sim::RunResult& r) {
   j["flights"] = flights_json(sim::flight_reports(r));
   j["events"] = contact_events_json(r.events);
   j["energy"] = energy_json(r.audit);
+  j["object"] = object_json(spec.object);
   return j;
 }
 

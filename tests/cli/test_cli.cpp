@@ -145,7 +145,7 @@ TEST_F(CliSimulate, JsonHasRequiredKeys) {
                "mu_required", "steps", "rhs_evals", "contact_lost", "energy"},
               {"formulation", "method", "stop_reason", "rejected", "restarts", "junction_crossings",
                "max_constraint_residual", "max_redundant_residual", "t_end", "csv", "model", "mu",
-               "end_mode", "mode_changes", "impacts", "mode_time", "flights", "events"});
+               "end_mode", "mode_changes", "impacts", "mode_time", "flights", "events", "object"});
   // The scene is the paper's Figure 2 motion: 2T = 1.181 s, k = -1.1393 (inputs, echoed).
   EXPECT_DOUBLE_EQ(j["period"].get<double>(), 1.181);
   EXPECT_DOUBLE_EQ(j["k"].get<double>(), -1.1393);

@@ -47,6 +47,11 @@ Json locus_json(const std::vector<sim::SolveReport>& points, const sim::Simulati
 /// s_h(T) from the dense output (NaN when the run does not cover t = T or the motion is not the
 /// butterfly).
 double s_at_half_period(const sim::SimulationSpec& spec, const sim::RunResult& r);
+/// The object as the run used it: `type`, `mass`, `radius` (the description's: a disk's or
+/// ring's outer, a ball's own), `rolling_radius` (centre to contact in the plane: below `radius`
+/// for a ball on rails) and `inertia` about the centre (given, or the uniform body's); an
+/// ellipse has null radii.
+Json object_json(const sim::ObjectSpec& object);
 /// `simulate --json` without its csv key: the run's end, extrema, integrator statistics and
 /// contact (modes, flights, events).
 Json simulate_json(const sim::SimulationSpec& spec, const sim::RunResult& r);
