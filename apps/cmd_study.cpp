@@ -62,6 +62,7 @@ void run_sim_study(const StudyOptions& o) {
   common.scene = o.scene;
   Scene scene = load_scene_with_overrides(common);
   const sim::SimulationSpec& spec = scene.sim;
+  studies::check_sim_study(spec);  // bad input before the banner
   const fs::path dir = o.out;
   if (!dir.empty()) check_output_directory("--out", dir, o.force);
   const bool plots = !dir.empty() && !o.no_plot;

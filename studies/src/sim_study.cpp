@@ -99,11 +99,16 @@ std::vector<IntegratorSetting> sim_study_settings(bool quick) {
   return settings;
 }
 
-SimStudyResult run_sim_study(const sim::SimulationSpec& spec, const SimStudyOptions& options) {
+void check_sim_study(const sim::SimulationSpec& spec) {
   if (spec.motion.kind != sim::MotionSpec::Kind::kButterfly)
     throw std::invalid_argument(
         "study sim: the scene's motion must be the butterfly (motion.kind)");
-  sim::build_problem(spec);
+  sim::require_palm_and_back(spec.hand, *sim::build_problem(spec)->hand,
+                             "study sim (its search for k)");
+}
+
+SimStudyResult run_sim_study(const sim::SimulationSpec& spec, const SimStudyOptions& options) {
+  check_sim_study(spec);
   const std::vector<IntegratorSetting> settings = sim_study_settings(options.quick);
   const double start = cpu_now();
   SimStudyResult out;

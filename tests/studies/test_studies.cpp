@@ -76,6 +76,29 @@ TEST(Studies, SimStudyRefusesAMotionThatIsNotTheButterfly) {
   EXPECT_THROW(studies::run_sim_study(scene.sim), std::invalid_argument);
 }
 
+// Its search for k plans from the palm to the back: a line or a circle has neither, refused
+// before any setting is measured (no progress call), naming hand.shape.
+TEST(Studies, SimStudyRefusesAHandWithoutPalmAndBackBeforeAnyWork) {
+  for (const auto shape : {sim::HandSpec::Shape::kLine, sim::HandSpec::Shape::kCircle}) {
+    flatland::Scene scene = bundled("butterfly.yaml");
+    scene.sim.hand.shape = shape;
+    scene.sim.hand.well_radius = 0.2;
+    int progress_calls = 0;
+    studies::SimStudyOptions o;
+    o.quick = true;
+    o.progress = [&](long, long) { ++progress_calls; };
+    try {
+      studies::run_sim_study(scene.sim, o);
+      ADD_FAILURE() << "no refusal for " << sim::to_string(shape);
+    } catch (const std::invalid_argument& e) {
+      EXPECT_EQ(std::string(e.what()).rfind("hand.shape: ", 0), 0u) << e.what();
+    }
+    EXPECT_EQ(progress_calls, 0);
+    EXPECT_THROW(studies::check_sim_study(scene.sim), std::invalid_argument);
+  }
+  EXPECT_NO_THROW(studies::check_sim_study(bundled("butterfly.yaml").sim));
+}
+
 TEST(Studies, CalibrationStudyRecoversTheCameraWithoutNoise) {
   studies::CalibrationStudyOptions o;
   o.quick = true;

@@ -50,8 +50,13 @@ struct SimStudyResult {
 /// DOP853 at rtol 1e-3 to 1e-13 (4 with quick), each in both formulations.
 std::vector<IntegratorSetting> sim_study_settings(bool quick);
 
-/// The study on a butterfly motion (std::invalid_argument otherwise, or for a spec that does not
-/// build); std::runtime_error if no DOP853 reference run succeeds.
+/// What the study needs of a scene, checked before any work: a butterfly motion, a spec that
+/// builds, and a hand with the palm and back wells that its search for k plans between
+/// (sim::require_palm_and_back). std::invalid_argument, one line naming the field.
+void check_sim_study(const sim::SimulationSpec& spec);
+
+/// The study on a butterfly motion (check_sim_study's std::invalid_argument otherwise);
+/// std::runtime_error if no DOP853 reference run succeeds.
 SimStudyResult run_sim_study(const sim::SimulationSpec& spec, const SimStudyOptions& options = {});
 
 /// sim.csv: one row per setting (method, formulation, rtol, atol, step, steps, rhs_evals, s_T,
