@@ -18,6 +18,7 @@ namespace {
 
 namespace studies = flatland::studies;
 namespace sim = flatland::sim;
+namespace drivers = flatland::drivers;
 
 flatland::Scene bundled(const std::string& name) {
   return flatland::load_scene(std::string(FLATLAND_ASSET_DIR) + "/scenes/" + name);
@@ -120,6 +121,44 @@ TEST(Studies, CalibrationStudyRecoversTheCameraWithoutNoise) {
     for (std::size_t i = 0; i < 6; ++i) EXPECT_LE(c.rms_error[i], c.max_error[i] * (1 + 1e-12));
   }
   EXPECT_EQ(csv_lines(studies::calibration_study_csv(r)), 17);
+}
+
+// A world whose drawn radius cannot hold the disk's given inertia (J > m R^2) is recorded as
+// invalid_world and left out of its cell's rate; the study goes on. J is put between the two
+// worlds' m r^2, so that one of them cannot exist and the other can.
+TEST(Studies, ClosedLoopRecordsAWorldThatCannotExistAndGoesOn) {
+  flatland::Scene scene = bundled("airtable-feedback.yaml");
+  scene.controller.plan = "solve";  // the plan for this disk's own k
+  const double m = scene.sim.object.mass, R = scene.sim.object.radius;
+  double r_small = 1e9, r_big = 0;
+  for (int run = 0; run < 2; ++run) {
+    const double r = drivers::perturb(scene, {}, studies::kClosedLoopSeed, run).sim.object.radius;
+    r_small = std::min(r_small, r);
+    r_big = std::max(r_big, r);
+  }
+  const double r_fits = std::min(r_big, R);  // the nominal must hold it too
+  ASSERT_LT(r_small, r_fits) << "the seed's two draws cannot separate a world that cannot exist";
+  scene.sim.object.inertia = m * 0.5 * (r_small * r_small + r_fits * r_fits);
+  const auto nominal = flatland::model::compile(scene);
+  studies::ClosedLoopGrid grid = studies::closed_loop_grid(*nominal, true);
+  grid.cells.resize(1);  // one cell is enough: every cell meets the same draws
+  studies::ClosedLoopStudyOptions o;
+  o.threads = 2;
+  const studies::ClosedLoopStudyResult r = studies::run_closed_loop_study(*nominal, grid, o);
+  ASSERT_EQ(r.cells.size(), 1u);
+  const auto& c = r.cells[0];
+  ASSERT_EQ(c.runs.size(), 2u);
+  for (const auto& run : c.runs) {
+    const bool cannot_exist = m * run.drawn.radius * run.drawn.radius < *scene.sim.object.inertia;
+    EXPECT_EQ(run.outcome == drivers::Outcome::kInvalidWorld, cannot_exist) << run.drawn.radius;
+  }
+  EXPECT_EQ(c.invalid_worlds, 1);
+  int failed = 0;
+  for (const auto& [cls, count] : c.failures) failed += count;
+  EXPECT_EQ(c.successes + failed + c.numerical_failures + c.invalid_worlds, 2);
+  const auto ci = drivers::wilson_interval(c.successes, 1 - c.numerical_failures);
+  EXPECT_EQ(c.ci.lo, ci.lo);
+  EXPECT_EQ(c.ci.hi, ci.hi);
 }
 
 TEST(Studies, ClosedLoopQuickGridHasACellThatMustFail) {
