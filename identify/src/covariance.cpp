@@ -8,6 +8,8 @@
 
 #include <Eigen/SVD>
 
+#include <boost/math/distributions/chi_squared.hpp>
+
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -145,17 +147,32 @@ std::string refusal(const Unknown& u, double value, double sigma, std::size_t j,
   return why;
 }
 
+/// chi^2 against its degrees of freedom: the 99 % quantile and, beyond it, the Birge ratio
+/// sqrt(chi^2 / dof) by which every sigma is scaled (1 when chi^2 is consistent).
+void consistency(IdentifyResult& result) {
+  result.sigma_scale = 1;
+  if (result.degrees_of_freedom <= 0) {
+    result.chi2_limit = std::numeric_limits<double>::infinity();
+    return;
+  }
+  result.chi2_limit = boost::math::quantile(boost::math::chi_squared(result.degrees_of_freedom),
+                                            kConsistentChi2Quantile);
+  if (result.chi2 > result.chi2_limit)
+    result.sigma_scale = std::sqrt(result.chi2 / result.degrees_of_freedom);
+}
+
 }  // namespace
 
 void report_fit(const ShootingProblem& problem, ceres::Problem& solved, std::vector<double>& w,
                 std::vector<std::array<double, 2>>& states, const IdentifyOptions& options,
-                IdentifyResult& result) {
+                const std::vector<std::string>& held, IdentifyResult& result) {
   std::vector<double> residuals;
   const Eigen::MatrixXd J =
       jacobian_at_solution(solved, w, states, options.threads > 0 ? options.threads : 1, residuals);
-  const Covariance cov = covariance_of(J);
   const std::vector<Unknown>& unknowns = problem.unknowns();
   const std::size_t K = unknowns.size();
+  std::size_t held_count = 0;
+  for (const std::string& why : held) held_count += !why.empty();
 
   // Per sample, per recording.
   result.fits.clear();
@@ -180,6 +197,19 @@ void report_fit(const ShootingProblem& problem, ceres::Problem& solved, std::vec
       result.chi2 += z * z;
     }
     if (seg.has_next) row += 2;
+  }
+  result.degrees_of_freedom = samples - static_cast<int>(K - held_count) -
+                              2 * static_cast<int>(problem.recordings().size());
+  consistency(result);
+
+  // The covariance with the sigma that cover the error: scaled when chi^2 says the weights were
+  // too large. The refusals below judge the scaled sigma.
+  Covariance cov = covariance_of(J);
+  const double scale2 = result.sigma_scale * result.sigma_scale;
+  cov.C *= scale2;
+  result.segments.clear();
+  for (std::size_t k = 0; k < problem.segments().size(); ++k) {
+    const Segment& seg = problem.segments()[k];
     SegmentState s;
     s.recording = seg.recording;
     s.t0 = seg.t0;
@@ -192,8 +222,6 @@ void report_fit(const ShootingProblem& problem, ceres::Problem& solved, std::vec
       s.sigma_sdot_h = std::sqrt(cov.C(col + 1, col + 1));
     result.segments.push_back(s);
   }
-  result.degrees_of_freedom =
-      samples - static_cast<int>(K) - 2 * static_cast<int>(problem.recordings().size());
 
   result.parameters.clear();
   std::vector<bool> determined(K, false);
@@ -204,6 +232,12 @@ void report_fit(const ShootingProblem& problem, ceres::Problem& solved, std::vec
     e.initial = unknowns[j].initial;
     e.value = w[j];
     e.bounds = unknowns[j].bounds;
+    if (j < held.size() && !held[j].empty()) {
+      e.not_determined = held[j];
+      e.held = true;
+      result.parameters.push_back(e);
+      continue;
+    }
     const double sigma =
         std::sqrt(cov.C(static_cast<Eigen::Index>(j), static_cast<Eigen::Index>(j)));
     int partner = -1;
@@ -211,6 +245,7 @@ void report_fit(const ShootingProblem& problem, ceres::Problem& solved, std::vec
         refusal(unknowns[j], e.value, sigma, j, cov, unknowns, options.max_relative_sigma, partner);
     if (e.not_determined.empty()) {
       e.sigma = sigma;
+      e.sigma_unscaled = sigma / result.sigma_scale;
       determined[j] = true;
     }
     result.parameters.push_back(e);
@@ -226,6 +261,7 @@ void report_fit(const ShootingProblem& problem, ceres::Problem& solved, std::vec
         "the data cannot separate it from " + unknowns[j].name + " (correlation " +
         sim::format_significant(cov.C(jj, mm) / std::sqrt(cov.C(jj, jj) * cov.C(mm, mm)), 3) + ")";
     e.sigma.reset();
+    e.sigma_unscaled.reset();
     determined[static_cast<std::size_t>(m)] = false;
   }
   result.correlation =

@@ -215,11 +215,11 @@ std::string fitted_scene(const std::string& scene_text, const IdentifyResult& re
     const YAML::Node old = original[key->section] ? original[key->section][key->key] : YAML::Node();
     const std::string was =
         old && old.IsScalar() ? " (was " + old.Scalar() + ")" : std::string(" (was unset)");
-    edits.push_back({*key, number_text(p.value * key->scale),
-                     "identified: " +
-                         sigma_text(ParameterEstimate{p.name, p.initial, p.value * key->scale,
-                                                      p.bounds, *p.sigma * key->scale, ""}) +
-                         was});
+    ParameterEstimate in_scene_units = p;
+    in_scene_units.value = p.value * key->scale;
+    in_scene_units.sigma = *p.sigma * key->scale;
+    edits.push_back({*key, number_text(in_scene_units.value),
+                     "identified: " + sigma_text(in_scene_units) + was});
   }
   // mu_kinetic needs mu: a scene without one gets the static coefficient the fit simulated with.
   const auto sets = [&edits](const std::string& key) {

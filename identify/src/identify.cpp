@@ -8,7 +8,9 @@
 #include "flatland/sim/format.hpp"
 
 #include <ceres/ceres.h>
+#include <ceres/manifold.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <memory>
@@ -34,10 +36,12 @@ constexpr double kStateStepS = 1e-5, kStateStepSdot = 1e-4;
 /// One segment's residuals: its samples' (s_h_sim - s_h_meas) / sigma and, unless it is the
 /// last of its recording, the continuity of (s_h, sdot_h) with the next segment's initial state.
 /// Parameter blocks: the segment's state (2), the world (if any unknown), the next state (2, if
-/// any). Derivatives by central differences (one-sided at a bound), the next state's exactly.
+/// any). Derivatives by central differences (one-sided at a bound), the next state's exactly; the
+/// column of an unknown that is held (`held[j]` not empty) is zero and costs no simulation.
 class SegmentCost final : public ceres::CostFunction {
  public:
-  SegmentCost(const ShootingProblem& problem, std::size_t k) : problem_(problem), k_(k) {
+  SegmentCost(const ShootingProblem& problem, std::size_t k, const std::vector<std::string>& held)
+      : problem_(problem), k_(k), held_(held) {
     const Segment& s = problem.segments()[k];
     samples_ = static_cast<int>(s.end - s.first);
     set_num_residuals(samples_ + (s.has_next ? 2 : 0));
@@ -53,11 +57,15 @@ class SegmentCost final : public ceres::CostFunction {
     const double* world = worlds_ > 0 ? parameters[1] : nullptr;
     const double* next =
         problem_.segments()[k_].has_next ? parameters[worlds_ > 0 ? 2 : 1] : nullptr;
-    if (!residuals_at(state[0], state[1], world, next, residuals)) return false;
-    if (!jacobians) return true;
     const int n = num_residuals();
-    if (jacobians[0] && !state_jacobian(state, world, next, jacobians[0])) return false;
-    if (worlds_ > 0 && jacobians[1] && !world_jacobian(state, world, next, jacobians[1]))
+    std::vector<double> base(static_cast<std::size_t>(n));
+    if (!residuals_at(state[0], state[1], world, next, base.data())) return false;
+    if (residuals) std::copy(base.begin(), base.end(), residuals);
+    if (!jacobians) return true;
+    if (jacobians[0] && !state_jacobian(state, world, next, base.data(), jacobians[0]))
+      return false;
+    if (worlds_ > 0 && jacobians[1] &&
+        !world_jacobian(state, world, next, base.data(), jacobians[1]))
       return false;
     if (next) {
       double* J = jacobians[worlds_ > 0 ? 2 : 1];
@@ -90,53 +98,72 @@ class SegmentCost final : public ceres::CostFunction {
     return true;
   }
 
-  /// Column `col` of a row-major n x cols Jacobian from the residuals at +h and -h (or one side).
-  void store_column(const std::vector<double>& plus, const std::vector<double>& minus, double step,
-                    int col, int cols, double* J) const {
-    for (int i = 0; i < num_residuals(); ++i)
-      J[i * cols + col] =
-          (plus[static_cast<std::size_t>(i)] - minus[static_cast<std::size_t>(i)]) / step;
+  /// Column `col` of a row-major n x cols Jacobian by differences of `residuals_with(x, out)` at
+  /// x = value + up and value - down (each >= 0): central, or one-sided against the base
+  /// residuals where a step is 0 (at a bound) or its run fails. The integrator gives up at
+  /// isolated perturbed points (seen on closed-loop experiments: a numerical failure in one
+  /// difference run of one segment), and a failed Jacobian ends the whole solve, so one side is
+  /// enough. False when neither side runs.
+  template <class ResidualsWith>
+  bool difference_column(const ResidualsWith& residuals_with, double value, double up, double down,
+                         const double* base, int col, int cols, double* J) const {
+    const std::size_t n = static_cast<std::size_t>(num_residuals());
+    std::vector<double> plus(n), minus(n);
+    const bool has_plus = up > 0 && residuals_with(value + up, plus.data());
+    const bool has_minus = down > 0 && residuals_with(value - down, minus.data());
+    if (!has_plus && !has_minus) return false;
+    const double* hi = has_plus ? plus.data() : base;
+    const double* lo = has_minus ? minus.data() : base;
+    const double step = (has_plus ? up : 0.0) + (has_minus ? down : 0.0);
+    for (std::size_t i = 0; i < n; ++i)
+      J[i * static_cast<std::size_t>(cols) + static_cast<std::size_t>(col)] =
+          (hi[i] - lo[i]) / step;
+    return true;
   }
 
   bool state_jacobian(const double* state, const double* world, const double* next,
-                      double* J) const {
-    const std::size_t n = static_cast<std::size_t>(num_residuals());
-    std::vector<double> plus(n), minus(n);
+                      const double* base, double* J) const {
     const double steps[2] = {kStateStepS, kStateStepSdot};
     for (int c = 0; c < 2; ++c) {
-      double x[2] = {state[0], state[1]};
-      x[c] = state[c] + steps[c];
-      if (!residuals_at(x[0], x[1], world, next, plus.data())) return false;
-      x[c] = state[c] - steps[c];
-      if (!residuals_at(x[0], x[1], world, next, minus.data())) return false;
-      store_column(plus, minus, 2 * steps[c], c, 2, J);
+      const auto with = [&](double x, double* out) {
+        double xs[2] = {state[0], state[1]};
+        xs[c] = x;
+        return residuals_at(xs[0], xs[1], world, next, out);
+      };
+      if (!difference_column(with, state[c], steps[c], steps[c], base, c, 2, J)) return false;
     }
     return true;
   }
 
   bool world_jacobian(const double* state, const double* world, const double* next,
-                      double* J) const {
-    const std::size_t n = static_cast<std::size_t>(num_residuals());
-    std::vector<double> plus(n), minus(n), w(world, world + worlds_);
+                      const double* base, double* J) const {
+    std::vector<double> w(world, world + worlds_);
     for (int c = 0; c < worlds_; ++c) {
-      const detail::Unknown& u = problem_.unknowns()[static_cast<std::size_t>(c)];
+      const auto cc = static_cast<std::size_t>(c);
+      if (!held_[cc].empty()) {
+        for (int i = 0; i < num_residuals(); ++i) J[i * worlds_ + c] = 0.0;
+        continue;
+      }
+      const detail::Unknown& u = problem_.unknowns()[cc];
       const double h = kDifferenceStep * std::max(std::abs(world[c]), u.typical);
       // Central inside the bounds, one-sided where a side would leave them (a negative drag or
       // a restitution above 1 is no world the simulator accepts).
-      const double hi = std::min(world[c] + h, u.bounds.upper);
-      const double lo = std::max(world[c] - h, u.bounds.lower);
-      w[static_cast<std::size_t>(c)] = hi;
-      if (!residuals_at(state[0], state[1], w.data(), next, plus.data())) return false;
-      w[static_cast<std::size_t>(c)] = lo;
-      if (!residuals_at(state[0], state[1], w.data(), next, minus.data())) return false;
-      w[static_cast<std::size_t>(c)] = world[c];
-      store_column(plus, minus, hi - lo, c, worlds_, J);
+      const double up = std::min(world[c] + h, u.bounds.upper) - world[c];
+      const double down = world[c] - std::max(world[c] - h, u.bounds.lower);
+      const auto with = [&](double x, double* out) {
+        w[cc] = x;
+        const bool ok = residuals_at(state[0], state[1], w.data(), next, out);
+        w[cc] = world[c];
+        return ok;
+      };
+      if (!difference_column(with, world[c], up, down, base, c, worlds_, J)) return false;
     }
     return true;
   }
 
   const ShootingProblem& problem_;
   std::size_t k_;
+  const std::vector<std::string>& held_;
   int samples_ = 0, worlds_ = 0;
 };
 
@@ -174,6 +201,63 @@ int hardware_threads() {
   return std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
 }
 
+ceres::Solver::Options solver_options(const IdentifyOptions& options,
+                                      ceres::IterationCallback* callback) {
+  ceres::Solver::Options so;
+  so.linear_solver_type = ceres::DENSE_QR;
+  so.max_num_iterations = options.max_iterations;
+  so.num_threads = options.threads > 0 ? options.threads : hardware_threads();
+  // A relative change of the cost below 1e-6 moves chi^2 by far less than the 1 that a one-sigma
+  // change of a parameter makes; the events make the last digits of the cost ragged anyway.
+  so.function_tolerance = 1e-6;
+  so.gradient_tolerance = 1e-12;
+  so.parameter_tolerance = 1e-10;
+  so.logging_type = ceres::SILENT;
+  if (callback) so.callbacks.push_back(callback);
+  return so;
+}
+
+/// Holds the unknowns whose `held` entry is not empty at their current values: the world block
+/// constant when all are, a subset manifold over it otherwise (kept in `manifolds`, which the
+/// problem does not own).
+void hold(ceres::Problem& cp, std::vector<double>& w, const std::vector<std::string>& held,
+          std::vector<std::unique_ptr<ceres::Manifold>>& manifolds) {
+  std::vector<int> constant;
+  for (std::size_t j = 0; j < held.size(); ++j)
+    if (!held[j].empty()) constant.push_back(static_cast<int>(j));
+  if (constant.size() == w.size()) {
+    cp.SetParameterBlockConstant(w.data());
+    return;
+  }
+  manifolds.push_back(
+      std::make_unique<ceres::SubsetManifold>(static_cast<int>(w.size()), constant));
+  cp.SetManifold(w.data(), manifolds.back().get());
+}
+
+/// The warnings of a solved fit: a solver that did not converge, chi^2 beyond its quantile.
+void fit_warnings(const ceres::Solver::Summary& summary, const IdentifyOptions& options,
+                  IdentifyResult& result) {
+  if (summary.termination_type == ceres::NO_CONVERGENCE)
+    result.warnings.push_back(
+        "the fit did not converge: the solver stopped after max_iterations = " +
+        std::to_string(options.max_iterations) + " iterations (" + summary.message +
+        "); the values are where it stopped, not a minimum of chi^2: raise max_iterations");
+  else if (summary.termination_type != ceres::CONVERGENCE)
+    result.warnings.push_back("the fit did not converge: Ceres ended with " +
+                              result.termination_type + " (" + summary.message +
+                              "); the values are where it stopped, not a minimum of chi^2");
+  if (result.sigma_scale > 1)
+    result.warnings.push_back(
+        "chi^2 " + sim::format_significant(result.chi2, 4) + " for " +
+        std::to_string(result.degrees_of_freedom) + " degrees of freedom exceeds its " +
+        sim::format_number(100 * detail::kConsistentChi2Quantile) + " % quantile " +
+        sim::format_significant(result.chi2_limit, 4) +
+        ": every sigma is scaled by sqrt(chi^2/dof) = " +
+        sim::format_significant(result.sigma_scale, 3) +
+        " (the unscaled beside it); the measurements' sigma is too small or the model misses "
+        "something (structure in the residuals over time says the model)");
+}
+
 }  // namespace
 
 namespace detail {
@@ -195,36 +279,26 @@ IdentifyResult solve(const ShootingProblem& problem, const sim::SimulationSpec& 
       throw std::runtime_error("identify: at the starting values, " + why);
   }
 
+  // held[j]: why unknown j is held at its starting value (empty: fitted).
+  std::vector<std::string> held(K);
   ceres::Problem::Options problem_options;
   problem_options.cost_function_ownership = ceres::TAKE_OWNERSHIP;
+  problem_options.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  std::vector<std::unique_ptr<ceres::Manifold>> manifolds;
   ceres::Problem cp(problem_options);
   for (std::size_t k = 0; k < states.size(); ++k) {
     std::vector<double*> blocks{states[k].data()};
     if (K > 0) blocks.push_back(w.data());
     if (problem.segments()[k].has_next) blocks.push_back(states[k + 1].data());
-    cp.AddResidualBlock(new SegmentCost(problem, k), nullptr, blocks);
+    cp.AddResidualBlock(new SegmentCost(problem, k, held), nullptr, blocks);
   }
-  if (K > 0) {
-    for (std::size_t j = 0; j < K; ++j) {
-      cp.SetParameterLowerBound(w.data(), static_cast<int>(j), problem.unknowns()[j].bounds.lower);
-      cp.SetParameterUpperBound(w.data(), static_cast<int>(j), problem.unknowns()[j].bounds.upper);
-    }
+  for (std::size_t j = 0; j < K; ++j) {
+    cp.SetParameterLowerBound(w.data(), static_cast<int>(j), problem.unknowns()[j].bounds.lower);
+    cp.SetParameterUpperBound(w.data(), static_cast<int>(j), problem.unknowns()[j].bounds.upper);
   }
-  ceres::Solver::Options so;
-  so.linear_solver_type = ceres::DENSE_QR;
-  so.max_num_iterations = options.max_iterations;
-  so.num_threads = options.threads > 0 ? options.threads : hardware_threads();
-  // A relative change of the cost below 1e-6 moves chi^2 by far less than the 1 that a one-sigma
-  // change of a parameter makes; the events make the last digits of the cost ragged anyway.
-  so.function_tolerance = 1e-6;
-  so.gradient_tolerance = 1e-12;
-  so.parameter_tolerance = 1e-10;
-  so.logging_type = ceres::SILENT;
   std::unique_ptr<ProgressCallback> callback;
-  if (options.progress) {
-    callback = std::make_unique<ProgressCallback>(options, problem, start);
-    so.callbacks.push_back(callback.get());
-  }
+  if (options.progress) callback = std::make_unique<ProgressCallback>(options, problem, start);
+  const ceres::Solver::Options so = solver_options(options, callback.get());
   // First the segments' states with the world held at its starting values: the guesses from the
   // data leave large gaps at the boundaries, and closing them while the world moves too sent the
   // world far off (into another minimum) in trials; then everything together.
@@ -236,14 +310,39 @@ IdentifyResult solve(const ShootingProblem& problem, const sim::SimulationSpec& 
     iterations += static_cast<int>(summary.iterations.size()) - 1;
     cp.SetParameterBlockVariable(w.data());
   }
-  ceres::Solve(so, &cp, &summary);
-  iterations += static_cast<int>(summary.iterations.size()) - 1;
-
+  // A parameter the data do not determine would wander where its noisy derivatives take it and
+  // drag the others along (adding an unconstrained mu_kinetic to a closed-loop experiment moved
+  // its rolling resistance by 3 sigma): it is held at its starting value, the value the fitted
+  // scene keeps, and the rest fitted again, until every free parameter is determined.
   IdentifyResult result;
+  for (;;) {
+    ceres::Solve(so, &cp, &summary);
+    iterations += static_cast<int>(summary.iterations.size()) - 1;
+    // The report's Jacobian has a column per unknown (a held one's zero): no manifold, which
+    // would drop the held columns, and not constant.
+    if (K > 0) {
+      cp.SetManifold(w.data(), nullptr);
+      cp.SetParameterBlockVariable(w.data());
+    }
+    detail::report_fit(problem, cp, w, states, options, held, result);
+    bool newly_held = false;
+    for (std::size_t j = 0; j < K; ++j) {
+      if (!held[j].empty() || result.parameters[j].sigma) continue;
+      const Unknown& u = problem.unknowns()[j];
+      held[j] = result.parameters[j].not_determined + "; held at its starting value " +
+                sim::format_number(u.initial) + ", the others fitted with it there";
+      w[j] = u.initial;
+      newly_held = true;
+    }
+    if (!newly_held) break;
+    hold(cp, w, held, manifolds);
+  }
+
   result.iterations = iterations;
   result.converged = summary.termination_type == ceres::CONVERGENCE;
+  result.termination_type = ceres::TerminationTypeToString(summary.termination_type);
   result.termination = summary.message;
-  detail::report_fit(problem, cp, w, states, options, result);
+  fit_warnings(summary, options, result);
   for (std::size_t k = 0; k < states.size(); ++k) {
     const Segment& seg = problem.segments()[k];
     SegmentOutput o;

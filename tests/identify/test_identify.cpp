@@ -10,6 +10,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <random>
@@ -240,4 +241,104 @@ TEST(Identify, RefusesBadInputNamingTheField) {
   EXPECT_NE(message(r, segment).find("segment_duration"), std::string::npos);
   for (const std::string& m : {message(bad, o), message(r, unknown), message(r, outside)})
     EXPECT_EQ(m.find('\n'), std::string::npos) << m;
+}
+
+// chi^2 beyond what its degrees of freedom allow: noise three times the sigma given makes chi^2/dof
+// about 9, and every sigma is scaled by sqrt(chi^2/dof) (the Birge ratio), the unscaled beside it,
+// with a warning; noise of the sigma given leaves sigma unscaled. The limit is the chi^2
+// distribution's 99 % quantile, checked against the Wilson-Hilferty approximation (within 0.5 %
+// at these dof).
+TEST(Identify, SigmaIsScaledByTheBirgeRatioOnlyWhenChiSquaredExceedsItsQuantile) {
+  const sim::SimulationSpec w = truth_world();
+  identify::IdentifyOptions o;
+  o.unknowns = {"rolling_resistance", "drag"};
+  o.segment_duration = 5.0;
+  o.threads = 2;
+  const auto wilson_hilferty_99 = [](double dof) {
+    const double z = 2.3263478740408408;  // the standard normal's 99 % quantile
+    return dof * std::pow(1 - 2 / (9 * dof) + z * std::sqrt(2 / (9 * dof)), 3);
+  };
+  for (const double noise_factor : {1.0, 3.0}) {
+    std::mt19937_64 rng(11);
+    identify::Recording r = rocking(w, -0.7, 4.0, noise_factor * kTrackerSigmaSh, &rng);
+    std::fill(r.sigma.begin(), r.sigma.end(), kTrackerSigmaSh);  // the sigma given
+    const identify::IdentifyResult fit = identify::identify(w, {r}, o);
+    const double dof = fit.degrees_of_freedom, ratio = fit.chi2 / dof;
+    EXPECT_EQ(fit.degrees_of_freedom, static_cast<int>(r.t.size()) - 2 - 2);
+    EXPECT_NEAR(fit.chi2_limit, wilson_hilferty_99(dof), 5e-3 * fit.chi2_limit);
+    std::printf("[ identify ] noise %.0f x sigma: chi^2/dof %.2f, limit %.1f, sigma scale %.3g\n",
+                noise_factor, ratio, fit.chi2_limit, fit.sigma_scale);
+    const bool beyond = fit.chi2 > fit.chi2_limit;
+    EXPECT_EQ(beyond, noise_factor > 1) << fit.chi2;
+    EXPECT_DOUBLE_EQ(fit.sigma_scale, beyond ? std::sqrt(ratio) : 1.0);
+    const bool warned = std::any_of(fit.warnings.begin(), fit.warnings.end(), [](const auto& m) {
+      return m.find("every sigma is scaled by sqrt(chi^2/dof)") != std::string::npos;
+    });
+    EXPECT_EQ(warned, beyond);
+    for (const identify::ParameterEstimate& p : fit.parameters) {
+      ASSERT_TRUE(p.sigma && p.sigma_unscaled) << p.name << ": " << p.not_determined;
+      EXPECT_NEAR(*p.sigma, fit.sigma_scale * *p.sigma_unscaled, 1e-12 * *p.sigma) << p.name;
+      EXPECT_LE(std::abs(p.value - truth_of(p.name)), 3 * *p.sigma) << p.name;
+    }
+  }
+}
+
+// A parameter the data do not depend on (the rocking disk never slides nor leaves the hand, so
+// neither mu_kinetic nor restitution acts) is held at its starting value, reported as not
+// determined with that said, and the rest fitted as if it were not there: the same drag and
+// rolling resistance, sigma and chi^2 as the fit without it, to a small fraction of sigma.
+TEST(Identify, AParameterTheDataDoNotDetermineIsHeldAndTheRestFittedWithout) {
+  const sim::SimulationSpec w = truth_world();
+  std::mt19937_64 rng(5);
+  const identify::Recording r = rocking(w, -0.7, 4.0, kTrackerSigmaSh, &rng);
+  identify::IdentifyOptions two;
+  two.unknowns = {"rolling_resistance", "drag"};
+  two.initial = {{"rolling_resistance", 1.5e-4}, {"drag", 0.08}};
+  two.segment_duration = 5.0;
+  two.threads = 2;
+  identify::IdentifyOptions four = two;
+  four.unknowns = {"mu_kinetic", "rolling_resistance", "restitution", "drag"};
+  four.initial["mu_kinetic"] = 0.55;
+  const identify::IdentifyResult a = identify::identify(w, {r}, two);
+  const identify::IdentifyResult b = identify::identify(w, {r}, four);
+  for (const std::size_t j : {0u, 2u}) {
+    const identify::ParameterEstimate& p = b.parameters[j];
+    EXPECT_TRUE(p.held) << p.name;
+    EXPECT_FALSE(p.sigma.has_value()) << p.name;
+    EXPECT_EQ(p.value, p.initial) << p.name;
+    EXPECT_NE(p.not_determined.find("held at its starting value"), std::string::npos)
+        << p.not_determined;
+    EXPECT_TRUE(std::isnan(b.correlation(static_cast<Eigen::Index>(j), 1)));
+  }
+  EXPECT_EQ(b.world.contact.mu_kinetic, 0.55);
+  for (const auto& [ja, jb] : {std::pair<std::size_t, std::size_t>{0, 1}, {1, 3}}) {
+    const identify::ParameterEstimate &p = a.parameters[ja], &q = b.parameters[jb];
+    ASSERT_EQ(p.name, q.name);
+    ASSERT_TRUE(p.sigma && q.sigma) << q.name << ": " << q.not_determined;
+    EXPECT_FALSE(q.held);
+    EXPECT_LE(std::abs(p.value - q.value), 0.05 * *p.sigma) << p.name;
+    EXPECT_NEAR(*q.sigma, *p.sigma, 0.01 * *p.sigma) << p.name;
+  }
+  EXPECT_EQ(b.degrees_of_freedom, a.degrees_of_freedom);
+  EXPECT_NEAR(b.chi2, a.chi2, 0.05);
+}
+
+// A fit stopped by max_iterations says so: not converged, Ceres' termination type, a warning.
+TEST(Identify, AFitThatDidNotConvergeSaysSo) {
+  const sim::SimulationSpec w = truth_world();
+  std::mt19937_64 rng(2);
+  identify::IdentifyOptions o;
+  o.unknowns = {"rolling_resistance", "drag"};
+  o.initial = {{"rolling_resistance", 1e-4}, {"drag", 0.05}};
+  o.segment_duration = 5.0;
+  o.max_iterations = 1;
+  const identify::IdentifyResult r =
+      identify::identify(w, {rocking(w, -0.7, 2.0, kTrackerSigmaSh, &rng)}, o);
+  EXPECT_FALSE(r.converged);
+  EXPECT_EQ(r.termination_type, "NO_CONVERGENCE");
+  const bool warned = std::any_of(r.warnings.begin(), r.warnings.end(), [](const auto& m) {
+    return m.find("the fit did not converge") != std::string::npos &&
+           m.find("raise max_iterations") != std::string::npos;
+  });
+  EXPECT_TRUE(warned);
 }

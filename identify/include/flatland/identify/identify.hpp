@@ -93,7 +93,11 @@ struct IdentifyOptions {
   std::map<std::string, Bounds> bounds;
   /// Starting values that replace the world's, by parameter name (inside the bounds).
   std::map<std::string, double> initial;
-  int max_iterations = 50;
+  /// Ceres iterations at most, per solve (the states alone, then everything; again after a
+  /// parameter is held). A fit that stops here has not converged: IdentifyResult::converged is
+  /// false and a warning says so. 50 stopped short of convergence on a closed-loop experiment
+  /// (it needed 60-70); docs/IDENTIFY.md.
+  int max_iterations = 200;
   /// Threads evaluating segments at once; 0: as many as the machine has.
   int threads = 0;
   /// A parameter whose sigma exceeds this fraction of its bounds' width (or of |value| where
@@ -117,6 +121,12 @@ struct ParameterEstimate {
   /// Why it is not determined (empty when sigma is present), e.g. "cannot be separated from
   /// drag (correlation -0.998)", "at its lower bound", "sigma 0.2 exceeds half its range".
   std::string not_determined;
+  /// The sigma from the weights as given, before the Birge ratio's scaling (equal to sigma when
+  /// chi^2 was consistent with its degrees of freedom; IdentifyResult::sigma_scale).
+  std::optional<double> sigma_unscaled;
+  /// Not fitted: the data did not determine it, so it was held at its starting value (`value`
+  /// is that value) and the other unknowns fitted again with it there.
+  bool held = false;
 };
 
 /// One recording's fit, per sample: time (camera clock), measured and fitted s_h, and the
@@ -131,7 +141,7 @@ struct SegmentState {
   std::size_t recording = 0;  ///< index into the recordings
   double t0 = 0, t1 = 0;      ///< s, the segment's span (camera clock)
   double s_h = 0, sdot_h = 0;
-  std::optional<double> sigma_s_h, sigma_sdot_h;
+  std::optional<double> sigma_s_h, sigma_sdot_h;  ///< scaled as the parameters' sigma are
 };
 
 struct IdentifyResult {
@@ -143,19 +153,32 @@ struct IdentifyResult {
   /// Samples minus fitted quantities (parameters and one initial state per recording; the
   /// segments' other initial states are tied by the continuity conditions).
   int degrees_of_freedom = 0;
+  /// The 99 % quantile of the chi^2 distribution with degrees_of_freedom (infinite when there
+  /// are none): chi^2 above it is not what noise of the given sigma makes.
+  double chi2_limit = 0;
+  /// The factor every reported sigma carries: sqrt(chi2 / dof) (the Birge ratio) when chi2
+  /// exceeds chi2_limit, the sigma given being too small or the model missing something (a
+  /// warning says so); 1 when chi2 is consistent. ParameterEstimate::sigma_unscaled has the
+  /// sigma before it.
+  double sigma_scale = 1;
   std::vector<RecordingFit> fits;  ///< one per recording
   std::vector<SegmentState> segments;
   int iterations = 0;
   long simulations = 0;        ///< simulator runs (segments), the differences' included
   double wall_time = 0;        ///< s
   double simulation_time = 0;  ///< s of wall time spent inside the simulator
+  /// Whether the last solve converged (Ceres' CONVERGENCE); when not, a warning says that the
+  /// values are where the solver stopped, not a minimum.
   bool converged = false;
-  std::string termination;  ///< Ceres' message
-  /// What the caller should know about the fit's validity, one line each: a segment boundary
-  /// where the fitted run is in flight or sliding (a segment starts rolling, so the continuity
-  /// there is not the whole state: choose another segment_duration).
+  std::string termination_type;  ///< Ceres' termination type: CONVERGENCE, NO_CONVERGENCE, ...
+  std::string termination;       ///< Ceres' message
+  /// What the caller should know about the fit's validity, one line each: a fit that did not
+  /// converge; chi^2 beyond chi2_limit (sigma scaled); a segment boundary where the fitted run is
+  /// in flight or sliding (a segment starts rolling, so the continuity there is not the whole
+  /// state: choose another segment_duration).
   std::vector<std::string> warnings;
-  /// The world with the fitted values in place (determined or not): contact law and tilt.
+  /// The world with the fitted values in place (the held ones at their starting values): contact
+  /// law and tilt.
   sim::SimulationSpec world;
   /// The fitted (or, when not among the unknowns, the starting) hand angle offset (rad) and
   /// camera-to-joint time offset (s), which a SimulationSpec does not hold: for validate().
