@@ -30,7 +30,7 @@ struct IdentifyCliOptions {
   std::vector<std::string> encoders;
   double segment = 1.0;
   double sigma = 0;
-  int max_iterations = 50;
+  int max_iterations = identify::IdentifyOptions{}.max_iterations;
   int threads = 0;
   bool json = false, force = false, no_plot = false;
   CLI::Option* sigma_opt = nullptr;
@@ -239,7 +239,9 @@ Json report_json(const identify::IdentifyResult& r, const std::vector<LoadedReco
     q["name"] = p.name;
     q["value"] = p.value;
     q["sigma"] = p.sigma ? Json(*p.sigma) : Json(nullptr);
+    q["sigma_unscaled"] = p.sigma_unscaled ? Json(*p.sigma_unscaled) : Json(nullptr);
     q["determined"] = p.sigma.has_value();
+    q["held"] = p.held;
     q["not_determined"] = p.sigma ? Json(nullptr) : Json(p.not_determined);
     q["initial"] = p.initial;
     q["bounds"] = {p.bounds.lower, p.bounds.upper};
@@ -260,8 +262,11 @@ Json report_json(const identify::IdentifyResult& r, const std::vector<LoadedReco
   j["degrees_of_freedom"] = r.degrees_of_freedom;
   j["chi2_per_dof"] =
       r.degrees_of_freedom > 0 ? json_number(r.chi2 / r.degrees_of_freedom) : Json(nullptr);
+  j["chi2_limit"] = json_number(r.chi2_limit);
+  j["sigma_scale"] = r.sigma_scale;
   j["iterations"] = r.iterations;
   j["converged"] = r.converged;
+  j["termination_type"] = r.termination_type;
   j["termination"] = r.termination;
   j["simulations"] = r.simulations;
   j["wall_time"] = r.wall_time;
@@ -348,14 +353,21 @@ std::string report_text(const identify::IdentifyResult& r, const std::vector<Loa
     for (const auto& [why, n] : l.summary.skipped) os << ", " << n << " " << why;
     os << "\n";
   }
-  os << "  parameters (1 sigma):\n";
+  os << "  parameters (1 sigma"
+     << (r.sigma_scale > 1 ? ", scaled by sqrt(chi^2/dof) = " +
+                                 sim::format_significant(r.sigma_scale, 3) + "; unscaled in ()"
+                           : std::string())
+     << "):\n";
   std::size_t width = 0;
   for (const auto& p : r.parameters) width = std::max(width, p.name.size());
   for (const auto& p : r.parameters) {
     os << "    " << p.name << std::string(width - p.name.size() + 2, ' ');
-    if (p.sigma)
-      os << value_text(p.value, *p.sigma) << " +- " << sim::format_significant(*p.sigma, 2) << "\n";
-    else
+    if (p.sigma) {
+      os << value_text(p.value, *p.sigma) << " +- " << sim::format_significant(*p.sigma, 2);
+      if (r.sigma_scale > 1 && p.sigma_unscaled)
+        os << " (+- " << sim::format_significant(*p.sigma_unscaled, 2) << ")";
+      os << "\n";
+    } else
       os << "not determined: " << p.not_determined << "\n";
   }
   os << "  correlation:\n    " << std::string(width + 2, ' ');
@@ -377,10 +389,13 @@ std::string report_text(const identify::IdentifyResult& r, const std::vector<Loa
   os << "  chi^2              " << sim::format_significant(r.chi2, 6) << " for "
      << r.degrees_of_freedom << " degrees of freedom";
   if (r.degrees_of_freedom > 0)
-    os << " (chi^2/dof = " << sim::format_significant(r.chi2 / r.degrees_of_freedom, 4) << ")";
+    os << " (chi^2/dof = " << sim::format_significant(r.chi2 / r.degrees_of_freedom, 4)
+       << "; 99 % of noise of the sigma given stays below "
+       << sim::format_significant(r.chi2_limit, 4) << ")";
   os << "\n  fit                " << r.iterations << " iterations, " << r.simulations
      << " simulations, " << sim::format_significant(r.wall_time, 3) << " s; "
-     << (r.converged ? "converged" : "NOT converged: " + r.termination) << "\n";
+     << (r.converged ? "converged" : "NOT converged: " + r.termination_type + ": " + r.termination)
+     << "\n";
   for (const std::string& w : r.warnings) os << "  warning            " << w << "\n";
   if (check) {
     os << "  validation         " << check->name << ": rms error "
@@ -528,7 +543,8 @@ std::string command_line(const IdentifyCliOptions& o) {
   for (const std::string& e : o.encoders) s += " --encoder " + shell_quote(e);
   if (o.sigma_opt->count()) s += " --sigma " + format_number(o.sigma);
   if (o.format != "auto") s += " --format " + o.format;
-  if (o.max_iterations != 50) s += " --max-iterations " + std::to_string(o.max_iterations);
+  if (o.max_iterations != identify::IdentifyOptions{}.max_iterations)
+    s += " --max-iterations " + std::to_string(o.max_iterations);
   return s;
 }
 
@@ -584,14 +600,17 @@ Command add_identify_command(CLI::App& app) {
                   "Recording format: auto (a directory or log.csv: experiment; else from the "
                   "header), plain, experiment, track, pixels. Default: auto");
   cmd->add_option("--max-iterations", o->max_iterations,
-                  "Ceres iterations at most (1 to 10000). Default: 50");
+                  "Ceres iterations at most per solve (1 to 10000); a fit that stops there is "
+                  "reported as not converged. Default: " +
+                      std::to_string(identify::IdentifyOptions{}.max_iterations));
   cmd->add_option("--threads", o->threads,
                   "Segments simulated at once (0 to 1024; 0: every core). Default: 0");
   cmd->add_flag("--no-plot", o->no_plot, "Do not draw residuals.png (and validation.png)");
   add_force_option(*cmd, o->force);
   cmd->add_flag("--json", o->json,
                 "Print exactly one JSON object on stdout ({parameters, correlation, chi2, "
-                "degrees_of_freedom, chi2_per_dof, iterations, converged, recordings, segments, "
+                "degrees_of_freedom, chi2_per_dof, chi2_limit, sigma_scale, iterations, converged, "
+                "termination_type, recordings, segments, "
                 "validation, outputs, ...}); the same as report.json. Default: off");
   return {cmd, [o] {
             o->command_line = command_line(*o);

@@ -633,7 +633,7 @@ def _recording(name: str, value: Any) -> Dict[str, Any]:
 
 def identify(scene: SceneLike, recordings: Any, unknowns: Sequence[str], *,
              segment: float = 1.0, bounds: Optional[Dict[str, Tuple[float, float]]] = None,
-             initial: Optional[Dict[str, float]] = None, max_iterations: int = 50,
+             initial: Optional[Dict[str, float]] = None, max_iterations: int = 200,
              threads: int = 0, validate: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
     """Fit the world's parameters ``unknowns`` to ``recordings`` (``flatland identify``,
     docs/IDENTIFY.md): "mu_static", "mu_kinetic", "restitution", "rolling_resistance" (m),
@@ -650,9 +650,13 @@ def identify(scene: SceneLike, recordings: Any, unknowns: Sequence[str], *,
     simulated at once (0: every core).
 
     Returns a dict: ``names``, ``values`` and ``sigmas`` (numpy, in ``unknowns``' order; sigma
-    NaN where the data do not determine the parameter), ``determined`` (bool array),
-    ``not_determined`` ({name: why}), ``correlation`` (K x K, NaN rows for undetermined ones),
-    ``chi2``, ``degrees_of_freedom``, ``iterations``, ``converged``, ``fits`` (per recording:
+    NaN where the data do not determine the parameter; scaled by ``sigma_scale`` =
+    sqrt(chi2/dof) when chi2 exceeds ``chi2_limit``, its 99 % quantile), ``sigmas_unscaled``,
+    ``determined`` (bool array), ``held`` (bool array: not determined, so held at its starting
+    value while the others were fitted), ``not_determined`` ({name: why}), ``correlation``
+    (K x K, NaN rows for undetermined ones), ``chi2``, ``degrees_of_freedom``, ``chi2_limit``,
+    ``sigma_scale``, ``iterations``, ``converged`` (with ``termination_type`` and
+    ``termination``, Ceres' own; a fit that did not converge also has a warning), ``fits`` (per recording:
     t, measured, fitted, normalised_residual), ``segments``, ``warnings``, ``scene`` (the fitted scene file's
     text, None when the scene is not a file) and ``validation`` (t, measured, predicted, error,
     normalised_error, rms_error, max_abs_error, time_to_3_sigma, stopped; None without

@@ -68,15 +68,17 @@ py::dict result_to_python(const identify::IdentifyResult& r, const Scene& scene,
                           const std::vector<identify::Recording>& recordings,
                           const std::string& command) {
   const auto k = static_cast<py::ssize_t>(r.parameters.size());
-  py::array_t<double> values(k), sigmas(k), correlation({k, k});
+  py::array_t<double> values(k), sigmas(k), sigmas_unscaled(k), correlation({k, k});
   py::list names;
-  py::array_t<bool> determined(k);
+  py::array_t<bool> determined(k), held(k);
   py::dict why;
   for (py::ssize_t i = 0; i < k; ++i) {
     const identify::ParameterEstimate& p = r.parameters[static_cast<std::size_t>(i)];
     names.append(p.name);
     values.mutable_at(i) = p.value;
     sigmas.mutable_at(i) = p.sigma ? *p.sigma : NAN;
+    sigmas_unscaled.mutable_at(i) = p.sigma_unscaled ? *p.sigma_unscaled : NAN;
+    held.mutable_at(i) = p.held;
     determined.mutable_at(i) = p.sigma.has_value();
     if (!p.sigma) why[py::str(p.name)] = p.not_determined;
     for (py::ssize_t j = 0; j < k; ++j) correlation.mutable_at(i, j) = r.correlation(i, j);
@@ -105,13 +107,16 @@ py::dict result_to_python(const identify::IdentifyResult& r, const Scene& scene,
       provenance.recordings.push_back(rec.name + " (" + std::to_string(rec.t.size()) + " samples)");
     fitted = py::str(identify::fitted_scene(text, r, provenance));
   }
-  return py::dict(
-      "names"_a = names, "values"_a = values, "sigmas"_a = sigmas, "determined"_a = determined,
-      "not_determined"_a = why, "correlation"_a = correlation, "chi2"_a = r.chi2,
-      "degrees_of_freedom"_a = r.degrees_of_freedom, "iterations"_a = r.iterations,
-      "converged"_a = r.converged, "termination"_a = r.termination, "simulations"_a = r.simulations,
-      "wall_time"_a = r.wall_time, "simulation_time"_a = r.simulation_time, "fits"_a = fits,
-      "segments"_a = segments, "warnings"_a = r.warnings, "scene"_a = fitted);
+  return py::dict("names"_a = names, "values"_a = values, "sigmas"_a = sigmas,
+                  "sigmas_unscaled"_a = sigmas_unscaled, "determined"_a = determined,
+                  "held"_a = held, "not_determined"_a = why, "correlation"_a = correlation,
+                  "chi2"_a = r.chi2, "degrees_of_freedom"_a = r.degrees_of_freedom,
+                  "chi2_limit"_a = r.chi2_limit, "sigma_scale"_a = r.sigma_scale,
+                  "iterations"_a = r.iterations, "converged"_a = r.converged,
+                  "termination_type"_a = r.termination_type, "termination"_a = r.termination,
+                  "simulations"_a = r.simulations, "wall_time"_a = r.wall_time,
+                  "simulation_time"_a = r.simulation_time, "fits"_a = fits, "segments"_a = segments,
+                  "warnings"_a = r.warnings, "scene"_a = fitted);
 }
 
 py::dict identify_binding(const py::object& scene_arg, const py::list& recordings_arg,

@@ -76,9 +76,15 @@ def test_identify_recovers_the_worlds_drag_and_writes_its_scene(tmp_path):
     assert 0 < sigma < 0.015
     assert abs(drag - 0.015) < 3 * sigma, (drag, sigma)
     assert out["correlation"][0, 0] == pytest.approx(1.0)
-    # chi^2 of noise of the stated sigma: about its degrees of freedom.
+    # chi^2 of noise of the stated sigma: about its degrees of freedom, below its 99 % quantile,
+    # so sigma is not scaled; the fit converged and held nothing.
     assert out["degrees_of_freedom"] > 0
     assert out["chi2"] / out["degrees_of_freedom"] < 2.0
+    assert out["chi2"] < out["chi2_limit"]
+    assert out["sigma_scale"] == 1.0
+    np.testing.assert_array_equal(out["sigmas_unscaled"], out["sigmas"])
+    assert not out["held"].any()
+    assert out["converged"] and out["termination_type"] == "CONVERGENCE"
     assert isinstance(out["warnings"], list)
     assert out["validation"] is None
     fits = out["fits"][0]
