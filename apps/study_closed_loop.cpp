@@ -23,13 +23,16 @@ Json cell_json(const studies::ClosedLoopCellResult& c, int n) {
   j["controller"] = c.cell.controller;
   j["runs"] = n;
   j["successes"] = c.successes;
-  const int counted = n - c.numerical_failures;  // worlds with a physical outcome
+  // Worlds with a physical outcome: a failed simulation or a world the draw made impossible has
+  // none, and is left out of the rate as the interval leaves it out.
+  const int counted = n - c.numerical_failures - c.invalid_worlds;
   j["success_rate"] = counted > 0 ? Json(static_cast<double>(c.successes) / counted) : Json();
   j["ci95"] = Json::array({c.ci.lo, c.ci.hi});
   Json f = Json::object();
   for (const auto& [cls, count] : c.failures) f[cls] = count;
   j["failures"] = f;
   j["numerical_failures"] = c.numerical_failures;
+  j["invalid_worlds"] = c.invalid_worlds;
   j["fn_min_ratio_mean"] = number(c.fn_min_mean);
   j["fn_min_ratio_min"] = number(c.fn_min_min);
   j["duration_mean_s"] = number(c.duration_mean);
@@ -219,6 +222,7 @@ void run_closed_loop_study(const StudyOptions& o) {
     for (const auto& [cls, count] : c.failures) os << "; " << cls << " " << count;
     if (c.numerical_failures > 0)
       os << "; " << c.numerical_failures << " failed numerically (not counted)";
+    if (c.invalid_worlds > 0) os << "; " << c.invalid_worlds << " could not exist (not counted)";
     os << "\n";
   }
   for (const std::string& p : written) os << "  wrote " << p << "\n";

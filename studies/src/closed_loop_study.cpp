@@ -196,7 +196,7 @@ std::string csv_header() {
   for (const char* c : kFailureColumns) h += std::string(",") + c;
   return h +
          ",fn_min_ratio_mean,fn_min_ratio_min,duration_mean[s],est_err_rms,nees_mean,"
-         "frames_lost_fraction,wall[s],cpu[s],numerical_failures\n";
+         "frames_lost_fraction,wall[s],cpu[s],numerical_failures,invalid_worlds\n";
 }
 
 std::string csv_row(const CellResult& c, int n) {
@@ -225,6 +225,8 @@ std::string csv_row(const CellResult& c, int n) {
   }
   s += ',';
   s += std::to_string(c.numerical_failures);
+  s += ',';
+  s += std::to_string(c.invalid_worlds);
   return s + "\n";
 }
 
