@@ -102,10 +102,10 @@ TEST(Identify, NoiseFreeRecordingGivesTheTruth) {
 // The acceptance of issue 26: ten noise seeds of the same two recordings (rocking, throw).
 TEST(Identify, TruthWithinTwoSigmaInNineOfTenSeedsAndSigmaMatchesTheSpread) {
   const sim::SimulationSpec w = truth_world();
-  // Under the sanitizers (FLATLAND_TEST_SHORT) three seeds run the same code paths; the spread
-  // of three says little, so only the 2-sigma count is asserted there (at least two).
+  // Under the sanitizers (FLATLAND_TEST_SHORT) one seed runs the same code paths (a fit there takes
+  // ~90 s); one seed has no spread, so only its distance from the truth is asserted (3 sigma).
   const bool short_run = flatland::test::short_tests();
-  const int seeds = short_run ? 3 : 10;
+  const int seeds = short_run ? 1 : 10;
   const std::vector<std::string> names = four_unknowns().unknowns;
   std::vector<std::vector<double>> values(names.size()), sigmas(names.size());
   double chi2_per_dof = 0;
@@ -130,6 +130,10 @@ TEST(Identify, TruthWithinTwoSigmaInNineOfTenSeedsAndSigmaMatchesTheSpread) {
       within += std::abs(values[j][i] - truth_of(names[j])) <= 2 * sigmas[j][i];
       mean += values[j][i] / seeds;
     }
+    if (short_run) {
+      EXPECT_LE(std::abs(values[j][0] - truth_of(names[j])), 3 * sigmas[j][0]) << names[j];
+      continue;
+    }
     for (int i = 0; i < seeds; ++i) spread += std::pow(values[j][i] - mean, 2) / (seeds - 1);
     spread = std::sqrt(spread);
     double sigma_lo = sigmas[j][0], sigma_hi = sigmas[j][0];
@@ -137,10 +141,6 @@ TEST(Identify, TruthWithinTwoSigmaInNineOfTenSeedsAndSigmaMatchesTheSpread) {
     std::printf(
         "[ identify ] %-18s truth %.6g: within 2 sigma %d/%d, spread %.3g, sigma %.3g..%.3g\n",
         names[j].c_str(), truth_of(names[j]), within, seeds, spread, sigma_lo, sigma_hi);
-    if (short_run) {
-      EXPECT_GE(within, seeds - 1) << names[j];
-      continue;
-    }
     EXPECT_GE(within, 9) << names[j];
     EXPECT_LE(sigma_hi, 2 * spread) << names[j];
     EXPECT_GE(sigma_lo, 0.5 * spread) << names[j];
