@@ -4,9 +4,11 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -41,6 +43,28 @@ inline std::vector<std::string> lines_of(const std::string& s) {
   std::vector<std::string> out;
   std::stringstream ss(s);
   for (std::string line; std::getline(ss, line);) out.push_back(line);
+  return out;
+}
+
+/// A CSV with a header (no quoted cells): each column by name, units in brackets kept in the name;
+/// a cell that is not a number, or missing at the end of a row, is NaN.
+inline std::map<std::string, std::vector<double>> read_columns(const fs::path& p) {
+  const std::vector<std::string> lines = lines_of(read_text(p));
+  std::map<std::string, std::vector<double>> out;
+  if (lines.empty()) return out;
+  std::vector<std::string> names;
+  std::stringstream header(lines[0]);
+  for (std::string cell; std::getline(header, cell, ',');) names.push_back(cell);
+  for (std::size_t i = 1; i < lines.size(); ++i) {
+    std::stringstream row(lines[i]);
+    std::size_t k = 0;
+    for (std::string cell; std::getline(row, cell, ',') && k < names.size(); ++k) {
+      char* end = nullptr;
+      const double v = std::strtod(cell.c_str(), &end);
+      out[names[k]].push_back(end != cell.c_str() ? v : std::nan(""));
+    }
+    for (; k < names.size(); ++k) out[names[k]].push_back(std::nan(""));
+  }
   return out;
 }
 

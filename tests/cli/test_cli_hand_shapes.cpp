@@ -23,32 +23,12 @@ namespace {
 namespace fs = std::filesystem;
 using flatland_test::lines_of;
 using flatland_test::quote;
+using flatland_test::read_columns;
 using flatland_test::read_text;
 using flatland_test::Result;
 using flatland_test::write_text;
 
 constexpr double kPi = std::numbers::pi;
-
-/// A CSV with a header: each column by name.
-std::map<std::string, std::vector<double>> read_columns(const fs::path& p) {
-  const std::vector<std::string> lines = lines_of(read_text(p));
-  std::map<std::string, std::vector<double>> out;
-  if (lines.empty()) return out;
-  std::vector<std::string> names;
-  std::stringstream header(lines[0]);
-  for (std::string cell; std::getline(header, cell, ',');) names.push_back(cell);
-  for (std::size_t i = 1; i < lines.size(); ++i) {
-    std::stringstream row(lines[i]);
-    std::size_t k = 0;
-    for (std::string cell; std::getline(row, cell, ',') && k < names.size(); ++k) {
-      char* end = nullptr;
-      const double v = std::strtod(cell.c_str(), &end);
-      out[names[k]].push_back(end != cell.c_str() ? v : std::nan(""));
-    }
-    for (; k < names.size(); ++k) out[names[k]].push_back(std::nan(""));  // an empty last cell
-  }
-  return out;
-}
 
 class CliHandShapes : public flatland_test::CliTestBase {
  protected:
