@@ -244,6 +244,7 @@ Json report_json(const identify::IdentifyResult& r, const std::vector<LoadedReco
     q["held"] = p.held;
     q["not_determined"] = p.sigma ? Json(nullptr) : Json(p.not_determined);
     q["initial"] = p.initial;
+    q["step_to_minimum"] = p.step_to_minimum;
     q["bounds"] = {p.bounds.lower, p.bounds.upper};
     const auto key = identify::scene_key(p.name);
     q["scene_key"] = key ? Json(key->section + "." + key->key) : Json(nullptr);
@@ -266,6 +267,8 @@ Json report_json(const identify::IdentifyResult& r, const std::vector<LoadedReco
   j["sigma_scale"] = r.sigma_scale;
   j["iterations"] = r.iterations;
   j["converged"] = r.converged;
+  j["step_in_sigma"] = r.step_in_sigma;
+  j["chi2_decrease_expected"] = r.chi2_decrease_expected;
   j["termination_type"] = r.termination_type;
   j["termination"] = r.termination;
   j["simulations"] = r.simulations;
@@ -395,7 +398,7 @@ std::string report_text(const identify::IdentifyResult& r, const std::vector<Loa
   os << "\n  fit                " << r.iterations << " iterations, " << r.simulations
      << " simulations, " << sim::format_significant(r.wall_time, 3) << " s; "
      << (r.converged ? "converged" : "NOT converged: " + r.termination_type + ": " + r.termination)
-     << "\n";
+     << " (the minimum within " << sim::format_significant(r.step_in_sigma, 2) << " sigma)\n";
   for (const std::string& w : r.warnings) os << "  warning            " << w << "\n";
   if (check) {
     os << "  validation         " << check->name << ": rms error "
@@ -610,7 +613,7 @@ Command add_identify_command(CLI::App& app) {
   cmd->add_flag("--json", o->json,
                 "Print exactly one JSON object on stdout ({parameters, correlation, chi2, "
                 "degrees_of_freedom, chi2_per_dof, chi2_limit, sigma_scale, iterations, converged, "
-                "termination_type, recordings, segments, "
+                "step_in_sigma, chi2_decrease_expected, termination_type, recordings, segments, "
                 "validation, outputs, ...}); the same as report.json. Default: off");
   return {cmd, [o] {
             o->command_line = command_line(*o);

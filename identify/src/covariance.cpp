@@ -10,6 +10,7 @@
 
 #include <boost/math/distributions/chi_squared.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -205,6 +206,13 @@ void report_fit(const ShootingProblem& problem, ceres::Problem& solved, std::vec
   // The covariance with the sigma that cover the error: scaled when chi^2 says the weights were
   // too large. The refusals below judge the scaled sigma.
   Covariance cov = covariance_of(J);
+  // The Gauss-Newton step at the solution, -(J^T J)^+ J^T r over the directions the data resolve:
+  // zero at a minimum; what it would still gain says whether the solver stopped short of one.
+  const Eigen::VectorXd gradient =
+      J.transpose() * Eigen::Map<const Eigen::VectorXd>(
+                          residuals.data(), static_cast<Eigen::Index>(residuals.size()));
+  const Eigen::VectorXd step = -cov.C * gradient;
+  result.chi2_decrease_expected = -gradient.dot(step);
   const double scale2 = result.sigma_scale * result.sigma_scale;
   cov.C *= scale2;
   result.segments.clear();
@@ -232,6 +240,7 @@ void report_fit(const ShootingProblem& problem, ceres::Problem& solved, std::vec
     e.initial = unknowns[j].initial;
     e.value = w[j];
     e.bounds = unknowns[j].bounds;
+    e.step_to_minimum = step[static_cast<Eigen::Index>(j)];
     if (j < held.size() && !held[j].empty()) {
       e.not_determined = held[j];
       e.held = true;
@@ -264,6 +273,10 @@ void report_fit(const ShootingProblem& problem, ceres::Problem& solved, std::vec
     e.sigma_unscaled.reset();
     determined[static_cast<std::size_t>(m)] = false;
   }
+  result.step_in_sigma = 0;
+  for (const ParameterEstimate& e : result.parameters)
+    if (e.sigma)
+      result.step_in_sigma = std::max(result.step_in_sigma, std::abs(e.step_to_minimum) / *e.sigma);
   result.correlation =
       Eigen::MatrixXd::Constant(static_cast<Eigen::Index>(K), static_cast<Eigen::Index>(K), kNaN);
   for (std::size_t i = 0; i < K; ++i)

@@ -655,7 +655,9 @@ def identify(scene: SceneLike, recordings: Any, unknowns: Sequence[str], *,
     ``determined`` (bool array), ``held`` (bool array: not determined, so held at its starting
     value while the others were fitted), ``not_determined`` ({name: why}), ``correlation``
     (K x K, NaN rows for undetermined ones), ``chi2``, ``degrees_of_freedom``, ``chi2_limit``,
-    ``sigma_scale``, ``iterations``, ``converged`` (with ``termination_type`` and
+    ``sigma_scale``, ``iterations``, ``converged`` (Ceres converged and the minimum lies within
+    0.3 sigma: ``step_in_sigma``, the largest of ``steps_to_minimum`` / sigma, the Gauss-Newton
+    step at the solution per unknown, and ``chi2_decrease_expected``; with ``termination_type`` and
     ``termination``, Ceres' own; a fit that did not converge also has a warning), ``fits`` (per recording:
     t, measured, fitted, normalised_residual), ``segments``, ``warnings``, ``scene`` (the fitted scene file's
     text, None when the scene is not a file) and ``validation`` (t, measured, predicted, error,

@@ -68,7 +68,7 @@ py::dict result_to_python(const identify::IdentifyResult& r, const Scene& scene,
                           const std::vector<identify::Recording>& recordings,
                           const std::string& command) {
   const auto k = static_cast<py::ssize_t>(r.parameters.size());
-  py::array_t<double> values(k), sigmas(k), sigmas_unscaled(k), correlation({k, k});
+  py::array_t<double> values(k), sigmas(k), sigmas_unscaled(k), steps(k), correlation({k, k});
   py::list names;
   py::array_t<bool> determined(k), held(k);
   py::dict why;
@@ -78,6 +78,7 @@ py::dict result_to_python(const identify::IdentifyResult& r, const Scene& scene,
     values.mutable_at(i) = p.value;
     sigmas.mutable_at(i) = p.sigma ? *p.sigma : NAN;
     sigmas_unscaled.mutable_at(i) = p.sigma_unscaled ? *p.sigma_unscaled : NAN;
+    steps.mutable_at(i) = p.step_to_minimum;
     held.mutable_at(i) = p.held;
     determined.mutable_at(i) = p.sigma.has_value();
     if (!p.sigma) why[py::str(p.name)] = p.not_determined;
@@ -113,6 +114,8 @@ py::dict result_to_python(const identify::IdentifyResult& r, const Scene& scene,
                   "chi2"_a = r.chi2, "degrees_of_freedom"_a = r.degrees_of_freedom,
                   "chi2_limit"_a = r.chi2_limit, "sigma_scale"_a = r.sigma_scale,
                   "iterations"_a = r.iterations, "converged"_a = r.converged,
+                  "steps_to_minimum"_a = steps, "step_in_sigma"_a = r.step_in_sigma,
+                  "chi2_decrease_expected"_a = r.chi2_decrease_expected,
                   "termination_type"_a = r.termination_type, "termination"_a = r.termination,
                   "simulations"_a = r.simulations, "wall_time"_a = r.wall_time,
                   "simulation_time"_a = r.simulation_time, "fits"_a = fits, "segments"_a = segments,

@@ -127,6 +127,10 @@ struct ParameterEstimate {
   /// Not fitted: the data did not determine it, so it was held at its starting value (`value`
   /// is that value) and the other unknowns fitted again with it there.
   bool held = false;
+  /// The Gauss-Newton step that the linear model at the solution still takes for this parameter
+  /// (its unit; 0 when held): where that model puts the minimum of chi^2, relative to `value`.
+  /// About 0 at a minimum; IdentifyResult::step_in_sigma judges it.
+  double step_to_minimum = 0;
 };
 
 /// One recording's fit, per sample: time (camera clock), measured and fitted s_h, and the
@@ -167,9 +171,19 @@ struct IdentifyResult {
   long simulations = 0;        ///< simulator runs (segments), the differences' included
   double wall_time = 0;        ///< s
   double simulation_time = 0;  ///< s of wall time spent inside the simulator
-  /// Whether the last solve converged (Ceres' CONVERGENCE); when not, a warning says that the
-  /// values are where the solver stopped, not a minimum.
+  /// Whether the fit reached a minimum of chi^2: the last solve converged (Ceres' CONVERGENCE)
+  /// and the linear model at the solution moves no determined parameter by more than 0.3 of its
+  /// sigma (step_in_sigma). When not, a warning says that the values are where the solver
+  /// stopped, not a minimum.
   bool converged = false;
+  /// The largest |ParameterEstimate::step_to_minimum| / sigma over the determined parameters: how
+  /// far, in sigma, the minimum lies from the values reported, as far as the linear model at the
+  /// solution knows. A solver that stops short of the minimum (Ceres calls its tolerance
+  /// convergence where a curved valley shrank its steps to nothing) shows here.
+  double step_in_sigma = 0;
+  /// chi^2 that the linear model at the solution expects its Gauss-Newton step to remove (0 at a
+  /// minimum).
+  double chi2_decrease_expected = 0;
   std::string termination_type;  ///< Ceres' termination type: CONVERGENCE, NO_CONVERGENCE, ...
   std::string termination;       ///< Ceres' message
   /// What the caller should know about the fit's validity, one line each: a fit that did not
