@@ -85,6 +85,11 @@ def test_identify_recovers_the_worlds_drag_and_writes_its_scene(tmp_path):
     np.testing.assert_array_equal(out["sigmas_unscaled"], out["sigmas"])
     assert not out["held"].any()
     assert out["converged"] and out["termination_type"] == "CONVERGENCE"
+    # Converged means at a minimum: the Gauss-Newton step there moves no value by 0.3 sigma.
+    assert out["steps_to_minimum"].shape == out["values"].shape
+    steps_in_sigma = np.abs(out["steps_to_minimum"]) / out["sigmas"]
+    assert out["step_in_sigma"] == pytest.approx(np.max(steps_in_sigma))
+    assert out["step_in_sigma"] <= 0.3 and out["chi2_decrease_expected"] >= 0
     assert isinstance(out["warnings"], list)
     assert out["validation"] is None
     fits = out["fits"][0]
