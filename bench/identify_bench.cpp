@@ -44,6 +44,9 @@ void BM_Identify(benchmark::State& state) {
   state.counters["simulations"] = static_cast<double>(r.simulations);
   state.counters["sim_ms_each"] = 1e3 * r.simulation_time / static_cast<double>(r.simulations);
   state.counters["chi2_per_dof"] = r.chi2 / r.degrees_of_freedom;
+  state.counters["chi2"] = r.chi2;
+  state.counters["converged"] = r.converged;
+  state.counters["step_in_sigma"] = r.step_in_sigma;
   int determined = 0;
   for (const auto& p : r.parameters) determined += p.sigma.has_value();
   state.counters["determined"] = determined;
