@@ -15,9 +15,9 @@ namespace flatland::identify::detail {
 /// given, and every sigma is scaled by sqrt(chi^2 / dof) (docs/IDENTIFY.md, "Covariance").
 constexpr double kConsistentChi2Quantile = 0.99;
 /// A fit whose Gauss-Newton step at the solution moves a determined parameter by more than this
-/// many of its sigma has not reached the minimum (IdentifyResult::step_in_sigma): at a minimum
-/// found by the continuation it was 0.02-0.22 on the closed-loop experiment of tests/cli, at the
-/// stops short of it that Ceres called convergence 0.6-4.4 (docs/IDENTIFY.md, "Convergence").
+/// many of its sigma has not reached the minimum (IdentifyResult::step_in_sigma): at the minima
+/// found by the continuation it was 0.06-0.23 on the closed-loop experiment of tests/cli, at the
+/// stops short of them that Ceres called convergence 0.6-8.6 (docs/IDENTIFY.md, "Convergence").
 constexpr double kConvergedStepInSigma = 0.3;
 
 /// Fill result's parameters (with their step_to_minimum), correlation, chi2, degrees of freedom,

@@ -93,9 +93,10 @@ struct IdentifyOptions {
   std::map<std::string, Bounds> bounds;
   /// Starting values that replace the world's, by parameter name (inside the bounds).
   std::map<std::string, double> initial;
-  /// Ceres iterations at most, per solve (the states alone, then everything; again after a
-  /// parameter is held). A fit that stops here has not converged: IdentifyResult::converged is
-  /// false and a warning says so. 50 stopped short of convergence on a closed-loop experiment
+  /// Ceres iterations at most, per solve (the states alone, then everything with the continuity
+  /// conditions relaxed and tightened, then as defined; again after a parameter is held). A fit
+  /// whose last solve stops here has not converged: IdentifyResult::converged is false and a
+  /// warning says so. 50 stopped short of convergence on a closed-loop experiment
   /// (it needed 60-70); docs/IDENTIFY.md.
   int max_iterations = 200;
   /// Threads evaluating segments at once; 0: as many as the machine has.
