@@ -5,13 +5,25 @@
 // tracker's error is then what it really is, partly systematic (docs/VISION.md), and its sigma
 // what it claims, not the Gaussian noise of the stated size the other tests draw.
 //
-// Each frame is rendered once; a seed's camera is the same frames with its own sensor noise drawn
-// (the renderer's apply_noise and quantize, with the renderer's random stream), which is what
-// Renderer::capture makes of them: the first test checks that bit for bit.
+// A seed is a session of the experiment repeated: what a researcher cannot hold fixed from one
+// session to the next is drawn per seed (SessionDraw: where the disk is let go, when the hand
+// starts after it, the camera as mounted again, when its frames fall, its sensor noise), and
+// each seed's frames are captured by its own Renderer and tracked, so that the spread over seeds
+// sees the tracker's whole error. The tracker's error on a frame depends on where the disk's edge
+// falls on the pixels: with frames rendered once and only the sensor noise drawn per seed (this
+// file's first version), most of it was the same in every seed and the spread saw a tenth of it.
+// Measured (docs/IDENTIFY.md, "Acceptance"): the tracked s_h carries an offset per session (up to
+// 1.1e-4, about one sigma, the same in both recordings of a session, which share only the
+// camera's mounting) on top of errors independent from frame to frame; the truth is within 2 sigma
+// in 10 of 10 sessions for each parameter, and each session's sigma is 0.88-1.63 times the spread
+// over the sessions, with every fit at its minimum. Session 4's fit from the starting values below
+// stops short of it today (chi^2 563 where the same data's minimum, reached from the truth or from
+// a restart at the stop, is 155.7: docs/IDENTIFY.md, "Not yet solved"), its sigma scaled by 1.74,
+// and fails the factor 2 for restitution. A session costs about 1.2 s of CPU to render and track
+// (197 frames) and 4 s to fit.
 #include "flatland/identify/identify.hpp"
 #include "flatland/model/compile.hpp"
 #include "flatland/model/model.hpp"
-#include "flatland/render/effects.hpp"
 #include "flatland/render/renderer.hpp"
 #include "flatland/vision/mapping.hpp"
 #include "flatland/vision/tracker.hpp"
@@ -25,7 +37,11 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
+#include <map>
 #include <memory>
+#include <numbers>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -34,8 +50,26 @@ using namespace flatland;
 namespace {
 
 constexpr double kMuKinetic = 0.6, kRestitution = 0.4, kRollingResistance = 2e-4, kDrag = 0.1;
+constexpr double kRockingEnd = 4.0, kThrowEnd = 2.5, kThrowPeriod = 3.2, kThrowDip = -1.155794;
+constexpr double kFrameRate = 30.0;
 
-/// The air-table camera (2 DN read noise, no blur) over the world of test_identify.cpp.
+/// What changes from one session of the experiment to the next, drawn per seed, uniformly within
+/// a careful researcher's ranges: the disk placed by hand (rocking from s_h -0.7 +- 0.05, about
+/// +- 1.3 cm of arc; the throw from -1 +- 0.02, +- 4 mm), the hand started 0-20 ms after the disk
+/// is let go, the camera's shutter free-running against both (the first frame 0-33 ms after the
+/// release), and the camera mounted again: its centre within +- 1 cm of the nominal in each axis
+/// (at 1.2 m, 1 cm is 7.5 px), its aim within +- 1 cm on the table, turned about its axis by up to
+/// +- 2 degrees. The camera is known exactly (as if calibrated without error): the tracker's
+/// error is the only measurement error.
+struct SessionDraw {
+  double rocking_s0 = 0, throw_s0 = 0;        ///< where the disk is let go (s_h)
+  double throw_delay = 0;                     ///< s, the hand's start after the release
+  double rocking_phase = 0, throw_phase = 0;  ///< s, the first frame after the release
+  CameraSpec camera;
+};
+
+/// The air-table camera (2 DN read noise, no blur) over the world of test_identify.cpp, with the
+/// renderer's random stream seeded by `seed`.
 Scene rendered_scene(std::uint64_t seed) {
   Scene scene = flatland_test::air_table_experiment(2.0, false, seed);
   scene.sim =
@@ -43,16 +77,37 @@ Scene rendered_scene(std::uint64_t seed) {
   return scene;
 }
 
-/// A recording's truth and its frames before the sensor: the run (as identify simulates it: the
-/// joint log's spline, rtol 1e-12), the linear image (CV_32FC3, DN) and the hand angle at each of
-/// the truth's sample times.
-struct CleanFrames {
-  identify::Recording truth;
-  sim::RunResult run;
-  std::vector<cv::Mat> linear;
-  std::vector<double> theta;
-};
+SessionDraw draw_session(int seed, const CameraSpec& nominal) {
+  // Not the renderer's stream (seeded by `seed` too): an offset keeps the two independent.
+  std::mt19937_64 rng(0x5eed0000ULL + static_cast<std::uint64_t>(seed));
+  const auto uniform = [&rng](double lo, double hi) {
+    return std::uniform_real_distribution<double>(lo, hi)(rng);
+  };
+  SessionDraw d;
+  d.rocking_s0 = uniform(-0.75, -0.65);
+  d.throw_s0 = uniform(-1.02, -0.98);
+  d.throw_delay = uniform(0.0, 0.02);
+  d.rocking_phase = uniform(0.0, 1.0 / kFrameRate);
+  d.throw_phase = uniform(0.0, 1.0 / kFrameRate);
+  d.camera = nominal;
+  for (double& x : d.camera.position) x += uniform(-0.01, 0.01);
+  d.camera.look_at[0] += uniform(-0.01, 0.01);
+  d.camera.look_at[1] += uniform(-0.01, 0.01);
+  const double roll = uniform(-2.0, 2.0) * std::numbers::pi / 180.0;
+  d.camera.up = {std::sin(roll), std::cos(roll), 0.0};
+  return d;
+}
 
+/// The joint's log of the throw: the paper's motion too fast (2T = 3.2 s), started `delay` after
+/// the release, palm up before that, logged at 1 kHz over [-0.5, t_end + 0.5].
+flatland_test::JointLog throw_hand(double delay) {
+  const sim::ButterflyMotion m(kThrowPeriod, kThrowDip);
+  return flatland_test::joint_log(-0.5, kThrowEnd + 0.5, 1e-3,
+                                  [&](double t) { return m.at(t - delay).angle; });
+}
+
+/// The world's run from rest at s0, the hand driven by the log's spline (as identify simulates
+/// it), rtol 1e-12.
 sim::RunResult run_of(const sim::SimulationSpec& world, const flatland_test::JointLog& log,
                       double s0, double t_end) {
   auto pb = std::make_shared<sim::RollingProblem>(*sim::build_problem(world));
@@ -68,56 +123,62 @@ sim::RunResult run_of(const sim::SimulationSpec& world, const flatland_test::Joi
   return sim::simulate(pb, init, o);
 }
 
-render::SceneState state_at(const sim::RunResult& run, double t) {
-  const sim::Trajectory& tr = run.trajectory;
-  return render::SceneState::from_sample(tr.sample(std::clamp(t, tr.t_begin(), tr.t_end())));
-}
+/// The squared errors of tracked s_h against the truth, and the sigma given, over recordings.
+struct TrackedError {
+  double sum2 = 0, sigma_sum = 0;
+  int count = 0;
+};
 
-CleanFrames clean_frames(render::Renderer& renderer, const std::string& name,
-                         const sim::SimulationSpec& world, const flatland_test::JointLog& log,
-                         double s0, double t_end) {
-  CleanFrames f;
-  f.truth = flatland_test::record(name, world, log, s0, 0, t_end, 30, 1.0, nullptr);
-  f.run = run_of(world, log, s0, t_end);
-  EXPECT_EQ(f.run.reason, sim::StopReason::kEndTime) << name;
-  for (const double t : f.truth.t) {
-    const render::SceneState s = state_at(f.run, t);
-    f.linear.push_back(renderer.render_linear(s));
-    f.theta.push_back(renderer.truth(s).theta);
-  }
-  return f;
-}
-
-/// One frame as the camera of `effects` captures it from its linear image, drawing from `rng`.
-cv::Mat captured(const cv::Mat& linear, const EffectsSpec& effects, render::EffectsRng& rng) {
-  cv::Mat image = linear.clone();
-  render::apply_noise(image, effects.noise_read_dn, effects.noise_shot_gain, rng);
-  return render::quantize(image);
-}
-
-/// The recording a seed's camera gives: each frame captured, tracked and mapped to s_h with the
-/// tracker's sigma carried through the mapping. Adds the squared errors against the truth to
-/// `sum2` (and their count to `count`).
-identify::Recording tracked(const CleanFrames& clean, const vision::HandMapping& mapping,
-                            const EffectsSpec& effects, render::EffectsRng& rng, double& sum2,
-                            int& count) {
-  identify::Recording r = clean.truth;
+/// One recording of a session: the run captured by `renderer` at phase + i / 30 s up to t_end,
+/// each frame tracked and mapped to s_h with the tracker's sigma carried through the mapping.
+identify::Recording tracked_recording(const std::string& name, render::Renderer& renderer,
+                                      const vision::HandMapping& mapping,
+                                      const sim::SimulationSpec& world,
+                                      const flatland_test::JointLog& log, double s0, double t_end,
+                                      double phase, TrackedError& error) {
+  const sim::RunResult run = run_of(world, log, s0, t_end);
+  EXPECT_EQ(run.reason, sim::StopReason::kEndTime) << name;
+  identify::Recording r;
+  r.name = name;
+  r.joint_t = log.t;
+  r.joint_theta = log.theta;
   vision::Tracker tracker;
-  double guess = r.s_h.front();
-  for (std::size_t i = 0; i < r.t.size(); ++i) {
-    const vision::TrackResult tr = tracker.track(captured(clean.linear[i], effects, rng));
-    EXPECT_TRUE(tr.ok()) << r.name << " frame " << i;
-    const auto c = vision::pixel_to_contact(mapping, tr.center, clean.theta[i], guess, 0.5);
-    EXPECT_TRUE(c.has_value()) << r.name << " frame " << i;
-    if (!tr.ok() || !c) continue;
-    r.s_h[i] = c->s_h;
-    r.sigma[i] = vision::contact_sigma(mapping, tr.center, tr.sigma_px, clean.theta[i], c->s_h);
-    const double e = std::remainder(c->s_h - clean.truth.s_h[i], 4.0);
-    sum2 += e * e;
-    ++count;
+  double guess = std::numeric_limits<double>::quiet_NaN();
+  for (int i = 0; phase + i / kFrameRate <= t_end; ++i) {
+    const double t = phase + i / kFrameRate;
+    const render::Frame frame = renderer.capture(run.trajectory, t);
+    const vision::TrackResult tr = tracker.track(frame.image);
+    EXPECT_TRUE(tr.ok()) << name << " t " << t;
+    if (!tr.ok()) continue;
+    const auto c = vision::follow_contact(mapping, tr.center, frame.truth.theta, guess);
+    EXPECT_TRUE(c.has_value()) << name << " t " << t;
+    if (!c) continue;
+    r.t.push_back(t);
+    r.s_h.push_back(c->s_h);
+    r.sigma.push_back(
+        vision::contact_sigma(mapping, tr.center, tr.sigma_px, frame.truth.theta, c->s_h));
+    const double e = std::remainder(c->s_h - run.trajectory.s_h(t), 4.0);
+    error.sum2 += e * e;
+    error.sigma_sum += r.sigma.back();
+    ++error.count;
     guess = c->s_h;
   }
   return r;
+}
+
+/// A session's two recordings, rendered with its own camera and noise, tracked.
+std::vector<identify::Recording> session_recordings(int seed, TrackedError& error) {
+  Scene scene = rendered_scene(static_cast<std::uint64_t>(seed));
+  const SessionDraw d = draw_session(seed, *scene.camera);
+  scene.camera = d.camera;
+  const auto model = model::compile(scene);
+  render::Renderer renderer(model::render_setup(*model));
+  const vision::HandMapping mapping = model::hand_mapping(*model, renderer.camera());
+  return {tracked_recording("rocking", renderer, mapping, scene.sim,
+                            flatland_test::still_hand(kRockingEnd), d.rocking_s0, kRockingEnd,
+                            d.rocking_phase, error),
+          tracked_recording("throw", renderer, mapping, scene.sim, throw_hand(d.throw_delay),
+                            d.throw_s0, kThrowEnd, d.throw_phase, error)};
 }
 
 double truth_of(const std::string& name) {
@@ -127,46 +188,46 @@ double truth_of(const std::string& name) {
   return kDrag;
 }
 
+int count_events(const sim::RunResult& run, sim::EventKind kind) {
+  return static_cast<int>(
+      std::count_if(run.events.begin(), run.events.end(),
+                    [kind](const sim::RecordedEvent& e) { return e.kind == kind; }));
+}
+
 }  // namespace
 
-// The frames this file's seeds are made of are the renderer's own: its linear image plus its
-// sensor noise drawn from its seeded stream equals Renderer::capture to the bit.
-TEST(IdentifyRendered, NoiseOnTheCleanFramesIsWhatTheRendererCaptures) {
-  const Scene scene = rendered_scene(7);
-  const auto model = model::compile(scene);
-  render::Renderer renderer(model::render_setup(*model));
-  const flatland_test::JointLog log = flatland_test::butterfly_hand(3.2, -1.155794, 2.5);
-  const sim::RunResult run = run_of(scene.sim, log, -1, 2.5);
-  ASSERT_EQ(run.reason, sim::StopReason::kEndTime);
-  render::EffectsRng rng(scene.effects.seed);
-  for (const double t : {0.0, 1.0 / 30, 2.0 / 30, 1.5}) {
-    const render::Frame frame = renderer.capture(run.trajectory, t);
-    const cv::Mat ours = captured(renderer.render_linear(state_at(run, t)), scene.effects, rng);
-    ASSERT_EQ(frame.image.type(), ours.type());
-    EXPECT_EQ(cv::norm(frame.image, ours, cv::NORM_INF), 0.0) << t;
+// Every session drawn is the same experiment: the rocking only rolls (its decay is what
+// separates drag from rolling resistance), the throw slides before the tip (mu_k), flies over it
+// and bounces on the back (restitution). A draw beyond these would test another experiment.
+TEST(IdentifyRendered, EverySessionDrawnRocksAndThrowsAlike) {
+  const Scene scene = rendered_scene(1);
+  for (int seed = 1; seed <= 10; ++seed) {
+    const SessionDraw d = draw_session(seed, *scene.camera);
+    const sim::RunResult rocking =
+        run_of(scene.sim, flatland_test::still_hand(kRockingEnd), d.rocking_s0, kRockingEnd);
+    ASSERT_EQ(rocking.reason, sim::StopReason::kEndTime) << seed;
+    EXPECT_EQ(count_events(rocking, sim::EventKind::kSlipStart), 0) << seed;
+    EXPECT_EQ(count_events(rocking, sim::EventKind::kLiftOff), 0) << seed;
+    EXPECT_EQ(count_events(rocking, sim::EventKind::kRest), 0) << seed;
+    const sim::RunResult thrown =
+        run_of(scene.sim, throw_hand(d.throw_delay), d.throw_s0, kThrowEnd);
+    ASSERT_EQ(thrown.reason, sim::StopReason::kEndTime) << seed;
+    EXPECT_GE(count_events(thrown, sim::EventKind::kSlipStart), 1) << seed;
+    EXPECT_GE(count_events(thrown, sim::EventKind::kLiftOff), 1) << seed;
+    EXPECT_GE(count_events(thrown, sim::EventKind::kImpact), 3) << seed;
+    EXPECT_GT(thrown.final.s_h, 0.0) << seed << ": the disk did not land on the back";
+    std::printf(
+        "[ identify ] session %2d: rocking from %.3f (phase %.1f ms), throw from %.3f "
+        "(hand %.1f ms late, phase %.1f ms): %d impacts, ends at s_h %.3f\n",
+        seed, d.rocking_s0, 1e3 * d.rocking_phase, d.throw_s0, 1e3 * d.throw_delay,
+        1e3 * d.throw_phase, count_events(thrown, sim::EventKind::kImpact), thrown.final.s_h);
   }
 }
 
-/// The rendered rocking and throw, each frame drawn once for all the tests below.
+/// The sessions' tracked recordings, each rendered once for all the tests below.
 class IdentifyRenderedSeeds : public ::testing::Test {
  protected:
-  static void SetUpTestSuite() {
-    scene_ = new Scene(rendered_scene(1));
-    const auto model = model::compile(*scene_);
-    render::Renderer renderer(model::render_setup(*model));
-    mapping_ = new vision::HandMapping(model::hand_mapping(*model, renderer.camera()));
-    rocking_ = new CleanFrames(
-        clean_frames(renderer, "rocking", scene_->sim, flatland_test::still_hand(4.0), -0.7, 4.0));
-    throw_ =
-        new CleanFrames(clean_frames(renderer, "throw", scene_->sim,
-                                     flatland_test::butterfly_hand(3.2, -1.155794, 2.5), -1, 2.5));
-  }
-  static void TearDownTestSuite() {
-    delete scene_;
-    delete mapping_;
-    delete rocking_;
-    delete throw_;
-  }
+  static void TearDownTestSuite() { sessions_.clear(); }
   static identify::IdentifyOptions four_unknowns() {
     identify::IdentifyOptions opt;
     opt.unknowns = {"mu_kinetic", "restitution", "rolling_resistance", "drag"};
@@ -178,46 +239,61 @@ class IdentifyRenderedSeeds : public ::testing::Test {
     opt.threads = 2;
     return opt;
   }
-  /// Seed `seed`'s two recordings, tracked.
-  static std::vector<identify::Recording> recordings(int seed, double& sum2, int& count) {
-    render::EffectsRng rng(static_cast<std::uint64_t>(seed));
-    identify::Recording a = tracked(*rocking_, *mapping_, scene_->effects, rng, sum2, count);
-    identify::Recording b = tracked(*throw_, *mapping_, scene_->effects, rng, sum2, count);
-    return {a, b};
+  struct Session {
+    std::vector<identify::Recording> recordings;
+    TrackedError error;
+  };
+  /// Seed `seed`'s session: its two recordings, tracked.
+  static const Session& session(int seed) {
+    auto it = sessions_.find(seed);
+    if (it == sessions_.end()) {
+      Session s;
+      s.recordings = session_recordings(seed, s.error);
+      it = sessions_.emplace(seed, std::move(s)).first;
+    }
+    return it->second;
   }
-  static Scene* scene_;
-  static vision::HandMapping* mapping_;
-  static CleanFrames *rocking_, *throw_;
+  static const sim::SimulationSpec& world() {
+    static const Scene scene = rendered_scene(1);
+    return scene.sim;
+  }
+  static std::map<int, Session> sessions_;
 };
-Scene* IdentifyRenderedSeeds::scene_ = nullptr;
-vision::HandMapping* IdentifyRenderedSeeds::mapping_ = nullptr;
-CleanFrames* IdentifyRenderedSeeds::rocking_ = nullptr;
-CleanFrames* IdentifyRenderedSeeds::throw_ = nullptr;
+std::map<int, IdentifyRenderedSeeds::Session> IdentifyRenderedSeeds::sessions_;
 
-// The acceptance of issue 26 on the real thing: ten seeds of the camera's noise over the rendered
-// rocking and throw, each tracked and fitted for mu_kinetic, restitution, rolling resistance and
-// drag (started 8-25 % off, as in test_identify.cpp), weighted by the tracker's sigma. The truth
-// is within 2 sigma in at least 9 of 10 seeds, and the RMS error from the truth over the seeds is
-// within 2 sigma. The spread over the seeds is printed but not compared with sigma: the seeds
-// share every frame but the sensor noise, and most of the tracker's error on them is the
-// rendering's edge, the same in every seed, which a spread does not see (docs/IDENTIFY.md).
-TEST_F(IdentifyRenderedSeeds, TenSeedsGiveTheWorldWithinTwoSigma) {
+// The acceptance of issue 26 on the real thing: ten sessions, each rendered, tracked and fitted
+// for mu_kinetic, restitution, rolling resistance and drag (started 8-25 % off, as in
+// test_identify.cpp), weighted by the tracker's sigma. Both halves, per parameter:
+// - the truth within 2 sigma (each session's own sigma) in at least 9 of 10 sessions;
+// - every session's sigma within a factor 2 of the spread over the sessions (the sample standard
+//   deviation of the ten values about their mean). Each session's, not their median: a user has
+//   one fit and its one sigma, which must be the scale of that fit's error; the spread over
+//   independent sessions is that error's scale measured. (Ten values give the spread to about
+//   +- 25 %; for a right sigma its 95 % range is 0.69-1.8 times the spread.)
+// And the RMS error from the truth within 2 sigma: a bias common to all sessions would show there
+// and not in the spread.
+TEST_F(IdentifyRenderedSeeds, TruthWithinTwoSigmaInNineOfTenSessionsAndSigmaMatchesTheSpread) {
   const bool short_run = flatland::test::short_tests();
   const int seeds = short_run ? 2 : 10;
   const identify::IdentifyOptions opt = four_unknowns();
   const std::size_t K = opt.unknowns.size();
   std::vector<std::vector<double>> values(K), sigmas(K);
-  double sum2 = 0, mean_ratio = 0, mean_given = 0;
-  int count = 0, scaled = 0, given = 0;
+  TrackedError tracked;
+  double mean_ratio = 0;
+  int scaled = 0;
   for (int seed = 1; seed <= seeds; ++seed) {
-    const std::vector<identify::Recording> recs = recordings(seed, sum2, count);
-    for (const identify::Recording& r : recs)
-      for (const double s : r.sigma) mean_given += s, ++given;
-    const identify::IdentifyResult r = identify::identify(scene_->sim, recs, opt);
+    const Session& s = session(seed);
+    tracked.sum2 += s.error.sum2;
+    tracked.sigma_sum += s.error.sigma_sum;
+    tracked.count += s.error.count;
+    const identify::IdentifyResult r = identify::identify(world(), s.recordings, opt);
     EXPECT_TRUE(r.converged) << seed << ": " << r.termination;
     const double ratio = r.chi2 / r.degrees_of_freedom;
-    std::printf("[ identify ] seed %2d: chi^2/dof %.2f (limit %.2f), sigma scale %.3g\n", seed,
-                ratio, r.chi2_limit / r.degrees_of_freedom, r.sigma_scale);
+    std::printf(
+        "[ identify ] seed %2d: tracked s_h rms error %.3g, mean sigma %.3g; chi^2/dof "
+        "%.2f (limit %.2f), sigma scale %.3g\n",
+        seed, std::sqrt(s.error.sum2 / s.error.count), s.error.sigma_sum / s.error.count, ratio,
+        r.chi2_limit / r.degrees_of_freedom, r.sigma_scale);
     mean_ratio += ratio / seeds;
     scaled += r.sigma_scale > 1;
     for (std::size_t j = 0; j < K; ++j) {
@@ -225,10 +301,12 @@ TEST_F(IdentifyRenderedSeeds, TenSeedsGiveTheWorldWithinTwoSigma) {
       ASSERT_TRUE(p.sigma) << seed << " " << p.name << ": " << p.not_determined;
       values[j].push_back(p.value);
       sigmas[j].push_back(*p.sigma);
+      std::printf("[ identify ]   %-18s %.6g +- %.3g (%+.2f sigma)\n", p.name.c_str(), p.value,
+                  *p.sigma, (p.value - truth_of(p.name)) / *p.sigma);
     }
   }
-  const double rms = std::sqrt(sum2 / count);
-  mean_given /= given;
+  const double rms = std::sqrt(tracked.sum2 / tracked.count);
+  const double mean_given = tracked.sigma_sum / tracked.count;
   std::printf(
       "[ identify ] tracked s_h: rms error %.3g, mean sigma given %.3g (error / sigma %.2f); "
       "mean chi^2/dof %.2f, sigma scaled in %d/%d seeds\n",
@@ -245,31 +323,42 @@ TEST_F(IdentifyRenderedSeeds, TenSeedsGiveTheWorldWithinTwoSigma) {
     for (int i = 0; i < seeds; ++i) spread += std::pow(values[j][i] - mean, 2) / (seeds - 1);
     spread = std::sqrt(spread);
     const double error = std::sqrt(error2);
-    const auto [lo, hi] = std::minmax_element(sigmas[j].begin(), sigmas[j].end());
+    std::vector<double> sorted = sigmas[j];
+    std::sort(sorted.begin(), sorted.end());
+    const double median = 0.5 * (sorted[(seeds - 1) / 2] + sorted[seeds / 2]);
     std::printf(
-        "[ identify ] %-18s truth %.6g: within 2 sigma %d/%d, mean %.6g, spread %.3g, rms error "
-        "%.3g, sigma %.3g..%.3g (sigma / error %.2f, sigma / spread %.1f)\n",
-        opt.unknowns[j].c_str(), truth, within, seeds, mean, spread, error, *lo, *hi, *lo / error,
-        *lo / spread);
+        "[ identify ] %-18s truth %.6g: within 2 sigma %d/%d, mean %.6g (%+.2f spreads / sqrt(n) "
+        "from the truth), spread %.3g, rms error %.3g, sigma %.3g..%.3g median %.3g (sigma / "
+        "spread %.2f..%.2f, median %.2f; sigma / rms error %.2f..%.2f)\n",
+        opt.unknowns[j].c_str(), truth, within, seeds, mean,
+        (mean - truth) / (spread / std::sqrt(seeds)), spread, error, sorted.front(), sorted.back(),
+        median, sorted.front() / spread, sorted.back() / spread, median / spread,
+        sorted.front() / error, sorted.back() / error);
     EXPECT_GE(within, short_run ? seeds - 1 : 9) << opt.unknowns[j];
-    EXPECT_LE(error, 2 * *lo) << opt.unknowns[j];
+    EXPECT_LE(error, 2 * sorted.front()) << opt.unknowns[j];
+    if (short_run) continue;  // two seeds' spread says nothing; the Release stage checks it
+    for (int i = 0; i < seeds; ++i) {
+      EXPECT_LE(sigmas[j][i], 2 * spread) << opt.unknowns[j] << " seed " << i + 1;
+      EXPECT_GE(sigmas[j][i], spread / 2) << opt.unknowns[j] << " seed " << i + 1;
+    }
   }
 }
 
 // The rule of docs/IDENTIFY.md, "Covariance", on rendered data: the same tracked recordings
-// weighted by a sigma that is too small (4e-5, the noise model's of test_identify.cpp, about half
-// the tracked s_h's real error here) make chi^2 exceed its 99 % quantile; identify then scales
-// every sigma by sqrt(chi^2/dof), says so, and with the scaled sigma the truth is within 2 sigma.
+// weighted by a sigma that is too small (4e-5, the noise model's of test_identify.cpp, under the
+// tracked s_h's real error here) make chi^2 exceed its 99 % quantile; identify then scales every
+// sigma by sqrt(chi^2/dof), says so, and the scaled sigma covers the error: every value of two
+// seeds within 3 scaled sigma of the truth. (3, not 2: eight values at once are all within 2 of a
+// right sigma only two times in three, within 3 in 98 of 100; unscaled, seed 1's rolling
+// resistance is 3.2 sigma off.)
 TEST_F(IdentifyRenderedSeeds, SigmaGivenTooSmallIsScaledToCoverTheError) {
   const int seeds = flatland::test::short_tests() ? 1 : 2;
   const identify::IdentifyOptions opt = four_unknowns();
-  double sum2 = 0;
-  int count = 0;
   for (int seed = 1; seed <= seeds; ++seed) {
-    std::vector<identify::Recording> recs = recordings(seed, sum2, count);
+    std::vector<identify::Recording> recs = session(seed).recordings;
     for (identify::Recording& r : recs)
       std::fill(r.sigma.begin(), r.sigma.end(), flatland_test::kTrackerSigmaSh);
-    const identify::IdentifyResult r = identify::identify(scene_->sim, recs, opt);
+    const identify::IdentifyResult r = identify::identify(world(), recs, opt);
     std::printf("[ identify ] sigma 4e-5, seed %d: chi^2/dof %.2f, sigma scale %.3g\n", seed,
                 r.chi2 / r.degrees_of_freedom, r.sigma_scale);
     ASSERT_GT(r.chi2, r.chi2_limit);
@@ -279,9 +368,13 @@ TEST_F(IdentifyRenderedSeeds, SigmaGivenTooSmallIsScaledToCoverTheError) {
     }));
     for (const identify::ParameterEstimate& p : r.parameters) {
       ASSERT_TRUE(p.sigma && p.sigma_unscaled) << p.name << ": " << p.not_determined;
-      std::printf("[ identify ]   %-18s %.6g +- %.2g (unscaled %.2g), truth %.6g\n", p.name.c_str(),
-                  p.value, *p.sigma, *p.sigma_unscaled, truth_of(p.name));
-      EXPECT_LE(std::abs(p.value - truth_of(p.name)), 2 * *p.sigma) << p.name;
+      const double off = p.value - truth_of(p.name);
+      std::printf(
+          "[ identify ]   %-18s %.6g +- %.2g (unscaled %.2g), truth %.6g: %+.2f sigma "
+          "(unscaled %+.2f)\n",
+          p.name.c_str(), p.value, *p.sigma, *p.sigma_unscaled, truth_of(p.name), off / *p.sigma,
+          off / *p.sigma_unscaled);
+      EXPECT_LE(std::abs(off), 3 * *p.sigma) << p.name;
     }
   }
 }
