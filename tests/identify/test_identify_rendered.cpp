@@ -15,12 +15,11 @@
 // Measured (docs/IDENTIFY.md, "Acceptance"): the tracked s_h carries an offset per session (up to
 // 1.1e-4, about one sigma, the same in both recordings of a session, which share only the
 // camera's mounting) on top of errors independent from frame to frame; the truth is within 2 sigma
-// in 10 of 10 sessions for each parameter, and each session's sigma is 0.88-1.63 times the spread
-// over the sessions, with every fit at its minimum. Session 4's fit from the starting values below
-// stops short of it today (chi^2 563 where the same data's minimum, reached from the truth or from
-// a restart at the stop, is 155.7: docs/IDENTIFY.md, "Not yet solved"), its sigma scaled by 1.74,
-// and fails the factor 2 for restitution. A session costs about 1.2 s of CPU to render and track
-// (197 frames) and 4 s to fit.
+// in 10 of 10 sessions for each parameter, and each session's sigma is 0.89-1.64 times the spread
+// over the sessions. (Session 4 is where a fit stopping short of its minimum fails the factor 2:
+// before the continuation of docs/IDENTIFY.md, "Convergence", it stopped at chi^2 563 against the
+// minimum's 155.7, its sigma scaled by 1.74.) A session costs about 1.2 s of CPU to render and
+// track (197 frames) and 4 s to fit.
 #include "flatland/identify/identify.hpp"
 #include "flatland/model/compile.hpp"
 #include "flatland/model/model.hpp"
