@@ -303,6 +303,9 @@ TEST_F(CliIdentify, AnExperimentsRecordingIsFittedToItsWorld) {
   const double dof = j["degrees_of_freedom"];
   EXPECT_LT(std::abs(j["chi2"].get<double>() - dof), 5 * std::sqrt(2 * dof)) << j["chi2"];
 
+  // Under the sanitizers one fit runs the code paths; a second, with mu_kinetic held, is ~50 s
+  // more there and exercises nothing new.
+  if (flatland::test::short_tests()) return;
   const Result with_mu =
       run("identify " + world + " run --unknowns mu_kinetic,drag,rolling_resistance --json");
   ASSERT_EQ(with_mu.code, 0) << with_mu.err;
@@ -335,6 +338,9 @@ TEST_F(CliIdentify, AnExperimentsRecordingIsFittedToItsWorld) {
 /// sigma), the truth within 2 sigma, chi^2 within 1 of each other and each value within 1 sigma
 /// of the other fit's.
 TEST_F(CliIdentify, AFitStartedAwayFromTheTruthReachesTheSameMinimum) {
+  if (flatland::test::short_tests())  // the sanitizer stage: AnExperimentsRecording's code paths
+    GTEST_SKIP()
+        << "two fits of AnExperimentsRecordingIsFittedToItsWorld's recording: Release only";
   const std::string world = std::string(FLATLAND_ASSET_DIR) + "/scenes/airtable-feedback.yaml";
   const Result e = run("experiment --scene " + world + " --out run --no-plot");
   ASSERT_EQ(e.code, 0) << e.err;
@@ -352,7 +358,6 @@ TEST_F(CliIdentify, AFitStartedAwayFromTheTruthReachesTheSameMinimum) {
   const nlohmann::json away = fit("start.yaml");
   ASSERT_TRUE(away.is_object());
   ASSERT_EQ(away["parameters"][0]["initial"].get<double>(), 0.02);
-  if (flatland::test::short_tests()) return;  // the statistics are the Release stage's
   const nlohmann::json near = fit(world);
   ASSERT_TRUE(near.is_object());
   const std::map<std::string, double> truth = {{"drag", 0.015}, {"rolling_resistance", 5e-5}};
