@@ -17,7 +17,6 @@
 #include <filesystem>
 #include <limits>
 #include <map>
-#include <regex>
 #include <string>
 #include <vector>
 
@@ -286,11 +285,21 @@ TEST_F(CliIdentify, AnExperimentsRecordingIsFittedToItsWorld) {
   const std::string world = std::string(FLATLAND_ASSET_DIR) + "/scenes/airtable-feedback.yaml";
   const Result e = run("experiment --scene " + world + " --out run --no-plot");
   ASSERT_EQ(e.code, 0) << e.err;
-  const Result r = run("identify " + world + " run --unknowns drag,rolling_resistance --json");
+  // Under the sanitizers the fit runs 3 iterations per solve: its code paths, at a tenth of the
+  // ~160 s it takes there to converge; the values are the Release stage's to check.
+  const bool short_run = flatland::test::short_tests();
+  const Result r = run("identify " + world + " run --unknowns drag,rolling_resistance --json" +
+                       (short_run ? " --max-iterations 3" : ""));
   ASSERT_EQ(r.code, 0) << r.err;
   const nlohmann::json j = nlohmann::json::parse(r.out);
   EXPECT_EQ(j["recordings"][0]["format"], "experiment");
   EXPECT_GT(j["recordings"][0]["samples"].get<int>(), 100);
+  if (short_run) {
+    if (!j["converged"].get<bool>()) {
+      EXPECT_FALSE(j["warnings"].empty()) << j;
+    }
+    return;
+  }
   EXPECT_TRUE(j["converged"].get<bool>()) << j["termination"];
   EXPECT_EQ(j["termination_type"], "CONVERGENCE");
   const std::map<std::string, double> truth = {{"drag", 0.015}, {"rolling_resistance", 5e-5}};
@@ -303,9 +312,6 @@ TEST_F(CliIdentify, AnExperimentsRecordingIsFittedToItsWorld) {
   const double dof = j["degrees_of_freedom"];
   EXPECT_LT(std::abs(j["chi2"].get<double>() - dof), 5 * std::sqrt(2 * dof)) << j["chi2"];
 
-  // Under the sanitizers one fit runs the code paths; a second, with mu_kinetic held, is ~50 s
-  // more there and exercises nothing new.
-  if (flatland::test::short_tests()) return;
   const Result with_mu =
       run("identify " + world + " run --unknowns mu_kinetic,drag,rolling_resistance --json");
   ASSERT_EQ(with_mu.code, 0) << with_mu.err;
@@ -345,9 +351,17 @@ TEST_F(CliIdentify, AFitStartedAwayFromTheTruthReachesTheSameMinimum) {
   const Result e = run("experiment --scene " + world + " --out run --no-plot");
   ASSERT_EQ(e.code, 0) << e.err;
   std::string text = flatland_test::read_text(world);
-  const std::string started = std::regex_replace(
-      std::regex_replace(text, std::regex("\n  drag: [^\n#]*"), "\n  drag: 0.02 "),
-      std::regex("\n  rolling_resistance: [^\n#]*"), "\n  rolling_resistance: 4.0e-5 ");
+  // Each key's value up to its comment replaced (std::regex would do it too, but GCC 12 warns
+  // inside its std::function under the sanitizer build's -O1).
+  const auto with_value = [](std::string t, const std::string& key, const std::string& value) {
+    const auto at = t.find("\n  " + key + ": ");
+    if (at == std::string::npos) return t;
+    const auto from = at + 4 + key.size() + 2;
+    const auto to = t.find_first_of("#\n", from);
+    return t.replace(from, to - from, value + " ");
+  };
+  const std::string started =
+      with_value(with_value(text, "drag", "0.02"), "rolling_resistance", "4.0e-5");
   ASSERT_NE(started, text);
   write_text(dir_ / "start.yaml", started);
   const auto fit = [this](const std::string& scene) {

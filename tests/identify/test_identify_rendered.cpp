@@ -273,7 +273,8 @@ std::map<int, IdentifyRenderedSeeds::Session> IdentifyRenderedSeeds::sessions_;
 // and not in the spread.
 TEST_F(IdentifyRenderedSeeds, TruthWithinTwoSigmaInNineOfTenSessionsAndSigmaMatchesTheSpread) {
   const bool short_run = flatland::test::short_tests();
-  const int seeds = short_run ? 2 : 10;
+  // Under the sanitizers one session runs the code paths (~75 s there): its values within 2 sigma.
+  const int seeds = short_run ? 1 : 10;
   const identify::IdentifyOptions opt = four_unknowns();
   const std::size_t K = opt.unknowns.size();
   std::vector<std::vector<double>> values(K), sigmas(K);
@@ -319,8 +320,8 @@ TEST_F(IdentifyRenderedSeeds, TruthWithinTwoSigmaInNineOfTenSessionsAndSigmaMatc
       mean += values[j][i] / seeds;
       error2 += std::pow(values[j][i] - truth, 2) / seeds;
     }
-    for (int i = 0; i < seeds; ++i) spread += std::pow(values[j][i] - mean, 2) / (seeds - 1);
-    spread = std::sqrt(spread);
+    for (int i = 0; i < seeds; ++i) spread += std::pow(values[j][i] - mean, 2);
+    spread = seeds > 1 ? std::sqrt(spread / (seeds - 1)) : NAN;
     const double error = std::sqrt(error2);
     std::vector<double> sorted = sigmas[j];
     std::sort(sorted.begin(), sorted.end());
@@ -333,9 +334,9 @@ TEST_F(IdentifyRenderedSeeds, TruthWithinTwoSigmaInNineOfTenSessionsAndSigmaMatc
         (mean - truth) / (spread / std::sqrt(seeds)), spread, error, sorted.front(), sorted.back(),
         median, sorted.front() / spread, sorted.back() / spread, median / spread,
         sorted.front() / error, sorted.back() / error);
-    EXPECT_GE(within, short_run ? seeds - 1 : 9) << opt.unknowns[j];
+    EXPECT_GE(within, short_run ? seeds : 9) << opt.unknowns[j];
     EXPECT_LE(error, 2 * sorted.front()) << opt.unknowns[j];
-    if (short_run) continue;  // two seeds' spread says nothing; the Release stage checks it
+    if (short_run) continue;  // one session has no spread; the Release stage checks it
     for (int i = 0; i < seeds; ++i) {
       EXPECT_LE(sigmas[j][i], 2 * spread) << opt.unknowns[j] << " seed " << i + 1;
       EXPECT_GE(sigmas[j][i], spread / 2) << opt.unknowns[j] << " seed " << i + 1;
