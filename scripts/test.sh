@@ -78,7 +78,8 @@ cmake --build build-asan -j"$jobs" >&2
 # directory), so they run in parallel. The longest tests run the same code paths for less long
 # here (tests/test_scale.hpp: FLATLAND_TEST_SHORT): the hour-long hold for 6 minutes, the Monte
 # Carlo acceptance (400 whole experiments in stage 1) on 10 perturbed worlds, the thread-count
-# test on 2, identify's statistical tests on one or two fits. The full lengths ran in stage 1.
+# test on 2, identify's statistics of many fits not at all (docs/DEVELOPING.md lists which and what
+# covers their code paths). The full lengths ran in stage 1.
 export FLATLAND_TEST_SHORT=1 FLATLAND_MC_RUNS=10
 # llvmpipe renders on the calling thread: each of its worker threads takes dynamic-TLS blocks,
 # and before intercept_tls_get_addr=0 (above) that made the tracer crash reproducibly in one

@@ -352,7 +352,12 @@ TEST_F(IdentifyRenderedSeeds, TruthWithinTwoSigmaInNineOfTenSessionsAndSigmaMatc
 // right sigma only two times in three, within 3 in 98 of 100; unscaled, seed 1's rolling
 // resistance is 3.2 sigma off.)
 TEST_F(IdentifyRenderedSeeds, SigmaGivenTooSmallIsScaledToCoverTheError) {
-  const int seeds = flatland::test::short_tests() ? 1 : 2;
+  // Under the sanitizers (FLATLAND_TEST_SHORT) not run: 113 s there for one session, whose code
+  // paths the test above (a rendered session fitted) and test_identify.cpp's
+  // SigmaIsScaledByTheBirgeRatioOnlyWhenChiSquaredExceedsItsQuantile (sigma scaled) run.
+  if (flatland::test::short_tests())
+    GTEST_SKIP() << "a second fit of rendered sessions: the Release stage";
+  const int seeds = 2;
   const identify::IdentifyOptions opt = four_unknowns();
   for (int seed = 1; seed <= seeds; ++seed) {
     std::vector<identify::Recording> recs = session(seed).recordings;
