@@ -94,8 +94,10 @@ if ! command -v clang++ >/dev/null 2>&1 ||
   exit 0
 fi
 log "stage 5: libFuzzer targets over their seed corpora in build-fuzz/"
+# -O0 -g1: the targets run over their corpora once (seconds), so compiling is the stage's time, and
+# -O0 -g1 takes a third of the CPU of -O1 -g (sim's hybrid.cpp: 11.7 s against 32.3 s).
 CC=clang CXX=clang++ cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-  -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g" -DFLATLAND_FUZZ=ON -DFLATLAND_BUILD_TESTS=OFF \
+  -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O0 -g1" -DFLATLAND_FUZZ=ON -DFLATLAND_BUILD_TESTS=OFF \
   -DFLATLAND_BUILD_BENCHMARKS=OFF -DFLATLAND_BUILD_PYTHON=OFF >&2
 cmake --build build-fuzz -j"$jobs" --target scene_fuzzer camera_file_fuzzer >&2
 for target in scene camera_file; do

@@ -272,9 +272,12 @@ std::map<int, IdentifyRenderedSeeds::Session> IdentifyRenderedSeeds::sessions_;
 // And the RMS error from the truth within 2 sigma: a bias common to all sessions would show there
 // and not in the spread.
 TEST_F(IdentifyRenderedSeeds, TruthWithinTwoSigmaInNineOfTenSessionsAndSigmaMatchesTheSpread) {
-  const bool short_run = flatland::test::short_tests();
-  // Under the sanitizers one session runs the code paths (~75 s there): its values within 2 sigma.
-  const int seeds = short_run ? 1 : 10;
+  // Under the sanitizers (FLATLAND_TEST_SHORT) not run: one session took 90 s there, and its code
+  // paths (Renderer::capture, the tracker, identify on tracked recordings) are run there by
+  // CliIdentify.ARenderedAndTrackedVideoIsFittedToItsWorld and the closed-loop tests.
+  if (flatland::test::short_tests())
+    GTEST_SKIP() << "a statistic of ten sessions: the Release stage";
+  const int seeds = 10;
   const identify::IdentifyOptions opt = four_unknowns();
   const std::size_t K = opt.unknowns.size();
   std::vector<std::vector<double>> values(K), sigmas(K);
@@ -321,7 +324,7 @@ TEST_F(IdentifyRenderedSeeds, TruthWithinTwoSigmaInNineOfTenSessionsAndSigmaMatc
       error2 += std::pow(values[j][i] - truth, 2) / seeds;
     }
     for (int i = 0; i < seeds; ++i) spread += std::pow(values[j][i] - mean, 2);
-    spread = seeds > 1 ? std::sqrt(spread / (seeds - 1)) : NAN;
+    spread = std::sqrt(spread / (seeds - 1));
     const double error = std::sqrt(error2);
     std::vector<double> sorted = sigmas[j];
     std::sort(sorted.begin(), sorted.end());
@@ -334,9 +337,8 @@ TEST_F(IdentifyRenderedSeeds, TruthWithinTwoSigmaInNineOfTenSessionsAndSigmaMatc
         (mean - truth) / (spread / std::sqrt(seeds)), spread, error, sorted.front(), sorted.back(),
         median, sorted.front() / spread, sorted.back() / spread, median / spread,
         sorted.front() / error, sorted.back() / error);
-    EXPECT_GE(within, short_run ? seeds : 9) << opt.unknowns[j];
+    EXPECT_GE(within, 9) << opt.unknowns[j];
     EXPECT_LE(error, 2 * sorted.front()) << opt.unknowns[j];
-    if (short_run) continue;  // one session has no spread; the Release stage checks it
     for (int i = 0; i < seeds; ++i) {
       EXPECT_LE(sigmas[j][i], 2 * spread) << opt.unknowns[j] << " seed " << i + 1;
       EXPECT_GE(sigmas[j][i], spread / 2) << opt.unknowns[j] << " seed " << i + 1;
