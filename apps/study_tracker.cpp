@@ -80,6 +80,9 @@ void run_tracker_study(const StudyOptions& o) {
     q["latency_median_ms"] = number(c.ms_median);
     q["latency_p95_ms"] = number(c.ms_p95);
     q["latency_max_ms"] = number(c.ms_max);
+    q["sigma_median_px"] = number(c.sigma_median_px);
+    q["err_over_sigma_median"] = number(c.z_median);
+    q["beyond_3_sigma"] = number(c.beyond_3_sigma);
     rows.push_back(q);
   }
 
@@ -192,13 +195,15 @@ void run_tracker_study(const StudyOptions& o) {
      << "), " << format_number(std::round(wall * 10) / 10) << " s wall, load "
      << format_number(load_start) << " -> " << format_number(load_end) << "\n";
   for (const studies::TrackerStudyCell& c : cells) {
-    char line[240];
+    char line[320];
     std::snprintf(line, sizeof line,
                   "  %-10s exposure %5.1f ms (blur <= %4.1f px) noise %3g DN   RMS %.4f px "
-                  "(%.4f mm)  max %.4f px   latency %.3f / %.3f ms   lost %d  gross %d\n",
+                  "(%.4f mm)  max %.4f px   sigma %.4f px: |error|/sigma median %.2f, > 3 in "
+                  "%.1f %%   latency %.3f / %.3f ms   lost %d  gross %d\n",
                   methods[c.method].name.c_str(), 1e3 * blurs[c.blur].exposure,
-                  blurs[c.blur].px_max, noises[c.noise], c.rms_px, c.rms_mm, c.max_px, c.ms_median,
-                  c.ms_p95, c.lost, c.gross);
+                  blurs[c.blur].px_max, noises[c.noise], c.rms_px, c.rms_mm, c.max_px,
+                  c.sigma_median_px, c.z_median, 100 * c.beyond_3_sigma, c.ms_median, c.ms_p95,
+                  c.lost, c.gross);
     os << line;
   }
   for (const auto& p : written) os << "  wrote " << p << "\n";

@@ -64,7 +64,7 @@ double subframe_shift_px(const camera::CameraModel& cam, const sim::Trajectory& 
 const char* kTrackerColumns =
     "method,fit,blur_level,exposure_s,blur_subframes,blur_px_mean,blur_px_max,noise_dn,frames,"
     "lost,reacquired,gross,err_rms_px,err_max_px,err_rms_mm,err_max_mm,latency_median_ms,"
-    "latency_p95_ms,latency_max_ms\n";
+    "latency_p95_ms,latency_max_ms,sigma_median_px,err_over_sigma_median,beyond_3_sigma\n";
 
 }  // namespace
 
@@ -198,6 +198,7 @@ TrackerStudyResult run_tracker_study(const model::Model& model,
             if (r.state == vision::TrackState::kFound && k > 0) ++c.reacquired;
             const double e = cv::norm(r.center - f.truth.disk_center_px);
             c.err_px.push_back(e);
+            c.sigma_px.push_back(r.sigma_px);
             if (e > kGrossErrorPx) ++c.gross;
             const auto p = vision::pixel_to_table(renderer.camera(), r.center, z);
             const cv::Point3d& truth = f.truth.disk_center_table;
@@ -222,6 +223,16 @@ TrackerStudyResult run_tracker_study(const model::Model& model,
     c.ms_max = max_of(c.ms);
     c.ms_p95 = quantile(c.ms, 0.95);
     c.ms_median = quantile(c.ms, 0.5);
+    std::vector<double> z;
+    int beyond = 0;
+    for (std::size_t i = 0; i < c.err_px.size(); ++i) {
+      z.push_back(c.err_px[i] / c.sigma_px[i]);
+      beyond += z.back() > 3;
+    }
+    std::vector<double> sigma = c.sigma_px;
+    c.sigma_median_px = quantile(sigma, 0.5);
+    c.z_median = quantile(z, 0.5);
+    if (!z.empty()) c.beyond_3_sigma = static_cast<double>(beyond) / static_cast<double>(z.size());
   }
   out.wall_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
@@ -243,7 +254,8 @@ std::string tracker_study_csv(const TrackerStudyResult& r) {
          {b.exposure, static_cast<double>(b.subframes), b.px_mean, b.px_max, r.grid.noises[c.noise],
           static_cast<double>(c.frames), static_cast<double>(c.lost),
           static_cast<double>(c.reacquired), static_cast<double>(c.gross), c.rms_px, c.max_px,
-          c.rms_mm, c.max_mm, c.ms_median, c.ms_p95, c.ms_max}) {
+          c.rms_mm, c.max_mm, c.ms_median, c.ms_p95, c.ms_max, c.sigma_median_px, c.z_median,
+          c.beyond_3_sigma}) {
       line += ',';
       line += format_number(v);
     }

@@ -161,12 +161,28 @@ TEST_F(StudyVision, TrackerQuick) {
   EXPECT_FALSE(fs::exists(dir_ / "t" / "tracker_error.png"));
 
   const Csv csv = read_csv(dir_ / "t" / "tracker.csv");
-  EXPECT_EQ(csv.header,
-            (std::vector<std::string>{"method", "fit", "blur_level", "exposure_s", "blur_subframes",
-                                      "blur_px_mean", "blur_px_max", "noise_dn", "frames", "lost",
-                                      "reacquired", "gross", "err_rms_px", "err_max_px",
-                                      "err_rms_mm", "err_max_mm", "latency_median_ms",
-                                      "latency_p95_ms", "latency_max_ms"}));
+  EXPECT_EQ(csv.header, (std::vector<std::string>{"method",
+                                                  "fit",
+                                                  "blur_level",
+                                                  "exposure_s",
+                                                  "blur_subframes",
+                                                  "blur_px_mean",
+                                                  "blur_px_max",
+                                                  "noise_dn",
+                                                  "frames",
+                                                  "lost",
+                                                  "reacquired",
+                                                  "gross",
+                                                  "err_rms_px",
+                                                  "err_max_px",
+                                                  "err_rms_mm",
+                                                  "err_max_mm",
+                                                  "latency_median_ms",
+                                                  "latency_p95_ms",
+                                                  "latency_max_ms",
+                                                  "sigma_median_px",
+                                                  "err_over_sigma_median",
+                                                  "beyond_3_sigma"}));
   const auto noises = j["noise_dn"].get<std::vector<double>>();
   const auto& exposures = j["exposures"];
   std::set<std::string> methods;
@@ -203,6 +219,18 @@ TEST_F(StudyVision, TrackerQuick) {
       EXPECT_NEAR(csv.num(i, "err_rms_mm"), mm_per_px * csv.num(i, "err_rms_px"),
                   0.01 * mm_per_px * csv.num(i, "err_rms_px") + 1e-9)
           << "mm error is not the px error times distance / f";
+      // Whether sigma tells the truth: a share, and for hough, whose sigma is the same 0.5 px
+      // every frame, some frame beyond 3 sigma exactly when the largest error is.
+      EXPECT_GE(csv.num(i, "beyond_3_sigma"), 0.0);
+      EXPECT_LE(csv.num(i, "beyond_3_sigma"), 1.0);
+      EXPECT_GT(csv.num(i, "sigma_median_px"), 0.0);
+      EXPECT_LE(csv.num(i, "err_over_sigma_median") * csv.num(i, "sigma_median_px"),
+                csv.num(i, "err_max_px") * (1 + 1e-6))
+          << "a median error above the largest";
+      if (csv.rows[i].at("method") == "hough") {
+        EXPECT_EQ(csv.num(i, "beyond_3_sigma") > 0,
+                  csv.num(i, "err_max_px") > 3 * csv.num(i, "sigma_median_px"));
+      }
     }
   }
   // Noise hurts: at the sharpest exposure, some method is worse at the highest noise level.

@@ -52,7 +52,13 @@ struct TrackerStudyCell {
   std::size_t method = 0, blur = 0, noise = 0;  ///< indices into the grid and blurs
   int frames = 0, lost = 0, reacquired = 0, gross = 0;
   std::vector<double> err_px, err_mm, ms;  ///< per tracked frame
+  std::vector<double> sigma_px;            ///< the tracker's sigma_px, per tracked frame
   double rms_px = NAN, max_px = NAN, rms_mm = NAN, max_mm = NAN;
+  /// Whether the tracker's sigma tells the truth: the median of sigma_px, and of |error| / sigma_px
+  /// over the tracked frames, and the share of them with |error| > 3 sigma_px. sigma_px is each
+  /// coordinate's standard deviation, so for a true sigma |error| / sigma is Rayleigh distributed:
+  /// median sqrt(2 ln 2) = 1.18, beyond 3 in exp(-4.5) = 1.1 % of frames.
+  double sigma_median_px = NAN, z_median = NAN, beyond_3_sigma = NAN;
   double ms_median = NAN, ms_p95 = NAN, ms_max = NAN;
 };
 
