@@ -192,6 +192,8 @@ TEST(VisionTracker, MethodNames) {
   EXPECT_EQ(vision::parse_track_method("edge"), vision::TrackMethod::kEdge);
   EXPECT_EQ(vision::parse_track_method("moments"), vision::TrackMethod::kMoments);
   EXPECT_EQ(vision::parse_track_method("hough"), vision::TrackMethod::kHough);
+  EXPECT_EQ(vision::parse_track_method("contour"), vision::TrackMethod::kContour);
+  EXPECT_EQ(vision::to_string(vision::TrackMethod::kContour), "contour");
   EXPECT_THROW(vision::parse_track_method("sift"), std::invalid_argument);
   EXPECT_EQ(vision::to_string(vision::TrackState::kTracking), "tracking");
 }
@@ -238,4 +240,151 @@ TEST(VisionTracker, ObliqueCameraPlaneFit) {
   EXPECT_EQ(pixel.lost, 0);
   EXPECT_LE(plane_rms, 0.1);
   EXPECT_LT(plane_rms, pixel.rms);
+}
+
+// Whole-frame re-acquisition searches a grey copy four times smaller and then fits the edge at
+// full resolution in a window about the blob. On every other frame of the noisy, blurred run it
+// must be as accurate as the edge fit run on the whole frame's full-resolution float grey from the
+// true centre with both passes (an independent path: no blob search, no window, no 8-bit grey).
+TEST(VisionTracker, DownsampledReacquisitionMatchesFullResolution) {
+  const Sequence& seq = sequence(2.0, true);
+  vision::TrackerConfig two_passes;
+  two_passes.second_pass_shift_px = 0;
+  double sum2_found = 0, sum2_full = 0, worst_blob = 0;
+  int n = 0;
+  for (std::size_t k = 0; k < seq.frames.size(); k += 2) {
+    const render::Frame& f = seq.frames[k];
+    const cv::Point2d truth = f.truth.disk_center_px;
+    const vision::TrackResult blob = vision::acquire(f.image, 0);
+    ASSERT_TRUE(blob.ok()) << "frame " << k;
+    worst_blob = std::max(worst_blob, cv::norm(blob.center - truth));
+    vision::Tracker tracker;  // a fresh tracker: the frame is searched whole
+    const vision::TrackResult found = tracker.track(f.image);
+    ASSERT_EQ(found.state, vision::TrackState::kFound) << "frame " << k;
+    const vision::TrackResult full =
+        vision::refine_edge(vision::to_gray_f32(f.image), truth, found.radius_px, two_passes);
+    ASSERT_TRUE(full.ok()) << "frame " << k;
+    sum2_found += std::pow(cv::norm(found.center - truth), 2);
+    sum2_full += std::pow(cv::norm(full.center - truth), 2);
+    ++n;
+  }
+  const double rms_found = std::sqrt(sum2_found / n), rms_full = std::sqrt(sum2_full / n);
+  std::printf(
+      "[ vision   ] re-acquisition on %d frames: downsampled + window rms %.4f px, full "
+      "resolution from the truth rms %.4f px, blob centre within %.2f px\n",
+      n, rms_found, rms_full, worst_blob);
+  // The blob is found on a grid of 4 px pixels: within one of them.
+  EXPECT_LT(worst_blob, 4.0);
+  EXPECT_LE(rms_found, rms_full + 0.002);
+  EXPECT_LE(rms_found, 0.02);
+}
+
+// The edge fit reads an 8-bit frame's grey window as 8-bit: the same samples as its float copy,
+// so the same fit to the last bit.
+TEST(VisionTracker, EightBitWindowEqualsItsFloatCopy) {
+  const Sequence& seq = sequence(2.0, true);
+  const render::Frame& f = seq.frames[60];
+  const cv::Mat u8 = vision::to_gray_for_edge(f.image);
+  ASSERT_EQ(u8.type(), CV_8UC1);
+  cv::Mat f32;
+  u8.convertTo(f32, CV_32F);
+  const vision::TrackerConfig cfg;
+  const cv::Point2d guess = f.truth.disk_center_px + cv::Point2d(0.7, -0.4);
+  const vision::TrackResult a = vision::refine_edge(u8, guess, 35, cfg);
+  const vision::TrackResult b = vision::refine_edge(f32, guess, 35, cfg);
+  ASSERT_TRUE(a.ok());
+  EXPECT_EQ(a.center.x, b.center.x);
+  EXPECT_EQ(a.center.y, b.center.y);
+  EXPECT_EQ(a.sigma_px, b.sigma_px);
+  EXPECT_EQ(a.edge_points, b.edge_points);
+}
+
+// One refinement pass from a close guess (the default while tracking) against two passes on
+// every frame: the second pass may gain a little, never more than a few thousandths of a pixel,
+// and both keep every frame.
+TEST(VisionTracker, OnePassFromACloseGuessSuffices) {
+  const Sequence& seq = sequence(2.0, true);
+  const RunStats one = run_tracker(seq, vision::TrackMethod::kEdge);
+  vision::TrackerConfig cfg;
+  cfg.second_pass_shift_px = 0;
+  vision::Tracker tracker(cfg);
+  double sum2 = 0;
+  int lost = 0;
+  for (const render::Frame& f : seq.frames) {
+    const vision::TrackResult r = tracker.track(f.image);
+    if (!r.ok()) {
+      ++lost;
+      continue;
+    }
+    sum2 += std::pow(cv::norm(r.center - f.truth.disk_center_px), 2);
+  }
+  const double two_rms = std::sqrt(sum2 / static_cast<double>(seq.frames.size() - lost));
+  std::printf("[ vision   ] one pass rms %.4f px, two passes rms %.4f px\n", one.rms, two_rms);
+  EXPECT_EQ(one.lost, 0);
+  EXPECT_EQ(lost, 0);
+  EXPECT_LE(one.rms, two_rms + 0.003);
+}
+
+// A disk near the image's border: its window is clipped by the frame and the rays that leave the
+// frame are dropped; re-acquisition and tracking still find it against the projected truth. A
+// frame without the disk is refused by every method, the contour peer included.
+TEST(VisionTracker, DiskNearTheBorderAndNoDisk) {
+  const Scene scene = experiment_scene(2.0, false);
+  render::Renderer renderer(flatland_test::render_setup(scene));
+  const camera::CameraModel& cam = renderer.camera();
+  const double z = scene.render.disk_thickness;
+  // Metres per pixel at the table, from the camera's own projection.
+  const cv::Point2d p0 = cam.project(cv::Point3d(0, 0, z));
+  const double px_per_m = cv::norm(cam.project(cv::Point3d(0.01, 0, z)) - p0) / 0.01;
+  const double rim_px = scene.sim.object.radius * px_per_m;
+  for (const cv::Point2d& offset_px :
+       {cv::Point2d(320 - rim_px - 3, 0), cv::Point2d(0, -(240 - rim_px - 3)),
+        cv::Point2d(-(320 - rim_px - 1.5), 240 - rim_px - 1.5)}) {
+    render::SceneState state;
+    state.hand_angle = 0.3;
+    // The table's x and y as the image's u and v (overhead camera): found by projection below.
+    state.disk_center = {offset_px.x / px_per_m, offset_px.y / px_per_m};
+    const cv::Point2d truth = cam.project(cv::Point3d(state.disk_center.x, state.disk_center.y, z));
+    const double margin = std::min({truth.x, truth.y, 639 - truth.x, 479 - truth.y});
+    ASSERT_LT(margin, rim_px + 4) << "the disk is not near a border";
+    ASSERT_GT(margin, rim_px) << "the disk leaves the image";
+    const cv::Mat image = renderer.render_8u(state);
+    for (const vision::TrackMethod m :
+         {vision::TrackMethod::kEdge, vision::TrackMethod::kContour}) {
+      vision::TrackerConfig cfg;
+      cfg.method = m;
+      vision::Tracker tracker(cfg);
+      vision::TrackResult r = tracker.track(image);
+      ASSERT_EQ(r.state, vision::TrackState::kFound) << vision::to_string(m) << " at " << truth;
+      EXPECT_LT(cv::norm(r.center - truth), 0.1) << vision::to_string(m) << " at " << truth;
+      r = tracker.track(image);
+      ASSERT_EQ(r.state, vision::TrackState::kTracking) << vision::to_string(m);
+      EXPECT_LT(cv::norm(r.center - truth), 0.1) << vision::to_string(m) << " at " << truth;
+    }
+  }
+  render::SceneState away;
+  away.hand_angle = 0.3;
+  away.disk_center = {3.0, 3.0};  // far outside the view: only the table and the hand
+  const cv::Mat empty = renderer.render_8u(away);
+  EXPECT_FALSE(vision::acquire(empty, 0).ok());
+  EXPECT_FALSE(vision::acquire(empty, 35).ok());
+  for (const vision::TrackMethod m : {vision::TrackMethod::kEdge, vision::TrackMethod::kMoments,
+                                      vision::TrackMethod::kHough, vision::TrackMethod::kContour}) {
+    vision::TrackerConfig cfg;
+    cfg.method = m;
+    vision::Tracker tracker(cfg);
+    EXPECT_EQ(tracker.track(empty).state, vision::TrackState::kLost) << vision::to_string(m);
+  }
+}
+
+// The contour peer on the run's frames: it keeps every frame, to a few hundredths of a pixel (its
+// outline is the blob's boundary pixels); the edge fit is measured alongside on the same frames.
+TEST(VisionTracker, ContourPeerOnTheRun) {
+  const Sequence& seq = sequence(2.0, true);
+  const RunStats contour = run_tracker(seq, vision::TrackMethod::kContour);
+  const RunStats edge = run_tracker(seq, vision::TrackMethod::kEdge);
+  print("noise 2 DN + blur", vision::TrackMethod::kContour, contour);
+  EXPECT_EQ(contour.lost, 0);
+  EXPECT_LT(contour.rms, 0.2);
+  EXPECT_LE(edge.rms, contour.rms);
 }

@@ -35,6 +35,8 @@ std::string to_string(TrackMethod m) {
       return "moments";
     case TrackMethod::kHough:
       return "hough";
+    case TrackMethod::kContour:
+      return "contour";
   }
   return "edge";
 }
@@ -43,42 +45,89 @@ TrackMethod parse_track_method(const std::string& name) {
   if (name == "edge") return TrackMethod::kEdge;
   if (name == "moments") return TrackMethod::kMoments;
   if (name == "hough") return TrackMethod::kHough;
-  throw std::invalid_argument("tracker method: expected edge, moments or hough, got '" + name +
-                              "'");
+  if (name == "contour") return TrackMethod::kContour;
+  throw std::invalid_argument("tracker method: expected edge, moments, hough or contour, got '" +
+                              name + "'");
 }
 
-cv::Mat to_gray_f32(const cv::Mat& frame) {
+namespace {
+
+// Grey in the frame's own depth: cvtColor on 8-bit pixels is a fixed-point SIMD pass, several
+// times cheaper than converting three channels to float first and then making them grey.
+cv::Mat gray_in_own_depth(const cv::Mat& frame) {
   if (frame.empty()) throw std::invalid_argument("tracker: empty frame");
-  if (frame.type() == CV_32FC1) return frame;
-  cv::Mat f;
-  frame.convertTo(f, CV_32F);
-  if (f.channels() == 3) {
-    cv::cvtColor(f, f, cv::COLOR_BGR2GRAY);
-  } else if (f.channels() == 4) {
-    cv::cvtColor(f, f, cv::COLOR_BGRA2GRAY);
-  } else if (f.channels() != 1) {
-    throw std::invalid_argument("tracker: frames must have 1, 3 or 4 channels");
+  cv::Mat g;
+  switch (frame.channels()) {
+    case 1:
+      return frame;
+    case 3:
+      cv::cvtColor(frame, g, cv::COLOR_BGR2GRAY);
+      return g;
+    case 4:
+      cv::cvtColor(frame, g, cv::COLOR_BGRA2GRAY);
+      return g;
+    default:
+      throw std::invalid_argument("tracker: frames must have 1, 3 or 4 channels");
   }
+}
+
+}  // namespace
+
+cv::Mat to_gray_f32(const cv::Mat& frame) {
+  const cv::Mat g = gray_in_own_depth(frame);
+  if (g.depth() == CV_32F) return g;
+  cv::Mat f;
+  g.convertTo(f, CV_32F);
   return f;
+}
+
+cv::Mat to_gray_for_edge(const cv::Mat& frame) {
+  const cv::Mat g = gray_in_own_depth(frame);
+  if (g.depth() == CV_8U || g.depth() == CV_32F) return g;
+  cv::Mat f;
+  g.convertTo(f, CV_32F);
+  return f;
+}
+
+cv::Mat to_gray_u8(const cv::Mat& frame) {
+  const cv::Mat g = gray_in_own_depth(frame);
+  if (g.depth() == CV_8U) return g;
+  cv::Mat u8;
+  g.convertTo(u8, CV_8U);
+  return u8;
 }
 
 namespace {
 
 constexpr double kPi = std::numbers::pi;
 
-// Bilinear sample; NaN outside the image so that rays leaving the frame are simply dropped.
-inline float sample(const cv::Mat& g, double x, double y) {
-  if (!(x >= 0 && y >= 0 && x <= g.cols - 1.0 && y <= g.rows - 1.0))
-    return std::numeric_limits<float>::quiet_NaN();
+inline bool inside_image(const cv::Mat& g, double x, double y) {
+  return x >= 0 && y >= 0 && x <= g.cols - 1.0 && y <= g.rows - 1.0;
+}
+
+// Bilinear sample of a point in the image (inside_image). A ray checks its two ends only: a segment
+// between two points of the image lies in it, and c + rho d rounds monotonically in rho. Pixel:
+// float, or unsigned char for an 8-bit frame's grey window (sampled as it is, which gives the
+// same floats as its float copy would, from a quarter of the memory).
+template <typename Pixel>
+inline float sample_inside(const cv::Mat& g, double x, double y) {
   const int x0 = std::min(static_cast<int>(x), g.cols - 2 < 0 ? 0 : g.cols - 2);
   const int y0 = std::min(static_cast<int>(y), g.rows - 2 < 0 ? 0 : g.rows - 2);
   const float fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
-  const float* r0 = g.ptr<float>(y0);
-  const float* r1 = g.ptr<float>(std::min(y0 + 1, g.rows - 1));
+  const Pixel* r0 = g.ptr<Pixel>(y0);
+  const Pixel* r1 = g.ptr<Pixel>(std::min(y0 + 1, g.rows - 1));
   const int x1 = std::min(x0 + 1, g.cols - 1);
-  const float top = r0[x0] + fx * (r0[x1] - r0[x0]);
-  const float bottom = r1[x0] + fx * (r1[x1] - r1[x0]);
+  const float a = r0[x0], b = r0[x1], c = r1[x0], d = r1[x1];
+  const float top = a + fx * (b - a);
+  const float bottom = c + fx * (d - c);
   return top + fy * (bottom - top);
+}
+
+// Bilinear sample; NaN outside the image so that rays leaving the frame are simply dropped.
+template <typename Pixel>
+inline float sample(const cv::Mat& g, double x, double y) {
+  if (!inside_image(g, x, y)) return std::numeric_limits<float>::quiet_NaN();
+  return sample_inside<Pixel>(g, x, y);
 }
 
 double median(std::vector<double> v) {
@@ -96,18 +145,29 @@ struct Levels {
   bool ok = false;
 };
 
-Levels disk_levels(const cv::Mat& g, cv::Point2d c, double re, int rays) {
+template <typename Pixel>
+Levels disk_levels_of(const cv::Mat& g, cv::Point2d c, double re, int rays) {
   std::vector<double> face, dark;
   face.reserve(rays);
   dark.reserve(rays);
   for (int k = 0; k < rays; ++k) {
     const double a = 2 * kPi * k / rays, dx = std::cos(a), dy = std::sin(a);
-    const float f = sample(g, c.x + 0.8 * re * dx, c.y + 0.8 * re * dy);
+    const float f = sample<Pixel>(g, c.x + 0.8 * re * dx, c.y + 0.8 * re * dy);
     if (std::isfinite(f)) face.push_back(f);
     double lo = std::numeric_limits<double>::infinity();
-    for (double rho = 0.95 * re; rho <= 1.2 * re + 2; rho += 0.5) {
-      const float v = sample(g, c.x + rho * dx, c.y + rho * dy);
-      if (std::isfinite(v)) lo = std::min(lo, static_cast<double>(v));
+    double rho_last = 0.95 * re;  // the loop's last rho, summed as the loop sums it
+    for (double rho = 0.95 * re; rho <= 1.2 * re + 2; rho += 0.5) rho_last = rho;
+    if (inside_image(g, c.x + 0.95 * re * dx, c.y + 0.95 * re * dy) &&
+        inside_image(g, c.x + rho_last * dx, c.y + rho_last * dy)) {
+      for (double rho = 0.95 * re; rho <= 1.2 * re + 2; rho += 0.5) {
+        const float v = sample_inside<Pixel>(g, c.x + rho * dx, c.y + rho * dy);
+        if (std::isfinite(v)) lo = std::min(lo, static_cast<double>(v));
+      }
+    } else {
+      for (double rho = 0.95 * re; rho <= 1.2 * re + 2; rho += 0.5) {
+        const float v = sample<Pixel>(g, c.x + rho * dx, c.y + rho * dy);
+        if (std::isfinite(v)) lo = std::min(lo, static_cast<double>(v));
+      }
     }
     if (std::isfinite(lo)) dark.push_back(lo);
   }
@@ -119,6 +179,12 @@ Levels disk_levels(const cv::Mat& g, cv::Point2d c, double re, int rays) {
   l.dark = median(dark);
   l.ok = true;
   return l;
+}
+
+// The window's grey is 8-bit (an 8-bit frame's) or float.
+Levels disk_levels(const cv::Mat& g, cv::Point2d c, double re, int rays) {
+  return g.depth() == CV_8U ? disk_levels_of<unsigned char>(g, c, re, rays)
+                            : disk_levels_of<float>(g, c, re, rays);
 }
 
 struct CircleFit {
@@ -198,8 +264,10 @@ CircleFit fit_circle(const std::vector<cv::Point2d>& p, cv::Point2d c0, double r
 // Sub-pixel edge points: along each ray from the centre guess, the downward crossing of the
 // face/ring mid-level nearest to the expected radius (the marker's edges are crossings too, but
 // lie at most 0.67 of the radius out).
-std::vector<cv::Point2d> edge_points(const cv::Mat& g, cv::Point2d c, double re, const Levels& lv,
-                                     const TrackerConfig& cfg, int* rays_in_image) {
+template <typename Pixel>
+std::vector<cv::Point2d> edge_points_of(const cv::Mat& g, cv::Point2d c, double re,
+                                        const Levels& lv, const TrackerConfig& cfg,
+                                        int* rays_in_image) {
   const double level = 0.5 * (lv.face + lv.dark), inv = 1.0 / (lv.face - lv.dark);
   std::vector<cv::Point2d> pts;
   pts.reserve(cfg.rays);
@@ -211,13 +279,17 @@ std::vector<cv::Point2d> edge_points(const cv::Mat& g, cv::Point2d c, double re,
   for (int k = 0; k < cfg.rays; ++k) {
     const double a = 2 * kPi * (k + 0.5) / cfg.rays, dx = std::cos(a), dy = std::sin(a);
     const double rho0 = std::max(1.0, re - w);
-    bool inside = true;
+    const double rho_end = rho0 + (m - 1) * step;
+    if (!inside_image(g, c.x + rho0 * dx, c.y + rho0 * dy) ||
+        !inside_image(g, c.x + rho_end * dx, c.y + rho_end * dy))
+      continue;
+    bool finite = true;  // a float frame may hold NaN: such a ray is dropped as one leaving it
     for (int j = 0; j < m; ++j) {
       const double rho = rho0 + j * step;
-      prof[j] = sample(g, c.x + rho * dx, c.y + rho * dy);
-      if (!std::isfinite(prof[j])) inside = false;
+      prof[j] = sample_inside<Pixel>(g, c.x + rho * dx, c.y + rho * dy);
+      finite &= std::isfinite(prof[j]);
     }
-    if (!inside) continue;
+    if (!finite) continue;
     ++in_image;
     double best = -1, best_dist = 1e9;
     for (int j = 0; j + 1 < m; ++j) {
@@ -253,6 +325,12 @@ std::vector<cv::Point2d> edge_points(const cv::Mat& g, cv::Point2d c, double re,
   return pts;
 }
 
+std::vector<cv::Point2d> edge_points(const cv::Mat& g, cv::Point2d c, double re, const Levels& lv,
+                                     const TrackerConfig& cfg, int* rays_in_image) {
+  return g.depth() == CV_8U ? edge_points_of<unsigned char>(g, c, re, lv, cfg, rays_in_image)
+                            : edge_points_of<float>(g, c, re, lv, cfg, rays_in_image);
+}
+
 }  // namespace
 
 TrackResult refine_edge(const cv::Mat& g, cv::Point2d guess, double re, const TrackerConfig& cfg,
@@ -260,8 +338,10 @@ TrackResult refine_edge(const cv::Mat& g, cv::Point2d guess, double re, const Tr
   TrackResult res;
   cv::Point2d c = guess;
   double r = re;
-  // Two passes: the second casts its rays from the first fit's centre, so that every ray meets
-  // the edge nearly at right angles and the crossings are symmetric about the centre.
+  // A second pass, when the first fit's centre is far from the guess, casts its rays from that
+  // centre, so that every ray meets the edge nearly at right angles and the crossings are
+  // symmetric about the centre. From a guess within about a pixel one pass is as accurate
+  // (docs/VISION.md) at half the cost.
   for (int pass = 0; pass < 2; ++pass) {
     const Levels lv = disk_levels(g, c, r, 48);
     if (!lv.ok || lv.face - lv.dark < cfg.min_contrast_dn) return res;
@@ -295,7 +375,8 @@ TrackResult refine_edge(const cv::Mat& g, cv::Point2d guess, double re, const Tr
       f.sigma_r = fm.sigma_r / m_per_px;
       f.sigma_c = fm.sigma_c / m_per_px;
     }
-    if (pass == 1) {
+    const bool last_pass = pass == 1 || cv::norm(c - guess) <= cfg.second_pass_shift_px;
+    if (last_pass) {
       res.state = TrackState::kTracking;
       res.center = c;
       res.radius_px = r;
@@ -305,6 +386,7 @@ TrackResult refine_edge(const cv::Mat& g, cv::Point2d guess, double re, const Tr
       // scale relative to a sharp edge (blur or a wrong shape raise it).
       const double share = static_cast<double>(f.inliers) / cfg.rays;
       res.quality = std::clamp(share * std::exp(-f.sigma_r / 2.0), 0.0, 1.0);
+      break;
     }
   }
   return res;
@@ -386,18 +468,90 @@ TrackResult refine_hough(const cv::Mat& g, cv::Point2d guess, double re, const T
   return res;
 }
 
-TrackResult acquire(const cv::Mat& g, double expected_re) {
-  TrackResult res;
-  // Half resolution is plenty to find a ~70 px blob and keeps re-acquisition well under 3 ms.
-  cv::Mat half;
-  cv::resize(g, half, cv::Size(g.cols / 2, g.rows / 2), 0, 0, cv::INTER_AREA);
+namespace {
+
+// A frame made grey and f times smaller, with its histogram.
+struct SmallGray {
   cv::Mat u8;
-  half.convertTo(u8, CV_8U);
   std::array<int, 256> hist{};
+};
+
+// 8-bit frames of Channels channels (1: grey, 3: BGR, 4: BGRA), in one pass that reads two of
+// every f rows: each small pixel is the mean of the central 2 x 2 pixels of its f x f block (the
+// whole block for f = 2), so that it is centred where its block is, made grey with OpenCV's
+// BGR2GRAY weights in 16-bit fixed point (0.114, 0.587, 0.299 of the four pixels' sums). A blob
+// search needs no more than that, and the frame is read once, on this thread, at a fraction of
+// the cost of a full-size grey or float copy.
+template <int Channels>
+void small_gray_u8(const cv::Mat& frame, int f, SmallGray& s) {
+  const int o = f / 2 - 1;  // the first of a block's two central rows and columns
+  for (int y = 0; y < s.u8.rows; ++y) {
+    const unsigned char* a = frame.ptr<unsigned char>(f * y + o);
+    const unsigned char* b = frame.ptr<unsigned char>(f * y + o + 1);
+    unsigned char* out = s.u8.ptr<unsigned char>(y);
+    for (int x = 0; x < s.u8.cols; ++x) {
+      const int i = (f * x + o) * Channels;
+      int v = 0;
+      if constexpr (Channels == 1) {
+        v = (a[i] + a[i + 1] + b[i] + b[i + 1] + 2) >> 2;
+      } else {
+        const int blue = a[i] + a[i + Channels] + b[i] + b[i + Channels];
+        const int green = a[i + 1] + a[i + 1 + Channels] + b[i + 1] + b[i + 1 + Channels];
+        const int red = a[i + 2] + a[i + 2 + Channels] + b[i + 2] + b[i + 2 + Channels];
+        v = (blue * 1868 + green * 9617 + red * 4899 + (1 << 15)) >> 16;
+      }
+      out[x] = static_cast<unsigned char>(v);
+    }
+  }
+}
+
+// The histogram of an 8-bit image, counted in four interleaved tables: runs of equal values (a
+// uniform table) would otherwise make each count wait on the previous one.
+std::array<int, 256> histogram_u8(const cv::Mat& u8) {
+  std::array<std::array<int, 256>, 4> part{};
   for (int y = 0; y < u8.rows; ++y) {
     const unsigned char* row = u8.ptr<unsigned char>(y);
-    for (int x = 0; x < u8.cols; ++x) ++hist[row[x]];
+    int x = 0;
+    for (; x + 4 <= u8.cols; x += 4) {
+      ++part[0][row[x]];
+      ++part[1][row[x + 1]];
+      ++part[2][row[x + 2]];
+      ++part[3][row[x + 3]];
+    }
+    for (; x < u8.cols; ++x) ++part[0][row[x]];
   }
+  std::array<int, 256> hist{};
+  for (int i = 0; i < 256; ++i) hist[i] = part[0][i] + part[1][i] + part[2][i] + part[3][i];
+  return hist;
+}
+
+SmallGray small_gray(const cv::Mat& frame, int f) {
+  SmallGray s;
+  const cv::Size size(frame.cols / f, frame.rows / f);
+  s.u8.create(size, CV_8U);
+  if (frame.depth() == CV_8U && frame.channels() == 1) {
+    small_gray_u8<1>(frame, f, s);
+  } else if (frame.depth() == CV_8U && frame.channels() == 3) {
+    small_gray_u8<3>(frame, f, s);
+  } else if (frame.depth() == CV_8U && frame.channels() == 4) {
+    small_gray_u8<4>(frame, f, s);
+  } else {
+    // Float or 16-bit frames: OpenCV's area average over the blocks, then grey.
+    cv::Mat small;
+    cv::resize(frame(cv::Rect(0, 0, size.width * f, size.height * f)), small, size, 0, 0,
+               cv::INTER_AREA);
+    s.u8 = to_gray_u8(small);
+  }
+  s.hist = histogram_u8(s.u8);
+  return s;
+}
+
+// The blob search on the frame made f times smaller.
+TrackResult acquire_at(const cv::Mat& frame, int f, double expected_re) {
+  TrackResult res;
+  const SmallGray small = small_gray(frame, f);
+  const cv::Mat& u8 = small.u8;
+  const std::array<int, 256>& hist = small.hist;
   const long total = static_cast<long>(u8.total());
   auto percentile = [&](double q) {
     long acc = 0;
@@ -427,7 +581,8 @@ TrackResult acquire(const cv::Mat& g, double expected_re) {
     cv::minEnclosingCircle(ct, cc, rr);
     const double fill = area / (kPi * rr * rr);
     const double circ = 4 * kPi * area / (perim * perim);
-    const double re = 2.0 * std::sqrt(area / kPi) + 1.0;
+    // The outline runs through the boundary pixels' centres, half a small pixel inside the edge.
+    const double re = f * (std::sqrt(area / kPi) + 0.5);
     if (fill < 0.6 || circ < 0.6) continue;
     if (expected_re > 0 && (re < 0.6 * expected_re || re > 1.5 * expected_re)) continue;
     // Rank by brightness first: the face (albedo 0.92) is the brightest surface in the scene,
@@ -437,13 +592,14 @@ TrackResult acquire(const cv::Mat& g, double expected_re) {
     cv::Mat mask = cv::Mat::zeros(box.size(), CV_8U);
     cv::drawContours(mask, std::vector<std::vector<cv::Point>>{ct}, 0, cv::Scalar(255), cv::FILLED,
                      cv::LINE_8, cv::noArray(), 0, -box.tl());
-    const double brightness = cv::mean(half(box), mask)[0];
+    const double brightness = cv::mean(u8(box), mask)[0];
     const double score = brightness * brightness * brightness * fill * circ;
     if (score > best_score) {
       const cv::Moments mo = cv::moments(ct);
       best_score = score;
-      // Half-resolution pixel i covers full-resolution pixels 2i and 2i+1: centre 2i + 0.5.
-      res.center = {2.0 * mo.m10 / mo.m00 + 0.5, 2.0 * mo.m01 / mo.m00 + 0.5};
+      // Small pixel i stands for the frame's pixels f i .. f i + f - 1: centre f i + (f - 1) / 2.
+      const double half_span = 0.5 * (f - 1);
+      res.center = {f * mo.m10 / mo.m00 + half_span, f * mo.m01 / mo.m00 + half_span};
       res.radius_px = re;
       res.state = TrackState::kFound;
       res.quality = std::clamp(fill * circ, 0.0, 1.0);
@@ -453,9 +609,28 @@ TrackResult acquire(const cv::Mat& g, double expected_re) {
   return res;
 }
 
+}  // namespace
+
+TrackResult acquire(const cv::Mat& frame, double expected_re) {
+  // A quarter-size image is plenty to find the face of a disk whose edge radius is 24 px or more
+  // (a blob of 6 px radius or more there), and reading two rows in four halves what the search
+  // reads from memory. A smaller or unknown radius falls back to half size, where the face of a
+  // disk of 12 px edge radius still fills the 30 pixels the search asks of a blob.
+  if (frame.empty()) throw std::invalid_argument("tracker: empty frame");
+  for (const int f : {4, 2}) {
+    if (frame.cols < 16 * f || frame.rows < 16 * f) continue;
+    if (f == 4 && expected_re > 0 && expected_re < 24) continue;
+    const TrackResult r = acquire_at(frame, f, expected_re);
+    if (r.ok()) return r;
+  }
+  return {};
+}
+
 Tracker::Tracker(TrackerConfig config) : config_(config) {
   if (config_.rays < 16) throw std::invalid_argument("tracker: rays must be at least 16");
   if (!(config_.ray_step_px > 0)) throw std::invalid_argument("tracker: ray_step_px must be > 0");
+  if (!(config_.second_pass_shift_px >= 0))
+    throw std::invalid_argument("tracker: second_pass_shift_px must be >= 0");
 }
 
 void Tracker::reset() {
@@ -464,72 +639,93 @@ void Tracker::reset() {
   velocity_ = {0, 0};
 }
 
-TrackResult Tracker::locate(const cv::Mat& g, cv::Point2d guess, double radius, TrackState state,
-                            cv::Point2d offset) {
+namespace {
+
+// The window of half-size `half` about `centre`, clipped to the frame.
+cv::Rect window_about(cv::Point2d centre, double half, const cv::Size& frame) {
+  return cv::Rect(static_cast<int>(std::floor(centre.x - half)),
+                  static_cast<int>(std::floor(centre.y - half)), static_cast<int>(2 * half) + 2,
+                  static_cast<int>(2 * half) + 2) &
+         cv::Rect(0, 0, frame.width, frame.height);
+}
+
+}  // namespace
+
+// One fit with the configured method in the window `roi` of the frame (only the window is made
+// grey); guess and result in the frame's pixels.
+TrackResult Tracker::locate(const cv::Mat& frame, const cv::Rect& roi, cv::Point2d guess,
+                            double radius, TrackState state) {
+  if (roi.width <= 8 || roi.height <= 8) return {};
+  const cv::Point2d off(roi.x, roi.y);
+  const double expected = config_.edge_radius_px > 0 ? config_.edge_radius_px : radius;
   TrackResult r;
   switch (config_.method) {
     case TrackMethod::kEdge:
-      r = refine_edge(g, guess, radius, config_, offset);
+      r = refine_edge(to_gray_for_edge(frame(roi)), guess - off, radius, config_, off);
       break;
     case TrackMethod::kMoments:
-      r = refine_moments(g, guess, radius, config_);
+      r = refine_moments(to_gray_f32(frame(roi)), guess - off, radius, config_);
       if (r.ok()) r.radius_px = radius;  // moments give an area, not the edge radius
       break;
     case TrackMethod::kHough:
-      r = refine_hough(g, guess, radius, config_);
+      r = refine_hough(to_gray_f32(frame(roi)), guess - off, radius, config_);
       if (r.ok()) r.radius_px = radius;  // Hough may lock on the outer rim instead
+      break;
+    case TrackMethod::kContour:
+      r = fit_contour(to_gray_u8(frame(roi)), guess - off, expected);
       break;
   }
   if (!r.ok()) return r;
-  const double expected = config_.edge_radius_px > 0 ? config_.edge_radius_px : radius;
   if (std::abs(r.radius_px - expected) > config_.max_radius_change * expected) return {};
+  r.center += off;
   r.state = state;
   return r;
 }
 
+// Whole-frame (re-)acquisition: the blob search on a smaller copy, then one fit at full
+// resolution in a window about the blob (a second pass follows when the blob's centre was off by
+// more than second_pass_shift_px, as it usually is). The contour peer searches the whole frame at
+// full resolution, as it would be written without flatland.
+TrackResult Tracker::reacquire(const cv::Mat& frame) {
+  const double expected = config_.edge_radius_px > 0 ? config_.edge_radius_px : radius_;
+  if (config_.method == TrackMethod::kContour) {
+    TrackResult r = fit_contour(to_gray_u8(frame), std::nullopt, expected);
+    if (r.ok()) r.state = TrackState::kFound;
+    return r;
+  }
+  const TrackResult a = acquire(frame, expected);
+  if (!a.ok()) return a;
+  const double radius = expected > 0 ? expected : a.radius_px;
+  // The blob's centre is good to about a pixel of the small copy (4 px at most).
+  const double half = radius * 1.2 + config_.roi_margin_px + 4;
+  return locate(frame, window_about(a.center, half, frame.size()), a.center, radius,
+                TrackState::kFound);
+}
+
 TrackResult Tracker::track(const cv::Mat& frame) {
   if (frame.empty()) throw std::invalid_argument("tracker: empty frame");
-  const cv::Rect whole(0, 0, frame.cols, frame.rows);
   if (have_track_) {
     const cv::Point2d p = last_ + velocity_;
     const double half = radius_ * 1.2 + config_.roi_margin_px + cv::norm(velocity_);
-    const cv::Rect roi =
-        cv::Rect(static_cast<int>(std::floor(p.x - half)), static_cast<int>(std::floor(p.y - half)),
-                 static_cast<int>(2 * half) + 2, static_cast<int>(2 * half) + 2) &
-        whole;
-    if (roi.width > 8 && roi.height > 8) {
-      const cv::Mat g = to_gray_f32(frame(roi));
-      const cv::Point2d off(roi.x, roi.y);
-      TrackResult r = locate(g, p - off, radius_, TrackState::kTracking, off);
-      if (r.ok()) {
-        r.center += off;
-        velocity_ = r.center - last_;
-        last_ = r.center;
-        ++history_;
-        radius_ = 0.8 * radius_ + 0.2 * r.radius_px;
-        return r;
-      }
-    }
-  }
-  // Whole-frame (re-)acquisition.
-  const cv::Mat g = to_gray_f32(frame);
-  const double expected = config_.edge_radius_px > 0 ? config_.edge_radius_px : radius_;
-  const TrackResult a = acquire(g, expected);
-  if (a.ok()) {
-    TrackResult r = locate(g, a.center, expected > 0 ? expected : a.radius_px, TrackState::kFound);
-    // A second pass from the refined centre and radius: the blob's radius is only approximate.
+    TrackResult r =
+        locate(frame, window_about(p, half, frame.size()), p, radius_, TrackState::kTracking);
     if (r.ok()) {
-      TrackResult r2 = locate(g, r.center, r.radius_px, TrackState::kFound);
-      if (r2.ok()) r = r2;
-    }
-    if (r.ok()) {
-      velocity_ = {0, 0};
+      velocity_ = r.center - last_;
       last_ = r.center;
-      history_ = 1;
-      radius_ = r.radius_px;
-      have_track_ = true;
+      ++history_;
+      radius_ = 0.8 * radius_ + 0.2 * r.radius_px;
       return r;
     }
+  }
+  // The window failed (or there is no track): search the same frame whole.
+  const TrackResult r = reacquire(frame);
+  if (r.ok()) {
+    velocity_ = {0, 0};
+    last_ = r.center;
+    history_ = 1;
+    radius_ = r.radius_px;
+    have_track_ = true;
+    return r;
   }
   reset();
   return {};

@@ -31,6 +31,10 @@ enum class TrackMethod {
   kEdge,     ///< sub-pixel face/O-ring edge points + robust circle fit (default)
   kMoments,  ///< coverage-weighted moments of the face with the marker filled in
   kHough,    ///< cv::HoughCircles (measured baseline only)
+  /// The obvious OpenCV tracker, the peer the edge fit is measured against: Otsu's threshold,
+  /// cv::findContours and cv::fitEllipse, on the whole frame at full resolution (re-acquisition)
+  /// or a window around the prediction (tracking).
+  kContour,
 };
 std::string to_string(TrackMethod m);
 TrackMethod parse_track_method(const std::string& name);  ///< invalid_argument on unknown names
@@ -49,6 +53,11 @@ struct TrackerConfig {
   double min_inlier_fraction = 0.5;  ///< fewer valid edge points than this fraction: lost
   double max_radius_change = 0.25;   ///< relative change of the fitted radius that means "lost"
   double min_contrast_dn = 40;       ///< face minus O-ring level below this: no disk
+  /// The edge fit casts its rays from the guess, fits, and casts them again from the fitted
+  /// centre (so that they meet the edge at right angles) only when that centre is farther than
+  /// this from the guess (px). 0: always two passes. docs/VISION.md has the accuracy of one pass
+  /// against two.
+  double second_pass_shift_px = 1.0;
   /// When the camera (K, distortion, table pose) is known, the edge method fits the circle to the
   /// edge points back-projected onto the plane z = plane_z (the disk's top face) and projects its
   /// centre: exact for an oblique or distorted camera, where the image of the circle is not a
@@ -81,8 +90,9 @@ class Tracker {
   const TrackerConfig& config() const { return config_; }
 
  private:
-  TrackResult locate(const cv::Mat& gray, cv::Point2d guess, double radius, TrackState state,
-                     cv::Point2d offset = {0, 0});
+  TrackResult locate(const cv::Mat& frame, const cv::Rect& roi, cv::Point2d guess, double radius,
+                     TrackState state);
+  TrackResult reacquire(const cv::Mat& frame);
   TrackerConfig config_;
   bool have_track_ = false;
   int history_ = 0;
@@ -93,13 +103,23 @@ class Tracker {
 /// Building blocks, public for tests and benchmarks.
 
 /// The frame as a single-channel CV_32F image in DN (BGR is averaged; no copy for CV_32FC1).
+/// The grey conversion runs in the frame's own depth (an 8-bit frame is made grey as 8-bit,
+/// then the one channel is converted to float). Pass a window (`frame(roi)`) to convert only it.
 cv::Mat to_gray_f32(const cv::Mat& frame);
+/// The grey the edge fit reads: CV_8UC1 for an 8-bit frame (no float copy), else CV_32FC1.
+cv::Mat to_gray_for_edge(const cv::Mat& frame);
+/// The frame as a single-channel CV_8U image (grey in the frame's own depth, then saturated).
+cv::Mat to_gray_u8(const cv::Mat& frame);
 
-/// Whole-frame search for the disk's face: a bright, near-circular blob. Returns the blob's
-/// centre and the edge radius estimated from its area, or state kLost.
-TrackResult acquire(const cv::Mat& gray_f32, double expected_edge_radius_px = 0);
+/// Whole-frame search for the disk's face: a bright, near-circular blob, found on a grey copy of
+/// the frame four times smaller (two times when the expected edge radius is under 24 px, or when
+/// nothing was found at four), made in one pass over the frame's own pixels. `frame`: any frame
+/// `Tracker::track` accepts. Returns the blob's centre in the frame's pixels and the edge radius
+/// estimated from its area, or state kLost.
+TrackResult acquire(const cv::Mat& frame, double expected_edge_radius_px = 0);
 
-/// One refinement from a centre guess and edge radius (px) with the chosen method.
+/// One refinement from a centre guess and edge radius (px) with the chosen method. The edge fit
+/// reads CV_8UC1 or CV_32FC1 (to_gray_for_edge); the others CV_32FC1.
 /// `offset`: the full frame's pixel coordinates of gray_f32's (0, 0) when it is a region of
 /// interest (the camera-aware fit maps full-frame pixels); guess and result are in gray_f32's.
 TrackResult refine_edge(const cv::Mat& gray_f32, cv::Point2d guess, double edge_radius,
@@ -109,5 +129,10 @@ TrackResult refine_moments(const cv::Mat& gray_f32, cv::Point2d guess, double ed
 /// cv::HoughCircles in a window around the guess (whole frame if edge_radius <= 0 is unknown).
 TrackResult refine_hough(const cv::Mat& gray_f32, cv::Point2d guess, double edge_radius,
                          const TrackerConfig& config);
+/// The contour peer (TrackMethod::kContour) on a grey 8-bit image: the round outline nearest
+/// to the prediction, or without one the roundest large one; an expected edge radius > 0 keeps
+/// outlines within 25 % of it. Centre in gray_u8's pixels.
+TrackResult fit_contour(const cv::Mat& gray_u8, std::optional<cv::Point2d> prediction,
+                        double expected_edge_radius_px);
 
 }  // namespace flatland::vision
