@@ -1,6 +1,9 @@
 // Tracker latency per 640 x 480 frame (docs/VISION.md): following the disk in its region of
 // interest, and whole-frame re-acquisition, for each method, on one rendered frame of the
 // air-table butterfly (noise 2 DN, 30 Hz exposure blur). Medians over repetitions are reported.
+// The edge fit against its peer, the OpenCV contour tracker (TrackMethod::kContour: Otsu,
+// findContours, fitEllipse), is timed interleaved on the same 31 consecutive frames in the same
+// run and reported as the ratio flatland / contour (docs/BENCHMARKS.md).
 // Run: build/bin/flatland_vision_bench
 #include <benchmark/benchmark.h>
 #include "flatland/model/compile.hpp"
@@ -15,38 +18,60 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
+#include <chrono>
 #include <filesystem>
 #include <numbers>
+#include <vector>
 
 using namespace flatland;
 
 namespace {
 
+// The air-table experiment's scene: the butterfly at 5 deg, 2T = 4 s, the 640 x 480 overhead
+// camera with a 1/30 s exposure, supersample 2, 2 DN read noise.
+Scene bench_scene() {
+  Scene s;
+  s.sim.tilt = 5.0 * std::numbers::pi / 180.0;
+  s.sim.motion.period = 4.0;
+  s.sim.motion.k = -1.1395840;
+  s.sim.duration = 4.0;
+  s.sim.run.record = true;
+  CameraSpec cam;
+  cam.fx = cam.fy = 900;
+  cam.cx = 319.5;
+  cam.cy = 239.5;
+  cam.position = {0.0, 0.0, 1.2};
+  cam.look_at = {0.0, 0.0, 0.0};
+  cam.exposure = 1.0 / 30.0;
+  s.camera = cam;
+  s.effects.supersample = 2;
+  s.effects.blur_subframes = 8;
+  s.effects.noise_read_dn = 2;
+  return s;
+}
+
 // Mid-roll (t = 2 s: the disk near the fingertip, the hand touching it, moving fast).
 const cv::Mat& frame() {
   static const cv::Mat image = [] {
-    Scene s;
-    s.sim.tilt = 5.0 * std::numbers::pi / 180.0;
-    s.sim.motion.period = 4.0;
-    s.sim.motion.k = -1.1395840;
-    s.sim.duration = 4.0;
-    s.sim.run.record = true;
-    CameraSpec cam;
-    cam.fx = cam.fy = 900;
-    cam.cx = 319.5;
-    cam.cy = 239.5;
-    cam.position = {0.0, 0.0, 1.2};
-    cam.look_at = {0.0, 0.0, 0.0};
-    cam.exposure = 1.0 / 30.0;
-    s.camera = cam;
-    s.effects.supersample = 2;
-    s.effects.blur_subframes = 8;
-    s.effects.noise_read_dn = 2;
+    const Scene s = bench_scene();
     const sim::RunResult run = sim::run_spec(s.sim);
     render::Renderer renderer(flatland::model::render_setup(*flatland::model::compile(s)));
     return renderer.capture(run.trajectory, 2.0).image;
   }();
   return image;
+}
+
+// 31 consecutive 30 Hz frames, t = 1.5 .. 2.5 s (the disk rolling over the fingertip).
+const std::vector<cv::Mat>& sequence() {
+  static const std::vector<cv::Mat> images = [] {
+    const Scene s = bench_scene();
+    const sim::RunResult run = sim::run_spec(s.sim);
+    render::Renderer renderer(flatland::model::render_setup(*flatland::model::compile(s)));
+    std::vector<cv::Mat> out;
+    for (int k = 45; k <= 75; ++k) out.push_back(renderer.capture(run.trajectory, k / 30.0).image);
+    return out;
+  }();
+  return images;
 }
 
 vision::TrackMethod method_of(int64_t i) { return static_cast<vision::TrackMethod>(i); }
@@ -160,6 +185,53 @@ void ReadVideo(benchmark::State& state) {
   state.SetLabel(opencv ? "opencv" : "flatland");
 }
 
+// The edge fit and the contour peer on the same frames, interleaved frame by frame so that both
+// see the same load; `whole`: every frame searched whole (re-acquisition), else followed in the
+// window. Counters: each one's mean time per frame (us) and their ratio flatland / contour.
+void EdgeVsContour(benchmark::State& state) {
+  const bool whole = state.range(0) != 0;
+  const std::vector<cv::Mat>& frames = sequence();
+  vision::TrackerConfig edge_cfg, contour_cfg;
+  contour_cfg.method = vision::TrackMethod::kContour;
+  vision::Tracker edge(edge_cfg), contour(contour_cfg);
+  const vision::TrackState expected =
+      whole ? vision::TrackState::kFound : vision::TrackState::kTracking;
+  using clock = std::chrono::steady_clock;
+  double edge_s = 0, contour_s = 0;
+  long n = 0;
+  auto timed = [&](vision::Tracker& t, const cv::Mat& image, double& seconds) {
+    if (whole) t.reset();
+    const auto t0 = clock::now();
+    const vision::TrackResult r = t.track(image);
+    seconds += std::chrono::duration<double>(clock::now() - t0).count();
+    benchmark::DoNotOptimize(r.center);
+    return r.state == expected;
+  };
+  // The first frame acquires; the benchmark times the frames after it.
+  if (!edge.track(frames.front()).ok() || !contour.track(frames.front()).ok())
+    state.SkipWithError("disk not found");
+  for (auto _ : state) {
+    const auto t0 = clock::now();
+    for (std::size_t k = 1; k < frames.size(); ++k) {
+      if (!timed(edge, frames[k], edge_s) || !timed(contour, frames[k], contour_s)) {
+        state.SkipWithError("a tracker lost the disk or left its expected state");
+        return;
+      }
+      ++n;
+    }
+    state.SetIterationTime(std::chrono::duration<double>(clock::now() - t0).count());
+    // Back to the start of the sequence with a track at its first frame.
+    edge.reset();
+    contour.reset();
+    edge.track(frames.front());
+    contour.track(frames.front());
+  }
+  state.counters["flatland_us"] = 1e6 * edge_s / static_cast<double>(n);
+  state.counters["contour_us"] = 1e6 * contour_s / static_cast<double>(n);
+  state.counters["flatland_over_contour"] = edge_s / contour_s;
+  state.SetLabel(whole ? "whole-frame re-acquisition" : "window tracking");
+}
+
 constexpr int kReps = 7;
 
 }  // namespace
@@ -172,10 +244,18 @@ BENCHMARK(ReadVideo)
     ->Repetitions(5)
     ->ReportAggregatesOnly(true);
 
+BENCHMARK(EdgeVsContour)
+    ->Arg(0)
+    ->Arg(1)
+    ->Unit(benchmark::kMillisecond)
+    ->UseManualTime()
+    ->Repetitions(kReps)
+    ->ReportAggregatesOnly(true);
 BENCHMARK(TrackRoi)
     ->Arg(static_cast<int>(vision::TrackMethod::kEdge))
     ->Arg(static_cast<int>(vision::TrackMethod::kMoments))
     ->Arg(static_cast<int>(vision::TrackMethod::kHough))
+    ->Arg(static_cast<int>(vision::TrackMethod::kContour))
     ->Unit(benchmark::kMillisecond)
     ->Repetitions(kReps)
     ->ReportAggregatesOnly(true);
@@ -189,6 +269,7 @@ BENCHMARK(TrackFullFrame)
     ->Arg(static_cast<int>(vision::TrackMethod::kEdge))
     ->Arg(static_cast<int>(vision::TrackMethod::kMoments))
     ->Arg(static_cast<int>(vision::TrackMethod::kHough))
+    ->Arg(static_cast<int>(vision::TrackMethod::kContour))
     ->Unit(benchmark::kMillisecond)
     ->Repetitions(kReps)
     ->ReportAggregatesOnly(true);
