@@ -361,8 +361,9 @@ Command add_track_command(CLI::App& app) {
                   "clean frames score about 0.95, frames a decoder patched 0.1-0.5. Default: 0.5");
   cmd->add_option("--method", o->method,
                   "Tracker: edge (sub-pixel face/O-ring edge + robust circle fit), moments "
-                  "(coverage-weighted moments) or hough (cv::HoughCircles baseline). Default: edge")
-      ->check(CLI::IsMember({"edge", "moments", "hough"}));
+                  "(coverage-weighted moments), hough (cv::HoughCircles baseline) or contour (the "
+                  "OpenCV contour peer: Otsu, findContours, fitEllipse). Default: edge")
+      ->check(CLI::IsMember({"edge", "moments", "hough", "contour"}));
   cmd->add_option("--encoder", o->encoder,
                   "Hand angle log, CSV rows t,theta (s, rad; optional header), interpolated at "
                   "each frame time; enables the s_h column (needs the camera file's table pose)")

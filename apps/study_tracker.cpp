@@ -25,6 +25,7 @@ Json tracker_defaults_json() {
   j["min_inlier_fraction"] = d.min_inlier_fraction;
   j["max_radius_change"] = d.max_radius_change;
   j["min_contrast_dn"] = d.min_contrast_dn;
+  j["second_pass_shift_px"] = d.second_pass_shift_px;
   return j;
 }
 
@@ -126,7 +127,7 @@ void run_tracker_study(const StudyOptions& o) {
     outputs.begin_directory(dir);
     outputs.stage(dir / "tracker.csv", studies::tracker_study_csv(study));
     if (plots) {
-      const char* colors[] = {"#1b9e77", "#d95f02", "#7570b3", "#e7298a", "#66a61e"};
+      const char* colors[] = {"#1b9e77", "#d95f02", "#7570b3", "#e7298a", "#66a61e", "#e6ab02"};
       // Noise levels double from 1 DN: x = 1 + log2(noise), 0 DN at x = 0, labelled in DN.
       auto pos = [](double n) { return n <= 0 ? 0.0 : 1 + std::log2(n); };
       std::string xtics = "pos(n) = n <= 0 ? 0 : 1 + log(n) / log(2)\nset xtics (";
@@ -140,8 +141,11 @@ void run_tracker_study(const StudyOptions& o) {
                                "set xlabel 'read noise sigma (DN)'\nset key top left\n"
                                "lift(e) = e < 1e-4 ? 1e-4 : e\n";
       // Centre error: a panel per method, a curve per exposure.
-      std::string err = head + "set multiplot layout 2,2 title 'Tracker: RMS centre error (" +
-                        std::to_string(times.size()) + " frames per point)'\n";
+      // A panel per method, two to a row.
+      const std::string layout = std::to_string((methods.size() + 1) / 2) + ",2";
+      std::string err = head + "set multiplot layout " + layout +
+                        " title 'Tracker: RMS centre error (" + std::to_string(times.size()) +
+                        " frames per point)'\n";
       for (const studies::TrackerStudyMethod& m : methods) {
         err += "set title '" + m.name + "'\nset ylabel 'RMS centre error (px)'\nplot ";
         for (std::size_t bi = 0; bi < blurs.size(); ++bi) {
@@ -170,10 +174,10 @@ void run_tracker_study(const StudyOptions& o) {
           const std::string sel = "(strcol(1) eq '" + methods[mi].name +
                                   "' && column(3) == " + std::to_string(bi) + ")";
           lat += std::string(mi ? ", \\\n     " : "") + "datafile skip 1 using (pos(column(8))):(" +
-                 sel + " ? column(17) : NaN) with linespoints lw 2 pt 7 lc rgb '" + colors[mi % 5] +
+                 sel + " ? column(17) : NaN) with linespoints lw 2 pt 7 lc rgb '" + colors[mi % 6] +
                  "' title '" + methods[mi].name +
                  "', \\\n     datafile skip 1 using (pos(column(8))):(" + sel +
-                 " ? column(18) : NaN) with lines lw 1 dt 2 lc rgb '" + colors[mi % 5] +
+                 " ? column(18) : NaN) with lines lw 1 dt 2 lc rgb '" + colors[mi % 6] +
                  "' notitle";
         }
         lat += "\n";

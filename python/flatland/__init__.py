@@ -344,7 +344,7 @@ class Tracker:
     scene's camera, the contact parameter s_h.
 
     ``model``: a Model (or scene) whose camera and hand the tracker knows; None: a plain image
-    tracker. ``method``: edge (default), moments or hough. Frames are H x W or H x W x 3 (BGR),
+    tracker. ``method``: edge (default), moments, hough or contour. Frames are H x W or H x W x 3 (BGR),
     uint8 or float32 numpy arrays; track them in order (the tracker predicts from the last).
     """
 
