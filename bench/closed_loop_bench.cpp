@@ -7,7 +7,8 @@
 //    step() alone.
 //  * BM_SyntheticExperiment: a whole synthetic experiment of the paper's air-table run (5 deg,
 //    2T = 4 s, 5.2 s simulated with the settle), every frame rendered (640 x 480, 2 DN noise) and
-//    tracked. Counter realtime_factor = simulated time / wall time; target >= 4.
+//    tracked. Counter realtime_factor = simulated time / wall time; target >= 30.
+//  * BM_FrameNoise/0, /1: a frame's sensor noise through a float frame and on the 8-bit frame.
 // Run: build/bin/flatland_closed_loop_bench
 #include <benchmark/benchmark.h>
 
@@ -15,6 +16,7 @@
 #include "flatland/control/controller.hpp"
 #include "flatland/control/estimator.hpp"
 #include "flatland/drivers/experiment.hpp"
+#include "flatland/render/effects.hpp"
 #include "flatland/scene/scene.hpp"
 #include "flatland/sim/spec.hpp"
 
@@ -151,6 +153,41 @@ void BM_TransverseStart(benchmark::State& state) {
   }
 }
 BENCHMARK(BM_TransverseStart)->Unit(benchmark::kMillisecond);
+
+/// The sensor noise of one 640 x 480 frame as the loop's camera adds it (2 DN read noise on an
+/// 8-bit BGR render): arg 0 through a float frame (convert, apply_noise, quantize: the path before
+/// 2026-11-28 and still the one for blurred or vignetted frames), arg 1 on the 8-bit frame
+/// (apply_noise_8u: the same pixels, checked once here). Both start from the same render, copied
+/// so that every iteration noises the clean frame.
+void BM_FrameNoise(benchmark::State& state) {
+  const bool eight_bit = state.range(0) == 1;
+  cv::Mat render(480, 640, CV_8UC3);
+  cv::RNG(1).fill(render, cv::RNG::UNIFORM, 0, 256);
+  {
+    render::EffectsRng a(7), b(7);
+    cv::Mat floats, bytes = render.clone();
+    render.convertTo(floats, CV_32F);
+    render::apply_noise(floats, 2.0, 0.0, a);
+    render::apply_noise_8u(bytes, 2.0, 0.0, b);
+    if (cv::norm(render::quantize(floats), bytes, cv::NORM_INF) != 0)
+      state.SkipWithError("the two paths give different frames");
+  }
+  render::EffectsRng rng(1);
+  cv::Mat floats, frame;
+  for (auto _ : state) {
+    if (eight_bit) {
+      render.copyTo(frame);
+      render::apply_noise_8u(frame, 2.0, 0.0, rng);
+    } else {
+      render.convertTo(floats, CV_32F);
+      render::apply_noise(floats, 2.0, 0.0, rng);
+      frame = render::quantize(floats);
+    }
+    benchmark::DoNotOptimize(frame.data);
+  }
+  state.SetLabel(eight_bit ? "8-bit" : "float");
+}
+BENCHMARK(BM_FrameNoise)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
 
 void BM_SyntheticExperiment(benchmark::State& state) {
   const drivers::LoopSetup& su = setup();

@@ -11,6 +11,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -110,14 +112,6 @@ void apply_vignetting(cv::Mat& image_f32, double strength, cv::Point2d principal
 
 namespace {
 
-/// SplitMix64 (Steele, Lea, Flood 2014): a fast, well-mixed 64-bit stream from a counter.
-std::uint64_t splitmix64(std::uint64_t& state) {
-  std::uint64_t z = (state += 0x9e3779b97f4a7c15ULL);
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
-  return z ^ (z >> 31);
-}
-
 /// Standard normal quantile (Acklam's rational approximation, refined by one Halley step on
 /// erfc: ~1e-15 relative).
 double normal_quantile(double p) {
@@ -162,41 +156,177 @@ const float* gaussian_quantiles() {
   return table.data();
 }
 
-void apply_noise(cv::Mat& image_f32, double read_sigma_dn, double shot_gain, EffectsRng& rng) {
+namespace {
+
+void require_noise_levels(double read_sigma_dn, double shot_gain) {
   if (!(read_sigma_dn >= 0) || !std::isfinite(read_sigma_dn))
     fail("effects.noise_read_dn",
          "must be >= 0 and finite, got " + sim::format_significant(read_sigma_dn, 9));
   if (!(shot_gain >= 0) || !std::isfinite(shot_gain))
     fail("effects.noise_shot_gain",
          "must be >= 0 and finite, got " + sim::format_significant(shot_gain, 9));
+}
+
+constexpr std::uint64_t kSplitMixGamma = 0x9e3779b97f4a7c15ULL;
+
+/// SplitMix64's output for the state after `state` (the state advanced by one gamma).
+inline std::uint64_t splitmix64_next(std::uint64_t state) {
+  std::uint64_t z = state + kSplitMixGamma;
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+  return z ^ (z >> 31);
+}
+
+/// `words` 64-bit words of SplitMix64 from `state`, each four 16-bit indices into the quantile
+/// table, lowest bits first: 4 * words normals into z. SplitMix64 is a counter (the k-th output
+/// depends on state + k gamma only), so the words are independent of each other: no carried
+/// dependency between iterations, and no branch in the loop.
+void quantile_words(const float* quantile, std::uint64_t state, float* z, int words) {
+  for (int j = 0; j < words; ++j) {
+    const std::uint64_t w = splitmix64_next(state + static_cast<std::uint64_t>(j) * kSplitMixGamma);
+    z[4 * j] = quantile[w & 0xffff];
+    z[4 * j + 1] = quantile[(w >> 16) & 0xffff];
+    z[4 * j + 2] = quantile[(w >> 32) & 0xffff];
+    z[4 * j + 3] = quantile[w >> 48];
+  }
+}
+
+/// The standard normals of one frame's noise, in the order they are added (row by row, pixel by
+/// pixel, channel by channel): 16 random bits each index the normal's quantiles at 65536
+/// equal-probability midpoints (gaussian_quantiles), four to a SplitMix64 word, the stream
+/// running on across rows. Seeded by one 64-bit draw from the scene's generator per frame, so
+/// frames stay reproducible and the scene's stream advances the same whatever the image holds.
+class NormalStream {
+ public:
+  explicit NormalStream(EffectsRng& rng) : state_(rng.engine()()) {}
+
+  /// The next n normals into z.
+  void fill(float* z, int n) {
+    int i = 0;
+    for (; i < n && left_ > 0; ++i, --left_) {
+      z[i] = quantile_[bits_ & 0xffff];
+      bits_ >>= 16;
+    }
+    const int words = (n - i) / 4;
+    quantile_words(quantile_, state_, z + i, words);
+    state_ += static_cast<std::uint64_t>(words) * kSplitMixGamma;
+    i += 4 * words;
+    if (i == n) return;
+    bits_ = splitmix64_next(state_);
+    state_ += kSplitMixGamma;
+    for (left_ = 4; i < n; ++i, --left_) {
+      z[i] = quantile_[bits_ & 0xffff];
+      bits_ >>= 16;
+    }
+  }
+
+ private:
+  const float* quantile_ = gaussian_quantiles();
+  std::uint64_t state_, bits_ = 0;
+  int left_ = 0;
+};
+
+/// Values are noised in runs of at most this many (one row at a time, in pieces): the normals of a
+/// run stay in the first-level cache between being drawn and being added.
+constexpr int kRun = 2048;
+
+/// Adds sigma * z to each of n values: sigma = read without shot noise (no square root), else
+/// sqrt(read^2 + gain * max(value, 0)) of the value itself.
+void add_noise(float* values, const float* z, int n, float read, float read_var, float gain) {
+  if (gain == 0) {
+    for (int i = 0; i < n; ++i) values[i] += read * z[i];
+  } else {
+    for (int i = 0; i < n; ++i)
+      values[i] += std::sqrt(read_var + gain * std::max(values[i], 0.0f)) * z[i];
+  }
+}
+
+}  // namespace
+
+void apply_noise(cv::Mat& image_f32, double read_sigma_dn, double shot_gain, EffectsRng& rng) {
+  require_noise_levels(read_sigma_dn, shot_gain);
   if (read_sigma_dn == 0 && shot_gain == 0) return;  // no draws: the stream stays as it was
   require_f32(image_f32, "apply_noise");
   // Sensor noise is a standard normal per pixel and channel, times sigma. A frame needs ~1e6 of
   // them; std::normal_distribution took 70 % of a closed-loop experiment and OpenCV's Ziggurat
-  // 3.4 ms per 640 x 480 frame. Here each is one table lookup: 16 random bits index the normal's
-  // quantiles at 65536 equal-probability midpoints (gaussian_quantiles). The stream is seeded by
-  // one 64-bit draw from the scene's generator per frame, so frames stay reproducible and the
-  // stream advances the same whatever the image holds.
-  const float* quantile = gaussian_quantiles();
-  std::uint64_t state = rng.engine()();
+  // 3.4 ms per 640 x 480 frame. Here each is one table lookup (NormalStream).
+  NormalStream normals(rng);
+  float z[kRun];
   const int n = image_f32.cols * image_f32.channels();
   const float read = static_cast<float>(read_sigma_dn);
   const float read_var = static_cast<float>(read_sigma_dn * read_sigma_dn);
   const float gain = static_cast<float>(shot_gain);
-  std::uint64_t bits = 0;
-  int left = 0;
   for (int v = 0; v < image_f32.rows; ++v) {
     float* row = image_f32.ptr<float>(v);
-    for (int i = 0; i < n; ++i) {
-      if (left == 0) {
-        bits = splitmix64(state);
-        left = 4;
+    for (int i = 0; i < n; i += kRun) {
+      const int len = std::min(kRun, n - i);
+      normals.fill(z, len);
+      add_noise(row + i, z, len, read, read_var, gain);
+    }
+  }
+}
+
+namespace {
+
+/// Rounds to the nearest whole number, ties to even (as cvRound and quantize), and saturates to
+/// [0, 255], branch-free so that the loop around it vectorises: adding 1.5 * 2^23 leaves the whole
+/// number in the low mantissa bits, rounded by the processor's own round-to-nearest-even. Exact for
+/// |x| < 2^22 (apply_noise_8u's caller keeps within kLargestValue).
+inline std::uint8_t round_to_u8(float x) {
+  const float shifted = x + 12582912.0f;  // 1.5 * 2^23
+  std::int32_t rounded;
+  std::memcpy(&rounded, &shifted, sizeof rounded);
+  rounded -= 0x4b400000;
+  rounded = rounded < 0 ? 0 : rounded;
+  return static_cast<std::uint8_t>(rounded > 255 ? 255 : rounded);
+}
+
+/// Below this, value plus noise is within round_to_u8's range (2^22) even at 10 sigma.
+constexpr double kLargestValue = 4.0e6;
+
+}  // namespace
+
+void apply_noise_8u(cv::Mat& image_u8, double read_sigma_dn, double shot_gain, EffectsRng& rng) {
+  require_noise_levels(read_sigma_dn, shot_gain);
+  if (read_sigma_dn == 0 && shot_gain == 0) return;
+  if (image_u8.empty() || image_u8.depth() != CV_8U)
+    fail("apply_noise_8u", "expects a non-empty CV_8U image, got depth " +
+                               std::to_string(image_u8.depth()) +
+                               (image_u8.empty() ? " (empty)" : ""));
+  // The same frame as quantize() of apply_noise() on the image as floats, bit for bit: the same
+  // normals in the same order and the same float arithmetic on each value, converted, noised and
+  // rounded in one pass while its run is in the cache, instead of three passes over a float frame
+  // 4 times the size.
+  if (255 + 10 * std::sqrt(read_sigma_dn * read_sigma_dn + shot_gain * 255) > kLargestValue) {
+    cv::Mat floats;  // noise far beyond the 8-bit range: the general path
+    image_u8.convertTo(floats, CV_32F);
+    apply_noise(floats, read_sigma_dn, shot_gain, rng);
+    floats.convertTo(image_u8, CV_8U);
+    return;
+  }
+  NormalStream normals(rng);
+  float z[kRun];
+  const int n = image_u8.cols * image_u8.channels();
+  const float read = static_cast<float>(read_sigma_dn);
+  const float read_var = static_cast<float>(read_sigma_dn * read_sigma_dn);
+  const float gain = static_cast<float>(shot_gain);
+  // Shot noise's sigma of each of the 256 levels, computed once as add_noise computes it.
+  float sigma_of_level[256];
+  for (int level = 0; level < 256; ++level)
+    sigma_of_level[level] = std::sqrt(read_var + gain * std::max(static_cast<float>(level), 0.0f));
+  for (int v = 0; v < image_u8.rows; ++v) {
+    std::uint8_t* row = image_u8.ptr<std::uint8_t>(v);
+    for (int i = 0; i < n; i += kRun) {
+      const int len = std::min(kRun, n - i);
+      normals.fill(z, len);
+      std::uint8_t* values = row + i;
+      if (gain == 0) {
+        for (int k = 0; k < len; ++k)
+          values[k] = round_to_u8(static_cast<float>(values[k]) + read * z[k]);
+      } else {
+        for (int k = 0; k < len; ++k)
+          values[k] = round_to_u8(static_cast<float>(values[k]) + sigma_of_level[values[k]] * z[k]);
       }
-      const float z = quantile[bits & 0xffff];
-      bits >>= 16;
-      --left;
-      const float sigma = gain == 0 ? read : std::sqrt(read_var + gain * std::max(row[i], 0.0f));
-      row[i] += sigma * z;
     }
   }
 }

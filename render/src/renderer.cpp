@@ -1196,17 +1196,24 @@ Frame Renderer::capture(const StateAt& state_at, double t) {
     return frame;
   }
   const double exposure = impl_->camera.exposure;
+  const bool one_render = !(fx.blur_subframes > 1 && exposure > 0);
   const bool plain = fx.blur_subframes <= 1 && fx.noise_read_dn == 0 && fx.noise_shot_gain == 0 &&
                      fx.vignetting == 0 && fx.quantize;
-  if (plain) {
+  // Without anything that makes a render's pixels fractional (blur, vignetting, supersampling,
+  // distortion), the float frame holds whole numbers, and the noise goes straight onto the 8-bit
+  // render: the same frame, bit for bit, without a float frame (apply_noise_8u).
+  const bool whole_numbers = one_render && fx.vignetting == 0 && fx.quantize &&
+                             impl_->supersample == 1 && !impl_->camera.distorted();
+  if (plain || whole_numbers) {
     frame.image = impl_->render_8u(mid);
+    apply_noise_8u(frame.image, fx.noise_read_dn, fx.noise_shot_gain, rng);
     return frame;
   }
   // The float image is the frame only when it is not quantised; otherwise it is scratch that the
   // renderer keeps from frame to frame (see render_linear).
   cv::Mat unquantized;
   cv::Mat& linear = fx.quantize ? impl_->linear_scratch : unquantized;
-  if (fx.blur_subframes > 1 && exposure > 0) {
+  if (!one_render) {
     // Exposure blur: equally weighted sub-frames over the exposure centred on the capture time,
     // each rendered into the same buffer and added to the running mean.
     FrameMean mean;

@@ -169,6 +169,29 @@ TEST(Render, SameSceneAndSeedGiveIdenticalFrames) {
   EXPECT_GT(cv::norm(f42.image, f43.image, cv::NORM_INF), 0.0);
 }
 
+// A frame with noise and nothing fractional before it (no supersampling, blur, vignetting or
+// distortion) is noised on the 8-bit render directly: the same frame as the float path, the render
+// as floats noised from the same draw of the generator and rounded, for read and shot noise.
+TEST(Render, NoisyCaptureOfAWholeNumberRenderIsTheFloatPathRounded) {
+  for (const double gain : {0.0, 0.4}) {
+    Scene scene = overhead_scene(1);
+    scene.effects.noise_read_dn = 2.0;
+    scene.effects.noise_shot_gain = gain;
+    scene.effects.seed = 5;
+    const sim::RunResult run = sim::run_spec(scene.sim);
+    Renderer noisy(flatland_test::render_setup(scene)), clean(flatland_test::render_setup(scene));
+    EffectsRng rng(5);
+    for (double t : {0.3, 0.6}) {
+      const Frame f = noisy.capture(run.trajectory, t);
+      cv::Mat expected = clean.render_linear(SceneState::from_sample(run.trajectory.sample(t)));
+      apply_noise(expected, 2.0, gain, rng);
+      ASSERT_EQ(f.image.type(), CV_8UC3);
+      EXPECT_EQ(cv::norm(f.image, quantize(expected), cv::NORM_INF), 0.0)
+          << "t = " << t << ", gain " << gain;
+    }
+  }
+}
+
 // Exposure blur is the mean of the sub-frames over the exposure centred on the capture time.
 // capture() renders them one at a time into a reused buffer; here each is rendered on its own
 // (render_linear) and averaged with average_frames, through distortion and supersampling.
@@ -262,7 +285,8 @@ TEST(Render, CharucoBoardIsDetectedWhereItIs) {
   // calibration pipeline would.
   cv::cornerSubPix(gray, corners, cv::Size(5, 5), cv::Size(-1, -1),
                    cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 100, 1e-4));
-  const std::vector<cv::Point2d> truth = r.camera().project(camera::corners_in_table(flatland::model::compile_target(board)));
+  const std::vector<cv::Point2d> truth =
+      r.camera().project(camera::corners_in_table(flatland::model::compile_target(board)));
   double sum = 0;
   for (std::size_t i = 0; i < ids.size(); ++i) {
     const cv::Point2d d = cv::Point2d(corners[i]) - truth[ids[i]];

@@ -8,6 +8,7 @@
 #include <opencv2/calib3d.hpp>
 
 #include <cmath>
+#include <cstdint>
 #include <functional>
 #include <limits>
 #include <stdexcept>
@@ -71,7 +72,8 @@ cv::Point2d brown_conrady(const cv::Vec3d& pc, const cv::Matx33d& K,
 // --- Camera pose and projection ------------------------------------------------------------------
 
 TEST(RenderCamera, OverheadViewShowsTableXRightAndYUp) {
-  const camera::CameraModel cam = flatland::model::compile_camera(CameraSpec{});  // (0,0,1) looking down, up +y
+  const camera::CameraModel cam =
+      flatland::model::compile_camera(CameraSpec{});  // (0,0,1) looking down, up +y
   const cv::Point2d below = cam.project(cv::Point3d(0, 0, 0));
   EXPECT_NEAR(below.x, 319.5, 1e-9);
   EXPECT_NEAR(below.y, 239.5, 1e-9);
@@ -118,7 +120,8 @@ TEST(RenderCamera, LookAtPointProjectsToPrincipalPointAndUpIsUp) {
 TEST(RenderCamera, ProjectMatchesOpenCVAndTheModelWrittenOut) {
   for (const bool rational : {false, true}) {
     SCOPED_TRACE(rational ? "rational" : "plumb_bob");
-    camera::CameraModel cam = flatland::model::compile_camera(oblique_spec({-0.3, 0.1, 1e-3, -2e-3, 0.02}));
+    camera::CameraModel cam =
+        flatland::model::compile_camera(oblique_spec({-0.3, 0.1, 1e-3, -2e-3, 0.02}));
     if (rational) {
       cam.dist[5] = 0.05;  // k4..k6: the rational model's denominator
       cam.dist[6] = -0.02;
@@ -248,7 +251,8 @@ TEST(RenderCameraValidation, RejectsBadPose) {
   }
 }
 
-// --- camera::Distortion maps -------------------------------------------------------------------------
+// --- camera::Distortion maps
+// -------------------------------------------------------------------------
 
 /// Largest distance between output pixel centres and their map positions sent back through the
 /// camera model (ideal pixel -> normalised ray -> cv::projectPoints with K_s and dist), over every
@@ -328,7 +332,8 @@ TEST(RenderCameraDistortion, PincushionMapsStayInsideTheImage) {
 TEST(RenderCameraDistortion, MapsAgreeWithProjectOfTablePoints) {
   // The whole chain the renderer relies on: a table point drawn by the ideal pinhole camera and
   // remapped lands where project() says.
-  const camera::CameraModel cam = flatland::model::compile_camera(oblique_spec({-0.3, 0.1, 1e-3, -5e-4, 0.0}));
+  const camera::CameraModel cam =
+      flatland::model::compile_camera(oblique_spec({-0.3, 0.1, 1e-3, -5e-4, 0.0}));
   const int s = 2;
   const DistortionMaps maps = flatland::render::make_distortion_maps(cam, s);
   std::vector<cv::Point3d> pts;
@@ -390,7 +395,8 @@ TEST(RenderCameraDistortion, RejectsDistortionThatFoldsOverAndBadSupersample) {
   } catch (const std::invalid_argument& e) {
     EXPECT_EQ(std::string(e.what()).rfind("camera.distortion: ", 0), 0u) << e.what();
   }
-  EXPECT_THROW(flatland::render::make_distortion_maps(camera::CameraModel{}, 0), std::invalid_argument);
+  EXPECT_THROW(flatland::render::make_distortion_maps(camera::CameraModel{}, 0),
+               std::invalid_argument);
 }
 
 // --- Effects ---------------------------------------------------------------------------------
@@ -460,6 +466,133 @@ TEST(RenderEffects, NoiseIsSeeded) {
   EXPECT_EQ(cv::norm(a, b, cv::NORM_INF), 0.0);
   EXPECT_GT(cv::norm(a, c, cv::NORM_INF), 1.0);
   EXPECT_GT(cv::norm(a, flat, cv::NORM_INF), 1.0);
+}
+
+// The noise's stream written out independently of effects.cpp, one value at a time as the
+// renderer drew it before its runs were vectorised (2026-11-28): SplitMix64 (Steele, Lea, Flood
+// 2014) seeded by one draw of the scene's generator, each word four 16-bit quantile indices from
+// its lowest bits, running on across rows and channels. Pins the frames a seed gives.
+void reference_noise(cv::Mat& image_f32, double read_dn, double gain_dn, std::uint64_t seed) {
+  EffectsRng rng(seed);
+  std::uint64_t state = rng.engine()();
+  const float* quantile = flatland::render::gaussian_quantiles();
+  const float read = static_cast<float>(read_dn), read_var = static_cast<float>(read_dn * read_dn);
+  const float gain = static_cast<float>(gain_dn);
+  std::uint64_t bits = 0;
+  int left = 0;
+  for (int v = 0; v < image_f32.rows; ++v) {
+    float* row = image_f32.ptr<float>(v);
+    for (int i = 0; i < image_f32.cols * image_f32.channels(); ++i) {
+      if (left == 0) {
+        std::uint64_t z = (state += 0x9e3779b97f4a7c15ULL);
+        z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+        z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+        bits = z ^ (z >> 31);
+        left = 4;
+      }
+      const float z = quantile[bits & 0xffff];
+      bits >>= 16;
+      --left;
+      const float sigma = gain == 0 ? read : std::sqrt(read_var + gain * std::max(row[i], 0.0f));
+      row[i] += sigma * z;
+    }
+  }
+}
+
+cv::Mat random_u8(int rows, int cols, int type, int seed) {
+  cv::Mat img(rows, cols, type);
+  cv::RNG(seed).fill(img, cv::RNG::UNIFORM, 0, 256);
+  return img;
+}
+
+// apply_noise draws in runs of 2048 values and apply_noise_8u noises 8-bit images without a float
+// frame: both give the reference's values exactly, on rows shorter and longer than a run, whose
+// lengths are not multiples of the 4 values of a word, on a window of a larger image (rows not
+// contiguous) and with shot noise; the 8-bit path is the float path rounded, bit for bit.
+TEST(RenderEffects, NoiseIsTheReferenceStreamOnFloatAndEightBitImages) {
+  struct Case {
+    int rows, cols, type;
+    double read, gain;
+  };
+  for (const Case c : {Case{48, 64, CV_8UC3, 2.0, 0.0}, Case{31, 53, CV_8UC3, 1.5, 0.3},
+                       Case{9, 1001, CV_8UC3, 8.0, 0.0}, Case{40, 37, CV_8UC1, 0.0, 0.8},
+                       Case{7, 701, CV_8UC4, 3.0, 0.2}}) {
+    SCOPED_TRACE("rows " + std::to_string(c.rows) + " cols " + std::to_string(c.cols) + " read " +
+                 std::to_string(c.read) + " gain " + std::to_string(c.gain));
+    const cv::Mat bytes = random_u8(c.rows, c.cols, c.type, c.rows * c.cols);
+    cv::Mat expected;
+    bytes.convertTo(expected, CV_32F);
+    reference_noise(expected, c.read, c.gain, 11);
+    cv::Mat floats;
+    bytes.convertTo(floats, CV_32F);
+    EffectsRng a(11);
+    flatland::render::apply_noise(floats, c.read, c.gain, a);
+    EXPECT_EQ(cv::norm(floats, expected, cv::NORM_INF), 0.0);
+    // The 8-bit path, on a window of a larger image: its rows are not one contiguous block.
+    cv::Mat canvas(c.rows + 2, c.cols + 5, c.type, cv::Scalar::all(0));
+    cv::Mat window = canvas(cv::Rect(3, 1, c.cols, c.rows));
+    bytes.copyTo(window);
+    ASSERT_FALSE(window.isContinuous());
+    EffectsRng b(11);
+    flatland::render::apply_noise_8u(window, c.read, c.gain, b);
+    EXPECT_EQ(cv::norm(window, flatland::render::quantize(expected), cv::NORM_INF), 0.0);
+    EXPECT_GT(cv::norm(window, bytes, cv::NORM_INF), 0.0);
+    // Both took one draw from the scene's generator, as the reference did.
+    EffectsRng fresh(11);
+    fresh.engine()();
+    const std::uint64_t next = fresh.engine()();
+    EXPECT_EQ(a.engine()(), next);
+    EXPECT_EQ(b.engine()(), next);
+  }
+  cv::Mat floats(4, 4, CV_32FC1);
+  EffectsRng rng(1);
+  EXPECT_THROW(flatland::render::apply_noise_8u(floats, 2.0, 0.0, rng), std::invalid_argument);
+}
+
+/// Pearson's correlation of a and b (equal-sized single-channel float images).
+double correlation(const cv::Mat& a, const cv::Mat& b) {
+  cv::Scalar ma, sa, mb, sb;
+  cv::meanStdDev(a, ma, sa);
+  cv::meanStdDev(b, mb, sb);
+  cv::Mat da = a - ma[0], db = b - mb[0];
+  return da.dot(db) / (static_cast<double>(a.total()) * sa[0] * sb[0]);
+}
+
+// The noise against its closed form, on 640 x 480 x 3 frames of a flat signal: mean 0 (within 4
+// standard errors, sigma / sqrt(n)); variance read^2 + gain * signal (within 4 standard errors of
+// a sample variance, sigma^2 sqrt(2 / n)); no correlation between horizontal and vertical
+// neighbours, neighbouring channels or the same pixel in successive frames beyond 4 / sqrt(n), the
+// band of 4 standard errors of a correlation of independent values.
+TEST(RenderEffects, NoiseIsUnbiasedWithTheClosedFormVarianceAndUncorrelated) {
+  struct Case {
+    double read, gain, flat;
+  };
+  for (const Case c : {Case{2.0, 0.0, 100.0}, Case{1.5, 0.3, 180.0}, Case{0.0, 0.5, 60.0}}) {
+    SCOPED_TRACE("read " + std::to_string(c.read) + " gain " + std::to_string(c.gain));
+    const cv::Mat flat(480, 640, CV_32FC3, cv::Scalar::all(c.flat));
+    EffectsRng rng(2026);
+    cv::Mat first = flat.clone(), second = flat.clone();
+    flatland::render::apply_noise(first, c.read, c.gain, rng);
+    flatland::render::apply_noise(second, c.read, c.gain, rng);
+    const double variance = c.read * c.read + c.gain * c.flat;
+    for (const cv::Mat* frame : {&first, &second}) {
+      cv::Mat noise = *frame - flat;
+      noise = noise.reshape(1);  // one column per value: pixels and channels interleaved
+      const double n = static_cast<double>(noise.total());
+      cv::Scalar mean, stddev;
+      cv::meanStdDev(noise, mean, stddev);
+      EXPECT_NEAR(mean[0], 0.0, 4 * std::sqrt(variance / n));
+      EXPECT_NEAR(stddev[0] * stddev[0], variance, 4 * variance * std::sqrt(2 / n));
+      const double band = 4 / std::sqrt(n);
+      const int w = noise.cols;
+      // Neighbouring channels of a pixel, neighbouring pixels in a row (3 values on), in a column.
+      EXPECT_LT(std::abs(correlation(noise.colRange(0, w - 1), noise.colRange(1, w))), band);
+      EXPECT_LT(std::abs(correlation(noise.colRange(0, w - 3), noise.colRange(3, w))), band);
+      EXPECT_LT(std::abs(correlation(noise.rowRange(0, 479), noise.rowRange(1, 480))), band);
+    }
+    cv::Mat a = (first - flat), b = (second - flat);
+    EXPECT_LT(std::abs(correlation(a.reshape(1), b.reshape(1))), 4 / std::sqrt(a.total() * 3.0));
+  }
 }
 
 TEST(RenderEffects, EffectsThatAreOffDrawNothing) {

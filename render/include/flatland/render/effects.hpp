@@ -43,6 +43,9 @@ void downsample(const cv::Mat& image, int factor, cv::Mat& out);
 void apply_vignetting(cv::Mat& image_f32, double strength, cv::Point2d principal_point);
 /// Sensor noise on a float image in DN: Gaussian with variance read^2 + gain * max(signal, 0).
 void apply_noise(cv::Mat& image_f32, double read_sigma_dn, double shot_gain, EffectsRng& rng);
+/// The same noise on an 8-bit image, rounded and saturated back to 8 bits: bit for bit
+/// quantize(apply_noise(image as float)) with the same generator state, in one pass in the cache.
+void apply_noise_8u(cv::Mat& image_u8, double read_sigma_dn, double shot_gain, EffectsRng& rng);
 /// 65536 standard-normal quantiles at equal-probability midpoints: 16 uniform random bits index a
 /// normal variate (what apply_noise draws; public for its tests).
 const float* gaussian_quantiles();
