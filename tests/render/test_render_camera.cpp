@@ -506,9 +506,10 @@ cv::Mat random_u8(int rows, int cols, int type, int seed) {
 }
 
 // apply_noise draws in runs of 2048 values and apply_noise_8u noises 8-bit images without a float
-// frame: both give the reference's values exactly, on rows shorter and longer than a run, whose
-// lengths are not multiples of the 4 values of a word, on a window of a larger image (rows not
-// contiguous) and with shot noise; the 8-bit path is the float path rounded, bit for bit.
+// frame (read noise alone from offsets rounded in advance): both give the reference's values
+// exactly, on rows shorter and longer than a run, whose lengths are not multiples of the 4 values
+// of a word, on a window of a larger image (rows not contiguous), with shot noise and with offsets
+// that depend on the level; the 8-bit path is the float path rounded, bit for bit.
 TEST(RenderEffects, NoiseIsTheReferenceStreamOnFloatAndEightBitImages) {
   struct Case {
     int rows, cols, type;
@@ -516,7 +517,10 @@ TEST(RenderEffects, NoiseIsTheReferenceStreamOnFloatAndEightBitImages) {
   };
   for (const Case c : {Case{48, 64, CV_8UC3, 2.0, 0.0}, Case{31, 53, CV_8UC3, 1.5, 0.3},
                        Case{9, 1001, CV_8UC3, 8.0, 0.0}, Case{40, 37, CV_8UC1, 0.0, 0.8},
-                       Case{7, 701, CV_8UC4, 3.0, 0.2}}) {
+                       Case{7, 701, CV_8UC4, 3.0, 0.2},
+                       // 0.5 DN: 2 of the 65536 rounded offsets depend on the level (a sum within
+                       // float rounding of a half); about 28 values of this frame draw them.
+                       Case{480, 640, CV_8UC3, 0.5, 0.0}}) {
     SCOPED_TRACE("rows " + std::to_string(c.rows) + " cols " + std::to_string(c.cols) + " read " +
                  std::to_string(c.read) + " gain " + std::to_string(c.gain));
     const cv::Mat bytes = random_u8(c.rows, c.cols, c.type, c.rows * c.cols);
