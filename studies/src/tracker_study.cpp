@@ -71,7 +71,7 @@ const char* kTrackerColumns =
 TrackerStudyGrid tracker_study_grid(bool quick) {
   TrackerStudyGrid g;
   g.methods = {{"edge", vision::TrackMethod::kEdge, false},
-               {"edge-two-pass", vision::TrackMethod::kEdge, false, true},
+               {"edge-one-pass", vision::TrackMethod::kEdge, false, true},
                {"edge-plane", vision::TrackMethod::kEdge, true},
                {"moments", vision::TrackMethod::kMoments, false},
                {"hough", vision::TrackMethod::kHough, false},
@@ -169,7 +169,7 @@ TrackerStudyResult run_tracker_study(const model::Model& model,
         for (std::size_t mi = 0; mi < methods.size(); ++mi) {
           vision::TrackerConfig cfg;  // the library's defaults (reported in the JSON)
           cfg.method = methods[mi].method;
-          if (methods[mi].two_passes) cfg.second_pass_shift_px = 0;
+          if (methods[mi].one_pass) cfg.second_pass_shift_px = 1.0;
           if (methods[mi].table_plane) {
             cfg.camera = renderer.camera();
             cfg.plane_z = z;

@@ -24,12 +24,12 @@ struct TrackerStudyMethod {
   std::string name;  ///< CSV/JSON label
   vision::TrackMethod method = vision::TrackMethod::kEdge;
   bool table_plane = false;  ///< the edge fit on the table plane (the camera known), as `track`
-  /// The edge fit with its second pass always cast (TrackerConfig::second_pass_shift_px = 0), to
-  /// measure what the default's single pass from a close guess gives up.
-  bool two_passes = false;
+  /// The edge fit with one pass from a close guess (TrackerConfig::second_pass_shift_px = 1 px;
+  /// the default casts both), to measure what the shortcut gives up in accuracy and in its sigma.
+  bool one_pass = false;
 };
 
-/// What the study measures: the methods edge, edge-two-pass, edge-plane, moments, hough and the
+/// What the study measures: the methods edge, edge-one-pass, edge-plane, moments, hough and the
 /// contour peer (TrackMethod::kContour); read noise 0-64 DN
 /// (quick: 0, 2, 8, 32); exposures of 0, 1/4, 1/2 and 1 frame interval (quick: 0 and 1); every
 /// frame of the camera's rate (quick: every third).
