@@ -153,7 +153,7 @@ render::RenderSetup render_setup(const Model& model) {
   if (!model.camera)
     throw std::invalid_argument("camera: the scene has no camera section (needed to render)");
   return {*model.camera,     model.hand,         model.boards, model.spec.sim.object,
-          model.spec.render, model.spec.effects, std::nullopt};
+          model.spec.render, model.spec.effects, std::nullopt, model.spec.lighting};
 }
 
 namespace {

@@ -82,8 +82,8 @@ unsigned compile_shader(const Gl& gl, unsigned type, const char* src) {
   return sh;
 }
 
-unsigned link_program(const Gl& gl, const char* fragment_source) {
-  const unsigned vs = compile_shader(gl, GL_VERTEX_SHADER, kVertexShader);
+unsigned link_program(const Gl& gl, const char* fragment_source, const char* vertex_source) {
+  const unsigned vs = compile_shader(gl, GL_VERTEX_SHADER, vertex_source);
   const unsigned fs = compile_shader(gl, GL_FRAGMENT_SHADER, fragment_source);
   const unsigned p = gl.glCreateProgram();
   gl.glAttachShader(p, vs);

@@ -72,7 +72,11 @@ namespace flatland::render {
   X(glUniform3f)                 \
   X(glUniform1f)                 \
   X(glUniform2f)                 \
-  X(glUniform1i)
+  X(glUniform1i)                 \
+  X(glBlitFramebuffer)           \
+  X(glBlendFunc)                 \
+  X(glStencilFunc)               \
+  X(glStencilOp)
 
 struct Gl {
 #define FLATLAND_GL_MEMBER(name) decltype(&::name) name = nullptr;
@@ -106,7 +110,8 @@ const cv::Vec3d kLight =
 
 /// A compiled shader; std::runtime_error with the compiler's log when it does not compile.
 unsigned compile_shader(const Gl& gl, unsigned type, const char* source);
-/// kVertexShader linked with `fragment_source`; std::runtime_error when it does not link.
-unsigned link_program(const Gl& gl, const char* fragment_source);
+/// `vertex_source` linked with `fragment_source`; std::runtime_error when it does not link.
+unsigned link_program(const Gl& gl, const char* fragment_source,
+                      const char* vertex_source = kVertexShader);
 
 }  // namespace flatland::render

@@ -5,6 +5,7 @@
 #include "flatland/sim/curve.hpp"
 
 #include "gl_programs.hpp"
+#include "lighting.hpp"
 #include "meshes.hpp"
 
 #include <opencv2/aruco/charuco.hpp>
@@ -79,6 +80,10 @@ struct Renderer::Impl {
   std::unique_ptr<GlContext> context;
   std::unique_ptr<Gl> gl;
   unsigned program = 0, textured_program = 0, disk_program = 0, fbo = 0, color_rb = 0, depth_rb = 0;
+  // The scene's lamp (setup.lighting): its programs, and the lit table with its boards, drawn once
+  // into a framebuffer of its own (neither moves) and copied into each frame.
+  std::unique_ptr<LitPrograms> lit;
+  unsigned background_fbo = 0, background_color_rb = 0, background_depth_rb = 0;
   int fbo_width = 0, fbo_height = 0;
   Drawable table, hand, disk, disk_top;
   Drawable spatial_hand, spatial_object;  // a spatial scene's bodies
@@ -149,6 +154,19 @@ struct Renderer::Impl {
     for (unsigned p : {program, textured_program, disk_program})
       locations[p] = {gl->glGetUniformLocation(p, "model"),
                       gl->glGetUniformLocation(p, "specular")};
+    if (s.lighting) build_lighting(*s.lighting);
+  }
+
+  void build_lighting(const LightingSpec& lighting) {
+    if (setup.spatial)
+      throw std::invalid_argument("lighting: a spatial scene is drawn without a lamp");
+    if (auto problem = lighting_problem(lighting, setup.render))
+      throw std::invalid_argument("lighting." + problem->field + ": " + problem->reason);
+    lit = std::make_unique<LitPrograms>(*gl, lighting, to_gl(rigid(camera.R, camera.t)),
+                                        to_gl(projection()), camera.position_in_table(), kTable);
+    set_disk_top_uniforms(lit->program(LitPrograms::Kind::kDiskTop));
+    make_framebuffer(background_fbo, background_color_rb, background_depth_rb);
+    draw_lit_background();
   }
 
   // Whether every ray through the ideal image's corners meets the table plane inside the table.
@@ -175,6 +193,12 @@ struct Renderer::Impl {
     gl->glDeleteFramebuffers(1, &fbo);
     gl->glDeleteRenderbuffers(1, &color_rb);
     gl->glDeleteRenderbuffers(1, &depth_rb);
+    if (lit) {
+      lit.reset();
+      gl->glDeleteFramebuffers(1, &background_fbo);
+      gl->glDeleteRenderbuffers(1, &background_color_rb);
+      gl->glDeleteRenderbuffers(1, &background_depth_rb);
+    }
     gl->glDeleteProgram(program);
     gl->glDeleteProgram(textured_program);
     gl->glDeleteProgram(disk_program);
@@ -190,32 +214,44 @@ struct Renderer::Impl {
     program = link_program(*gl, kPlainFragmentShader);
     textured_program = link_program(*gl, kTexturedFragmentShader);
     disk_program = link_program(*gl, kDiskFragmentShader);
-    gl->glUseProgram(disk_program);
+    set_disk_top_uniforms(disk_program);
+  }
+
+  // The disk's face, O-ring band and marker, for the unlit and the lit disk program alike.
+  void set_disk_top_uniforms(unsigned p) {
+    gl->glUseProgram(p);
     auto set3 = [&](const char* name, const cv::Vec3f& c) {
-      gl->glUniform3f(gl->glGetUniformLocation(disk_program, name), c[0], c[1], c[2]);
+      gl->glUniform3f(gl->glGetUniformLocation(p, name), c[0], c[1], c[2]);
     };
     set3("face_color", kDiskFace);
     set3("ring_color", kRubber);
     set3("marker_color", kMarker);
-    gl->glUniform1f(gl->glGetUniformLocation(disk_program, "ring_inner"), float(1.0 - kRingWidth));
-    gl->glUniform1f(gl->glGetUniformLocation(disk_program, "marker_radius"), float(kMarkerRadius));
-    gl->glUniform2f(gl->glGetUniformLocation(disk_program, "marker_center"), float(marker_offset),
-                    0.0f);
-    gl->glUniform1f(gl->glGetUniformLocation(disk_program, "hole"),
+    gl->glUniform1f(gl->glGetUniformLocation(p, "ring_inner"), float(1.0 - kRingWidth));
+    gl->glUniform1f(gl->glGetUniformLocation(p, "marker_radius"), float(kMarkerRadius));
+    gl->glUniform2f(gl->glGetUniformLocation(p, "marker_center"), float(marker_offset), 0.0f);
+    gl->glUniform1f(gl->glGetUniformLocation(p, "hole"),
                     float(disk_radius > 0 ? hole_radius / disk_radius : 0.0));
   }
 
-  void build_framebuffer() {
-    gl->glGenFramebuffers(1, &fbo);
-    gl->glBindFramebuffer(GL_FRAMEBUFFER, fbo);
-    gl->glGenRenderbuffers(1, &color_rb);
-    gl->glBindRenderbuffer(GL_RENDERBUFFER, color_rb);
+  void build_framebuffer() { make_framebuffer(fbo, color_rb, depth_rb); }
+
+  // A framebuffer of the ideal image's size: RGBA colour, and depth; with a lamp, depth and a
+  // stencil (each pixel of a shadow is darkened once).
+  void make_framebuffer(unsigned& framebuffer, unsigned& color, unsigned& depth) {
+    gl->glGenFramebuffers(1, &framebuffer);
+    gl->glBindFramebuffer(GL_FRAMEBUFFER, framebuffer);
+    gl->glGenRenderbuffers(1, &color);
+    gl->glBindRenderbuffer(GL_RENDERBUFFER, color);
     gl->glRenderbufferStorage(GL_RENDERBUFFER, GL_RGBA8, fbo_width, fbo_height);
-    gl->glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, color_rb);
-    gl->glGenRenderbuffers(1, &depth_rb);
-    gl->glBindRenderbuffer(GL_RENDERBUFFER, depth_rb);
-    gl->glRenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT24, fbo_width, fbo_height);
-    gl->glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, depth_rb);
+    gl->glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, color);
+    gl->glGenRenderbuffers(1, &depth);
+    gl->glBindRenderbuffer(GL_RENDERBUFFER, depth);
+    const bool stencil = setup.lighting.has_value();
+    gl->glRenderbufferStorage(GL_RENDERBUFFER, stencil ? GL_DEPTH24_STENCIL8 : GL_DEPTH_COMPONENT24,
+                              fbo_width, fbo_height);
+    gl->glFramebufferRenderbuffer(GL_FRAMEBUFFER,
+                                  stencil ? GL_DEPTH_STENCIL_ATTACHMENT : GL_DEPTH_ATTACHMENT,
+                                  GL_RENDERBUFFER, depth);
     if (gl->glCheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
       throw std::runtime_error("render: framebuffer " + std::to_string(fbo_width) + "x" +
                                std::to_string(fbo_height) + " is incomplete (too large?)");
@@ -363,6 +399,8 @@ struct Renderer::Impl {
       gl->glClearColor(0, 0, 0, 1);
     if (setup.spatial) {
       draw_spatial(st);
+    } else if (lit) {
+      draw_lit_table_scene(st);
     } else {
       draw_table_scene(st);
     }
@@ -392,6 +430,88 @@ struct Renderer::Impl {
     draw(disk_top, 0.0f, disk_program);
     hand.model = rigid(rot_z(st.hand_angle), {0, 0, 0});
     draw(hand, 0.25f);  // brushed aluminium: a soft highlight
+  }
+
+  // ---- the scene's lamp ----
+
+  void draw_lit(const Drawable& d, LitPrograms::Kind kind, const MaterialSpec& material) {
+    lit->use(kind, to_gl(d.model), material);
+    if (d.texture) {
+      gl->glUniform1i(gl->glGetUniformLocation(lit->program(kind), "board"), 0);
+      gl->glActiveTexture(GL_TEXTURE0);
+      gl->glBindTexture(GL_TEXTURE_2D, d.texture);
+    }
+    if (d.behind) {
+      gl->glEnable(GL_POLYGON_OFFSET_FILL);
+      gl->glPolygonOffset(1.0f, 4.0f);
+    }
+    gl->glBindVertexArray(d.vao);
+    gl->glDrawArrays(GL_TRIANGLES, 0, d.count);
+    if (d.behind) gl->glDisable(GL_POLYGON_OFFSET_FILL);
+  }
+
+  // The table and its boards under the lamp, once: they do not move. Every fragment is lit (the
+  // lamp's light changes across the table), which costs llvmpipe a full-screen shader; copying
+  // the result into each frame costs a memory copy.
+  void draw_lit_background() {
+    context->make_current();
+    gl->glBindFramebuffer(GL_FRAMEBUFFER, background_fbo);
+    gl->glViewport(0, 0, fbo_width, fbo_height);
+    gl->glEnable(GL_DEPTH_TEST);
+    gl->glEnable(GL_CULL_FACE);
+    gl->glFrontFace(GL_CW);
+    gl->glClearColor(0, 0, 0, 1);
+    gl->glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT | GL_STENCIL_BUFFER_BIT);
+    const LightingSpec& lighting = *setup.lighting;
+    draw_lit(table, LitPrograms::Kind::kPlain, lighting.table);
+    for (const Drawable& t : targets)
+      draw_lit(t, t.texture ? LitPrograms::Kind::kTextured : LitPrograms::Kind::kPlain,
+               lighting.table);
+  }
+
+  // A frame under the lamp: the lit table copied in (with its depth when boards lie on it, which
+  // may hide the hand where they stand above it), the shadows, then the disk and the hand.
+  void draw_lit_table_scene(const SceneState& st) {
+    const LightingSpec& lighting = *setup.lighting;
+    gl->glBindFramebuffer(GL_READ_FRAMEBUFFER, background_fbo);
+    gl->glBindFramebuffer(GL_DRAW_FRAMEBUFFER, fbo);
+    const bool with_depth = !targets.empty();
+    gl->glBlitFramebuffer(0, 0, fbo_width, fbo_height, 0, 0, fbo_width, fbo_height,
+                          GL_COLOR_BUFFER_BIT | (with_depth ? GL_DEPTH_BUFFER_BIT : 0u),
+                          GL_NEAREST);
+    gl->glBindFramebuffer(GL_FRAMEBUFFER, fbo);
+    gl->glClear(GL_STENCIL_BUFFER_BIT | (with_depth ? 0u : GL_DEPTH_BUFFER_BIT));
+    disk.model = rigid(rot_z(st.disk_angle), {st.disk_center.x, st.disk_center.y, 0});
+    disk_top.model = disk.model;
+    hand.model = rigid(rot_z(st.hand_angle), {0, 0, 0});
+    if (lighting.shadows) draw_shadows(lighting);
+    draw_lit(disk, LitPrograms::Kind::kPlain, lighting.band);  // the rubber wall
+    draw_lit(disk_top, LitPrograms::Kind::kDiskTop, lighting.face);
+    draw_lit(hand, LitPrograms::Kind::kPlain, lighting.hand);
+  }
+
+  // The hand and the disk flattened onto the table from the lamp (planar_shadow_matrix). The
+  // table is a plane, so this shadow is exact (no shadow map's texels, bias or acne): a table
+  // point is in shadow when the ray to the lamp passes through a body, that is when it lies in
+  // the projection of the body's walls (a ray from outside a body into it crosses a wall; its own
+  // footprint is hidden under it). Faces flip when flattened, so none is culled; the stencil
+  // darkens each pixel once where the projections overlap. The disk's top quad is not drawn here:
+  // it is a square whose circle the fragment stage cuts out, and its wall already casts the disk's
+  // whole shadow.
+  void draw_shadows(const LightingSpec& lighting) {
+    gl->glDisable(GL_DEPTH_TEST);
+    gl->glDisable(GL_CULL_FACE);
+    gl->glEnable(GL_STENCIL_TEST);
+    gl->glStencilFunc(GL_EQUAL, 0, 0xFF);
+    gl->glStencilOp(GL_KEEP, GL_KEEP, GL_INCR);
+    gl->glEnable(GL_BLEND);
+    gl->glBlendFunc(GL_ZERO, GL_SRC_COLOR);
+    draw_lit(hand, LitPrograms::Kind::kShadow, lighting.table);
+    draw_lit(disk, LitPrograms::Kind::kShadow, lighting.table);
+    gl->glDisable(GL_BLEND);
+    gl->glDisable(GL_STENCIL_TEST);
+    gl->glEnable(GL_CULL_FACE);
+    gl->glEnable(GL_DEPTH_TEST);
   }
 
   // The geometric image: supersampled ideal render -> distortion remap -> area downsample.

@@ -420,6 +420,37 @@ void read_render(const MapReader& root, Scene& scene) {
   rs.table_extent = r->positive_or("table_extent", rs.table_extent);
 }
 
+void read_material(const MapReader& materials, const char* key, MaterialSpec& m) {
+  const auto r = materials.optional_section(key, {"specular", "shininess"});
+  if (!r) return;
+  m.specular = r->number_or("specular", m.specular);
+  m.shininess = r->number_or("shininess", m.shininess);
+}
+
+/// After `render`: the lamp is checked against the hand's and the disk's heights.
+void read_lighting(const MapReader& root, Scene& scene) {
+  const auto l = root.optional_section("lighting", {"position", "color", "intensity", "ambient",
+                                                    "specular", "shadows", "falloff", "materials"});
+  if (!l) return;
+  LightingSpec ls;
+  ls.position = l->numbers_or<3>("position", "[x, y, z]", ls.position);
+  ls.color = l->numbers_or<3>("color", "[r, g, b]", ls.color);
+  ls.intensity = l->number_or("intensity", ls.intensity);
+  ls.ambient = l->number_or("ambient", ls.ambient);
+  ls.specular = l->boolean_or("specular", ls.specular);
+  ls.shadows = l->boolean_or("shadows", ls.shadows);
+  ls.falloff = l->boolean_or("falloff", ls.falloff);
+  if (const auto m = l->optional_section("materials", {"table", "hand", "face", "band"})) {
+    read_material(*m, "table", ls.table);
+    read_material(*m, "hand", ls.hand);
+    read_material(*m, "face", ls.face);
+    read_material(*m, "band", ls.band);
+  }
+  if (auto problem = lighting_problem(ls, scene.render))
+    l->fail_at(problem->field, problem->reason);
+  scene.lighting = ls;
+}
+
 // ---- joint, controller, estimator, faults (the closed loop's plain data) -----------------------
 
 void read_joint(const MapReader& root, Scene& scene) {
@@ -690,6 +721,44 @@ std::optional<FieldProblem> camera_problem(const CameraSpec& cam) {
   return std::nullopt;
 }
 
+std::optional<FieldProblem> lighting_problem(const LightingSpec& lighting,
+                                             const RenderSpec& render) {
+  const auto& p = lighting.position;
+  for (std::size_t i = 0; i < 3; ++i)
+    if (!std::isfinite(p[i]))
+      return FieldProblem{"position[" + std::to_string(i) + "]", "must be finite"};
+  // A lamp at or below the hand's or the disk's top would light them from the side or from below:
+  // its shadows would not fall on the table as a projection through them.
+  const double top = std::max(render.hand_thickness, render.disk_thickness);
+  if (!(p[2] > top))
+    return FieldProblem{"position", "the lamp must be above the hand and the disk (z > " +
+                                        sim::format_number(top) +
+                                        " m, their top), got z = " + sim::format_number(p[2])};
+  for (std::size_t i = 0; i < 3; ++i)
+    if (!(lighting.color[i] >= 0 && lighting.color[i] <= 1))
+      return FieldProblem{"color[" + std::to_string(i) + "]",
+                          "must be in [0, 1], got " + sim::format_number(lighting.color[i])};
+  if (!(lighting.intensity >= 0 && std::isfinite(lighting.intensity)))
+    return FieldProblem{"intensity",
+                        "must be finite and >= 0, got " + sim::format_number(lighting.intensity)};
+  if (!(lighting.ambient >= 0 && lighting.ambient <= 1))
+    return FieldProblem{"ambient",
+                        "must be in [0, 1], got " + sim::format_number(lighting.ambient)};
+  const std::pair<const char*, const MaterialSpec*> materials[] = {{"table", &lighting.table},
+                                                                   {"hand", &lighting.hand},
+                                                                   {"face", &lighting.face},
+                                                                   {"band", &lighting.band}};
+  for (const auto& [name, m] : materials) {
+    if (!(m->specular >= 0 && m->specular <= 1))
+      return FieldProblem{std::string("materials.") + name + ".specular",
+                          "must be in [0, 1], got " + sim::format_number(m->specular)};
+    if (!(m->shininess >= 1 && m->shininess <= 1e4))
+      return FieldProblem{std::string("materials.") + name + ".shininess",
+                          "must be in [1, 10000], got " + sim::format_number(m->shininess)};
+  }
+  return std::nullopt;
+}
+
 Scene parse_scene(const std::string& yaml_text, const std::string& origin) {
   if (yaml_text.size() > kMaxSceneBytes)
     fail(origin, "(document)", "larger than 1 MiB; a scene is a few kB");
@@ -722,7 +791,7 @@ Scene parse_scene(const std::string& yaml_text, const std::string& origin) {
   const MapReader root(docs.front(), "", origin,
                        {"name", "space", "gravity", "hand", "object", "motion", "initial",
                         "duration", "integrator", "contact", "camera", "effects", "render",
-                        "targets", "joint", "controller", "estimator", "faults"});
+                        "lighting", "targets", "joint", "controller", "estimator", "faults"});
   if (root.has("name")) scene.name = root.text("name");
   sim::SimulationSpec& spec = scene.sim;
   read_gravity(root, spec);
@@ -736,6 +805,7 @@ Scene parse_scene(const std::string& yaml_text, const std::string& origin) {
   read_camera(root, scene);
   read_effects(root, scene);  // after the camera: exposure blur needs its exposure
   read_render(root, scene);
+  read_lighting(root, scene);  // after render: the lamp above the hand's and the disk's tops
   read_targets(root, scene);
   read_joint(root, scene);
   read_controller(root, scene);

@@ -85,6 +85,9 @@ struct RenderSetup {
   /// A spatial scene: these bodies instead of the hand and the disk (no table); `hand` and
   /// `object` are then unused. Frames come from render_linear / render_8u with SceneState::spatial.
   std::optional<SpatialBodies> spatial;
+  /// A lamp over the table (lighting.hpp); absent: the fixed distant light, shading flat faces
+  /// evenly, and no shadows (the frames of scenes without a `lighting` section).
+  std::optional<LightingSpec> lighting;
 };
 
 class Renderer {

@@ -92,6 +92,43 @@ struct RenderSpec {
   double table_extent = 0.6;       ///< m, half-size of the drawn table
 };
 
+/// A surface's highlight under the lamp (Blinn-Phong): strength (a fraction of the light that
+/// reaches the surface) and exponent.
+struct MaterialSpec {
+  double specular = 0.0;   ///< in [0, 1]; 0: matte
+  double shininess = 1.0;  ///< in [1, 10000]: the larger, the smaller and sharper the highlight
+};
+
+/// A lamp over the table (section `lighting`; docs/SCENE.md): a point light with its colour, an
+/// ambient level, diffuse and specular (Blinn-Phong) shading per material, the hand's and the
+/// disk's shadows on the table, and the table lit unevenly by the lamp's distance and angle. Off
+/// without the section: then the renderer keeps its fixed distant light and flat shading.
+struct LightingSpec {
+  std::array<double, 3> position{0.3, 0.2, 1.5};  ///< m, the lamp in the table frame, above all
+  std::array<double, 3> color{1.0, 1.0, 1.0};     ///< the lamp's colour, each in [0, 1]
+  /// The direct light's level on the table straight under the lamp (a white matte surface there
+  /// shows ambient + intensity of full scale), >= 0.
+  double intensity = 0.65;
+  double ambient = 0.35;  ///< light from everywhere (room, walls), in [0, 1]
+  bool specular = true;   ///< the materials' highlights
+  bool shadows = true;    ///< the hand's and the disk's shadows on the table
+  /// Inverse-square and cosine fall-off of the direct light across the table; false: the lamp is
+  /// taken as distant, in its direction from the table's origin, and lights the table evenly.
+  bool falloff = true;
+  MaterialSpec table{0.0, 1.0};   ///< the air table: matte
+  MaterialSpec hand{0.25, 24.0};  ///< brushed aluminium: a soft highlight
+  MaterialSpec face{0.05, 8.0};   ///< the disk's face (and its marker): nearly matte
+  MaterialSpec band{0.5, 40.0};   ///< the rubber O-ring round the disk: glossy
+};
+
+/// The lamp's rules, written once: the scene loader reports the first one broken as
+/// "origin: lighting.FIELD: reason", the renderer as "lighting.FIELD: reason". position, color
+/// finite; the lamp above the hand's and the disk's tops (render.hand_thickness, disk_thickness),
+/// whose shadows it casts on the table; color in [0, 1]; intensity >= 0; ambient in [0, 1]; each
+/// material's specular in [0, 1] and shininess in [1, 10000]. nullopt when none is broken.
+std::optional<FieldProblem> lighting_problem(const LightingSpec& lighting,
+                                             const RenderSpec& render);
+
 /// The joint that turns the hand (section `joint`), the paper's scheme: the commanded
 /// acceleration is integrated into a reference angle and rate, which a PD torque loop tracks on a
 /// motor model; the disk's contact force loads the joint.
@@ -180,6 +217,7 @@ struct Scene {
   std::optional<CameraSpec> camera;  ///< absent: nothing is rendered
   EffectsSpec effects;
   RenderSpec render;
+  std::optional<LightingSpec> lighting;  ///< absent: the renderer's fixed, even light
   std::vector<TargetSpec> targets;
   JointSpec joint;
   ControllerSpec controller;

@@ -1,0 +1,264 @@
+// The scene's lamp (section `lighting`) against what it must do, each computed here from the
+// lamp's position and the bodies' geometry, not read from the renderer: the disk's shadow ends
+// where the ray from the lamp grazing the disk's rim meets the table (to 1 px); the table's
+// brightness follows the inverse square and the cosine; the O-ring's highlight sits where its
+// normal bisects the lamp's and the camera's directions; without the section the table stays
+// the old evenly lit plane.
+#include "flatland/camera/camera_model.hpp"
+#include "flatland/render/renderer.hpp"
+#include "render_support.hpp"
+
+#include <gtest/gtest.h>
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <vector>
+
+using namespace flatland;
+using namespace flatland::render;
+
+namespace {
+
+// Straight down from 1 m, as tests/render/test_render.cpp's overhead scene, with a lamp low and
+// well off-axis so that the shadows are long.
+Scene lit_scene(int supersample) {
+  Scene s;  // the paper's butterfly hand and disk (radius 0.051 m)
+  CameraSpec cam;
+  cam.width = 640;
+  cam.height = 480;
+  cam.fx = cam.fy = 900;
+  cam.cx = 319.5;
+  cam.cy = 239.5;
+  cam.position = {0.05, 0.08, 1.0};
+  cam.look_at = {0.05, 0.08, 0.0};
+  s.camera = cam;
+  s.effects.supersample = supersample;
+  s.render.disk_thickness = 0.03;  // a tall disk: a shadow tens of pixels long
+  LightingSpec lamp;
+  lamp.position = {-0.15, 0.05, 0.6};
+  lamp.ambient = 0.3;
+  lamp.intensity = 0.7;
+  s.lighting = lamp;
+  return s;
+}
+
+SceneState disk_at(double x, double y) {
+  SceneState st;
+  st.hand_angle = 0.0;
+  st.disk_center = {x, y};
+  st.disk_angle = 0.3;
+  return st;
+}
+
+cv::Mat grey(const cv::Mat& bgr_f32) {
+  cv::Mat g;
+  cv::cvtColor(bgr_f32, g, cv::COLOR_BGR2GRAY);
+  return g;
+}
+
+double bilinear(const cv::Mat& g, cv::Point2d p) {
+  cv::Mat patch;
+  cv::getRectSubPix(g, cv::Size(1, 1), cv::Point2f(float(p.x), float(p.y)), patch, CV_32F);
+  return patch.at<float>(0, 0);
+}
+
+cv::Point2d project(const camera::CameraModel& cam, const cv::Vec3d& p) {
+  return cam.project(std::vector<cv::Point3d>{{p[0], p[1], p[2]}})[0];
+}
+
+// Whether the table point x (z = 0) is in the shadow of the upright cylinder of radius r and
+// height t about c: the ray from x to the lamp L is at x + (L - x) z / L.z at height z, so it
+// passes through the cylinder iff the segment of its horizontal trace over z in [0, t] comes
+// within r of the axis.
+bool in_cylinder_shadow(cv::Point2d x, cv::Point2d c, double r, double t, const cv::Vec3d& L) {
+  const cv::Point2d a = x, b = x + (cv::Point2d(L[0], L[1]) - x) * (t / L[2]);
+  const cv::Point2d ab = b - a;
+  const double s = std::clamp((c - a).dot(ab) / ab.dot(ab), 0.0, 1.0);
+  return cv::norm(a + s * ab - c) <= r;
+}
+
+}  // namespace
+
+TEST(RenderLighting, DiskShadowEndsWhereTheLampsRayGrazingTheRimMeetsTheTable) {
+  Scene scene = lit_scene(4);
+  Renderer shaded(flatland_test::render_setup(scene));
+  scene.lighting->shadows = false;
+  Renderer unshaded(flatland_test::render_setup(scene));
+  const cv::Point2d c(0.22, 0.2);
+  const SceneState st = disk_at(c.x, c.y);
+  // The shadow alone: the ratio of the frame with shadows to the one without (1 where nothing
+  // changes: lit table, disk, hand).
+  const cv::Mat with = grey(shaded.render_linear(st)), without = grey(unshaded.render_linear(st));
+  cv::Mat ratio;
+  cv::divide(with, cv::max(without, 1.0f), ratio);
+  const double r = scene.sim.object.radius, t = scene.render.disk_thickness;
+  const cv::Vec3d L(scene.lighting->position[0], scene.lighting->position[1],
+                    scene.lighting->position[2]);
+  const cv::Point2d away = cv::Point2d(c.x - L[0], c.y - L[1]) / std::hypot(c.x - L[0], c.y - L[1]);
+  int checked = 0;
+  for (double turn = -0.9; turn <= 0.9; turn += 0.15) {  // rad about the direction from the lamp
+    const cv::Point2d u(away.x * std::cos(turn) - away.y * std::sin(turn),
+                        away.x * std::sin(turn) + away.y * std::cos(turn));
+    // The shadow's edge along c + rho u, by bisection on the closed-form predicate.
+    double inside = r, outside = r + 0.2;
+    ASSERT_FALSE(in_cylinder_shadow(c + outside * u, c, r, t, L));
+    for (int i = 0; i < 60; ++i) {
+      const double mid = 0.5 * (inside + outside);
+      (in_cylinder_shadow(c + mid * u, c, r, t, L) ? inside : outside) = mid;
+    }
+    const cv::Point2d edge_table = c + inside * u;
+    const cv::Point2d edge_px = project(shaded.camera(), {edge_table.x, edge_table.y, 0.0});
+    // The rendered edge: scanning the image inwards along the same table line from beyond the
+    // shadow, where the ratio first falls halfway to its darkest on the line.
+    const cv::Point2d far_px =
+        project(shaded.camera(), {c.x + (inside + 0.02) * u.x, c.y + (inside + 0.02) * u.y, 0});
+    const cv::Point2d near_px = project(shaded.camera(), {c.x + r * u.x, c.y + r * u.y, 0});
+    const double length = cv::norm(far_px - near_px);
+    const cv::Point2d step = (near_px - far_px) / length * 0.05;
+    double darkest = 1;
+    for (double s = 0; s <= length; s += 0.05)
+      darkest = std::min(darkest, bilinear(ratio, far_px + step * (s / 0.05)));
+    ASSERT_LT(darkest, 0.8) << "no shadow along direction " << turn;
+    const double half = 0.5 * (1 + darkest);
+    double previous = bilinear(ratio, far_px);
+    cv::Point2d found(-1, -1);
+    for (int k = 1; k * 0.05 <= length; ++k) {
+      const double v = bilinear(ratio, far_px + step * k);
+      if (v < half) {
+        const double f = (previous - half) / (previous - v);  // between samples k-1 and k
+        found = far_px + step * (k - 1 + f);
+        break;
+      }
+      previous = v;
+    }
+    const double error = cv::norm(found - edge_px);
+    EXPECT_LT(error, 1.0) << "direction " << turn << ": rendered edge " << found << ", projected "
+                          << edge_px;
+    ++checked;
+  }
+  EXPECT_GE(checked, 12);
+}
+
+TEST(RenderLighting, TableBrightnessFollowsTheInverseSquareAndTheCosine) {
+  // Against the same lamp taken as distant (falloff off: the table lit evenly at the level under
+  // the lamp), the ratio at a table point x is (ambient + I h^2 cos / d^2) / (ambient + I) with
+  // cos = h / d: the table's colour cancels.
+  Scene scene = lit_scene(1);
+  scene.lighting->shadows = false;
+  Renderer near_lamp(flatland_test::render_setup(scene));
+  scene.lighting->falloff = false;
+  Renderer distant(flatland_test::render_setup(scene));
+  // The hand lies within 0.23 m of the pivot and the disk's shadow is off: table points beyond.
+  const SceneState st = disk_at(0.12, 0.21);
+  const cv::Mat a = near_lamp.render_linear(st), b = distant.render_linear(st);
+  const LightingSpec& lamp = *scene.lighting;
+  const cv::Vec3d L(lamp.position[0], lamp.position[1], lamp.position[2]);
+  double lowest = 1;
+  for (const cv::Point2d x :
+       {cv::Point2d(-0.28, 0.32), cv::Point2d(-0.28, -0.16), cv::Point2d(0.38, 0.32),
+        cv::Point2d(0.38, -0.16), cv::Point2d(0.38, 0.08), cv::Point2d(-0.05, 0.33)}) {
+    const double d = std::sqrt(std::pow(x.x - L[0], 2) + std::pow(x.y - L[1], 2) + L[2] * L[2]);
+    const double g = std::pow(L[2] / d, 3);  // h^2 / d^2 times cos = h / d
+    lowest = std::min(lowest, g);
+    const double expected = (lamp.ambient + lamp.intensity * g) / (lamp.ambient + lamp.intensity);
+    const cv::Point2d px = project(near_lamp.camera(), {x.x, x.y, 0.0});
+    const cv::Point ip(static_cast<int>(std::lround(px.x)), static_cast<int>(std::lround(px.y)));
+    ASSERT_TRUE(cv::Rect(0, 0, a.cols, a.rows).contains(ip));
+    for (int ch = 0; ch < 3; ++ch) {
+      // Both frames come from 8-bit GL colour: each value within half a level.
+      const double lit = a.at<cv::Vec3f>(ip)[ch], even = b.at<cv::Vec3f>(ip)[ch];
+      EXPECT_NEAR(lit, expected * even, 0.5 + 0.5 * expected + 1e-3)
+          << "table point " << x << " channel " << ch;
+    }
+  }
+  EXPECT_LT(lowest, 0.6);  // the points span a strong fall-off: the test can tell it apart
+}
+
+TEST(RenderLighting, BandHighlightSitsWhereTheNormalBisectsLampAndCamera) {
+  Scene scene = lit_scene(2);
+  scene.render.disk_thickness = 0.006;
+  scene.lighting->shadows = false;
+  scene.lighting->position = {0.2, 0.25, 1.2};
+  scene.lighting->face.specular = 0;  // only the band shines
+  scene.lighting->hand.specular = 0;
+  scene.lighting->band = {0.8, 200.0};
+  Renderer glossy(flatland_test::render_setup(scene));
+  scene.lighting->specular = false;
+  Renderer matte(flatland_test::render_setup(scene));
+  const cv::Point2d c(-0.2, 0.28);  // clear of the hand (within 0.23 m of the pivot)
+  const SceneState st = disk_at(c.x, c.y);
+  cv::Mat highlight = grey(glossy.render_linear(st)) - grey(matte.render_linear(st));
+  double peak = 0;
+  cv::minMaxLoc(highlight, nullptr, &peak);
+  ASSERT_GT(peak, 20.0) << "no highlight on the band";
+  // The rendered highlight: the centroid of what is within 80 % of its peak.
+  double sw = 0, sx = 0, sy = 0;
+  for (int y = 0; y < highlight.rows; ++y)
+    for (int x = 0; x < highlight.cols; ++x) {
+      const double v = highlight.at<float>(y, x);
+      if (v < 0.8 * peak) continue;
+      sw += v;
+      sx += v * x;
+      sy += v * y;
+    }
+  const cv::Point2d rendered(sx / sw, sy / sw);
+  // The O-ring's top as a torus over the band (its outer 8 % of the radius): at azimuth phi and
+  // u in [-1, 1] across the band, the normal is (u e_r, sqrt(1 - u^2)); the highlight is where
+  // n . h is largest, h the half-vector of the directions to the lamp and to the camera.
+  const double r = scene.sim.object.radius, t = scene.render.disk_thickness;
+  const double band_mid = r * (1 - 0.04), band_half = r * 0.04;
+  const cv::Vec3d L(scene.lighting->position[0], scene.lighting->position[1],
+                    scene.lighting->position[2]);
+  const cv::Vec3d E(0.05, 0.08, 1.0);
+  double best = -1;
+  cv::Vec3d best_point;
+  for (int i = 0; i < 3600; ++i) {
+    const double phi = 2 * std::numbers::pi * i / 3600;
+    const cv::Vec3d er(std::cos(phi), std::sin(phi), 0);
+    for (int j = -100; j <= 100; ++j) {
+      const double u = j / 100.0;
+      const cv::Vec3d p = cv::Vec3d(c.x, c.y, t) + (band_mid + u * band_half) * er;
+      const cv::Vec3d n = u * er + cv::Vec3d(0, 0, std::sqrt(1 - u * u));
+      const cv::Vec3d h = cv::normalize(cv::normalize(L - p) + cv::normalize(E - p));
+      if (n.dot(h) > best) {
+        best = n.dot(h);
+        best_point = p;
+      }
+    }
+  }
+  const cv::Point2d predicted = project(glossy.camera(), best_point);
+  EXPECT_LT(cv::norm(rendered - predicted), 2.0)
+      << "rendered highlight " << rendered << ", predicted " << predicted;
+}
+
+TEST(RenderLighting, WithoutTheSectionTheTableIsEvenAndWithItItIsNot) {
+  Scene scene = lit_scene(1);
+  const SceneState st = disk_at(0.3, 0.3);
+  Renderer lit(flatland_test::render_setup(scene));
+  scene.lighting.reset();
+  Renderer plain(flatland_test::render_setup(scene));
+  const cv::Point2d corners[] = {{5, 5}, {634, 5}, {5, 474}, {634, 474}};
+  const cv::Mat a = grey(plain.render_linear(st)), b = grey(lit.render_linear(st));
+  for (const cv::Point2d& p : corners) {
+    EXPECT_EQ(a.at<float>(cv::Point(p)), a.at<float>(5, 5)) << "unlit corner " << p;
+  }
+  double lo = 255, hi = 0;
+  for (const cv::Point2d& p : corners) {
+    lo = std::min<double>(lo, b.at<float>(cv::Point(p)));
+    hi = std::max<double>(hi, b.at<float>(cv::Point(p)));
+  }
+  EXPECT_GT(hi - lo, 5.0) << "the lamp lights the table's corners unevenly";
+}
+
+TEST(RenderLighting, ALampBelowTheHandsTopIsRefusedNamingTheField) {
+  Scene scene = lit_scene(1);
+  scene.lighting->position = {0.0, 0.0, 0.01};
+  try {
+    Renderer r(flatland_test::render_setup(scene));
+    FAIL() << "a lamp under the hand's top was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("lighting.position"), std::string::npos) << e.what();
+  }
+}
