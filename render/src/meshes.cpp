@@ -387,6 +387,13 @@ Mesh disk_top_quad(double r, double thickness) {
   return m;
 }
 
+Mesh walls_of(const Mesh& mesh) {
+  Mesh walls;
+  for (std::size_t i = 0; i + 2 < mesh.size(); i += 3)
+    if (std::abs(mesh[i].n[2]) < 0.5f) walls.insert(walls.end(), &mesh[i], &mesh[i] + 3);
+  return walls;
+}
+
 // ---- spatial bodies ----
 
 /// A surface's chart tessellated over [lo, hi] (nu x nv quads, flat-shaded by each facet's

@@ -45,6 +45,9 @@ Mesh surface_mesh(const sim::Surface& surface, const sim::SurfacePatch& range, i
 /// The part of the hand's chart drawn: the extent asked for, its unbounded sides cut at the patch.
 sim::SurfacePatch drawn_range(const sim::Surface& s, const sim::SurfacePatch& extent);
 Mesh table_mesh(double extent);
+/// The triangles of `mesh` whose normal is horizontal (an extruded body's walls): what casts its
+/// shadow on the table (a ray from a table point outside the body into it crosses a wall).
+Mesh walls_of(const Mesh& mesh);
 /// A chessboard's white board (one square of margin) and its black squares, in the board plane.
 Mesh chessboard_background(const camera::Board& t);
 Mesh chessboard_squares(const camera::Board& t);
