@@ -137,6 +137,30 @@ void Render(benchmark::State& state, render::GlBackend backend, int width, int h
       benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
 }
 
+// The scene's lamp, each effect on its own and all together, against the same frame unlit
+// (docs/SCENE.md "Lighting"; the lamp at its defaults, the bundled scenes' values). `lamp`:
+// "off" (no lighting section), "diffuse" (the point light's inverse-square and cosine fall-off,
+// no highlights, no shadows), "specular" (diffuse + Blinn-Phong highlights), "shadows" (diffuse +
+// the hand's and the disk's planar shadows), "all" (the default lamp).
+void RenderLighting(benchmark::State& state, render::GlBackend backend, int width, int height,
+                    int supersample, const std::string& lamp) {
+  Scene scene = camera_scene(width, height, supersample);
+  if (lamp != "off") {
+    LightingSpec lighting;
+    lighting.specular = lamp == "specular" || lamp == "all";
+    lighting.shadows = lamp == "shadows" || lamp == "all";
+    scene.lighting = lighting;
+  }
+  render::Renderer r(model::render_setup(*model::compile(scene)), backend);
+  const render::SceneState st = mid_roll();
+  for (auto _ : state) {
+    cv::Mat image = r.render_8u(st);
+    benchmark::DoNotOptimize(image.data);
+  }
+  state.counters["fps"] =
+      benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
+}
+
 // The bundled butterfly-camera scene (640 x 480, 2 x 2 supersampling) at its run's t = 0.45 s:
 // the frame bench/python_bindings.py renders through Python, for the binding's overhead.
 void RenderButterflyCamera(benchmark::State& state) {
@@ -220,6 +244,16 @@ void register_all() {
       }
     }
   }
+  for (const auto backend : {render::GlBackend::kOsmesa, render::GlBackend::kEgl})
+    for (const int ss : {1, 2})
+      for (const char* lamp : {"off", "diffuse", "specular", "shadows", "all"}) {
+        const std::string name = "BM_RenderLighting/" + render::to_string(backend) + "/640x480/" +
+                                 (ss == 1 ? "aa:off/" : "aa:4x/") + lamp;
+        benchmark::RegisterBenchmark(name.c_str(), RenderLighting, backend, 640, 480, ss,
+                                     std::string(lamp))
+            ->Unit(benchmark::kMicrosecond)
+            ->UseRealTime();
+      }
   benchmark::RegisterBenchmark("BM_RenderButterflyCamera", RenderButterflyCamera)
       ->Unit(benchmark::kMicrosecond)
       ->UseRealTime();
