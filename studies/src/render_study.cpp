@@ -96,7 +96,9 @@ render::SceneState disk_at(cv::Point2d c, double angle) {
 }
 
 /// The scene as rendered in one cell: its camera scaled, supersampling `factor`, every other
-/// effect off (render_8u applies none anyway), no calibration targets.
+/// effect off (render_8u applies none anyway), no calibration targets, and no lamp: the study
+/// measures where the renderer puts the disk, and a lamp's shading (brighter towards the lamp,
+/// the O-ring's highlight) would move the face's intensity centroid without moving the disk.
 Scene cell_scene(const Scene& scene, double scale, int factor) {
   Scene s = scene;
   s.camera = scaled_camera(*scene.camera, scale);
@@ -104,6 +106,7 @@ Scene cell_scene(const Scene& scene, double scale, int factor) {
   s.effects.supersample = factor;
   s.effects.seed = scene.effects.seed;
   s.targets.clear();
+  s.lighting.reset();
   return s;
 }
 
