@@ -76,7 +76,8 @@ namespace flatland::render {
   X(glBlitFramebuffer)           \
   X(glBlendFunc)                 \
   X(glStencilFunc)               \
-  X(glStencilOp)
+  X(glStencilOp)                 \
+  X(glDepthMask)
 
 struct Gl {
 #define FLATLAND_GL_MEMBER(name) decltype(&::name) name = nullptr;

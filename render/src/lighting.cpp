@@ -11,7 +11,10 @@ namespace {
 // stage, which lights each pixel (the lamp's light varies across a face: a point light's
 // distance and angle change along it, and a highlight is smaller than most triangles). `flatten`
 // is the identity except in the shadow program, where it is planar_shadow_matrix: its w is not 1
-// there, so the position is divided by it.
+// there, so the position is divided by it. `depth_lift` is 0 except in the shadow program: the
+// flattened body lies on the table, where it is drawn, but takes the depth of a point that much
+// higher, so that the depth test lets it darken the table and what lies flat on it (a printed
+// board) and not a board standing above the table, which hides the table there.
 const char* const kLitVertexShader = R"(#version 330 core
 layout(location = 0) in vec3 position;
 layout(location = 1) in vec3 normal;
@@ -19,6 +22,7 @@ layout(location = 2) in vec3 color;
 layout(location = 3) in vec2 uv;
 uniform mat4 model;
 uniform mat4 flatten;
+uniform float depth_lift;
 uniform mat4 view;
 uniform mat4 projection;
 out vec3 world_position;
@@ -35,6 +39,10 @@ void main() {
   tex_uv = uv;
   world_radial = (mat3(model) * vec3(uv, 0.0)).xy;  // the disk's top: its radius in the table
   gl_Position = projection * view * wp;
+  if (depth_lift != 0.0) {
+    vec4 lifted = projection * view * (wp + vec4(0.0, 0.0, depth_lift, 0.0));
+    gl_Position.z = lifted.z / lifted.w * gl_Position.w;
+  }
 }
 )";
 
@@ -156,6 +164,10 @@ std::string fragment_source(const char* body) {
   return std::string("#version 330 core\n") + kShading + body;
 }
 
+// m: above a printed board lying on the table (render-calibration's are 0.5 mm thick), below a
+// board held above it.
+constexpr double kShadowDepthLift = 0.002;
+
 }  // namespace
 
 cv::Matx44d planar_shadow_matrix(const cv::Vec3d& light, double plane_z) {
@@ -187,8 +199,9 @@ LitPrograms::LitPrograms(const Gl& gl, const LightingSpec& lighting, const cv::M
     auto at = [&](const char* name) { return gl.glGetUniformLocation(p, name); };
     gl.glUniformMatrix4fv(at("view"), 1, GL_FALSE, view.val);
     gl.glUniformMatrix4fv(at("projection"), 1, GL_FALSE, projection.val);
-    gl.glUniformMatrix4fv(at("flatten"), 1, GL_FALSE,
-                          (static_cast<Kind>(k) == Kind::kShadow ? flatten : identity).val);
+    const bool shadow = static_cast<Kind>(k) == Kind::kShadow;
+    gl.glUniformMatrix4fv(at("flatten"), 1, GL_FALSE, (shadow ? flatten : identity).val);
+    gl.glUniform1f(at("depth_lift"), shadow ? float(kShadowDepthLift) : 0.0f);
     gl.glUniform3f(at("light_position"), float(lamp[0]), float(lamp[1]), float(lamp[2]));
     gl.glUniform3f(at("light_radiance"), float(lighting.intensity * lighting.color[0]),
                    float(lighting.intensity * lighting.color[1]),

@@ -506,7 +506,7 @@ struct Renderer::Impl {
   // the 640 x 480 frame's 2.4 ms), and the disk's is a square whose circle the fragment stage cuts
   // out; their walls already cast the whole shadows.
   void draw_shadows(const LightingSpec& lighting) {
-    gl->glDisable(GL_DEPTH_TEST);
+    gl->glDepthMask(GL_FALSE);  // tested against the table and boards (LitPrograms' depth_lift)
     gl->glDisable(GL_CULL_FACE);
     gl->glEnable(GL_STENCIL_TEST);
     gl->glStencilFunc(GL_EQUAL, 0, 0xFF);
@@ -518,7 +518,7 @@ struct Renderer::Impl {
     gl->glDisable(GL_BLEND);
     gl->glDisable(GL_STENCIL_TEST);
     gl->glEnable(GL_CULL_FACE);
-    gl->glEnable(GL_DEPTH_TEST);
+    gl->glDepthMask(GL_TRUE);
   }
 
   // The geometric image: supersampled ideal render -> distortion remap -> area downsample.

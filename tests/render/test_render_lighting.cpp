@@ -207,6 +207,56 @@ TEST(RenderLighting, WhereTheRayToTheLampCrossesBothWallsTheTableIsDarkenedOnce)
   EXPECT_GE(checked, 50);
 }
 
+TEST(RenderLighting, ShadowsFallOnTheTableNotOnABoardHeldAboveIt) {
+  // A chessboard held flat 0.15 m above the hand: the table under it is hidden, and so is the
+  // hand's shadow there; the board itself shows no shadow (none is cast on boards). The board's
+  // depth is in the frame, so the disk's shadow on the table is drawn through the depth test.
+  Scene scene = lit_scene(2);
+  TargetSpec board;
+  board.position = {-0.2, -0.1, 0.15};
+  scene.targets = {board};
+  Renderer shaded(flatland_test::render_setup(scene));
+  scene.lighting->shadows = false;
+  Renderer unshaded(flatland_test::render_setup(scene));
+  const cv::Point2d c(0.22, 0.2);
+  const SceneState st = disk_at(c.x, c.y);
+  const cv::Mat with = grey(shaded.render_linear(st)), without = grey(unshaded.render_linear(st));
+  // The board's squares, 5 mm in from their edge, in the image.
+  const double inset = 0.005, w = board.squares_x * board.square,
+               h = board.squares_y * board.square;
+  std::vector<cv::Point> corners;
+  for (const cv::Point2d& q : {cv::Point2d(inset, inset), cv::Point2d(w - inset, inset),
+                               cv::Point2d(w - inset, h - inset), cv::Point2d(inset, h - inset)}) {
+    const cv::Point2d px = project(
+        shaded.camera(), {board.position[0] + q.x, board.position[1] + q.y, board.position[2]});
+    corners.emplace_back(static_cast<int>(std::lround(px.x)), static_cast<int>(std::lround(px.y)));
+  }
+  cv::Mat on_board = cv::Mat::zeros(with.size(), CV_8U);
+  cv::fillConvexPoly(on_board, corners, cv::Scalar(255));
+  ASSERT_GT(cv::countNonZero(on_board), 10000);
+  cv::Mat difference = cv::abs(with - without);
+  double most = 0;
+  cv::minMaxLoc(difference, nullptr, &most, nullptr, nullptr, on_board);
+  EXPECT_EQ(most, 0.0) << "a shadow drawn on the board held above the table";
+  // The disk's shadow on the table, straight away from the lamp, halfway between the footprint
+  // and the shadow's end: the table keeps its ambient light.
+  const double r = scene.sim.object.radius, t = scene.render.disk_thickness;
+  const cv::Vec3d L(scene.lighting->position[0], scene.lighting->position[1],
+                    scene.lighting->position[2]);
+  const cv::Point2d away = cv::Point2d(c.x - L[0], c.y - L[1]) / std::hypot(c.x - L[0], c.y - L[1]);
+  double inside = r, outside = r + 0.2;
+  for (int i = 0; i < 60; ++i) {
+    const double mid = 0.5 * (inside + outside);
+    (in_cylinder_shadow(c + mid * away, c, r, t, L) ? inside : outside) = mid;
+  }
+  const cv::Point2d x = c + 0.5 * (r + inside) * away;
+  const double d2 = std::pow(x.x - L[0], 2) + std::pow(x.y - L[1], 2) + L[2] * L[2];
+  const double direct = scene.lighting->intensity * std::pow(L[2] * L[2] / d2, 1.5);
+  const cv::Point2d px = project(shaded.camera(), {x.x, x.y, 0.0});
+  EXPECT_NEAR(bilinear(with, px) / bilinear(without, px),
+              scene.lighting->ambient / (scene.lighting->ambient + direct), 0.02);
+}
+
 TEST(RenderLighting, TableBrightnessFollowsTheInverseSquareAndTheCosine) {
   // Against the same lamp taken as distant (falloff off: the table lit evenly at the level under
   // the lamp), the ratio at a table point x is (ambient + I h^2 cos / d^2) / (ambient + I) with
