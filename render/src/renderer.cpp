@@ -373,6 +373,12 @@ struct Renderer::Impl {
     const cv::Matx44f m = to_gl(d.model);
     gl->glUniformMatrix4fv(loc.model, 1, GL_FALSE, m.val);
     gl->glUniform1f(loc.specular, specular);
+    draw_with_current_program(d, p);
+  }
+
+  // The drawable's triangles with the program `p` in use (its uniforms set): its board texture
+  // bound, pushed behind what shares its depth when it is a backing.
+  void draw_with_current_program(const Drawable& d, unsigned p) {
     if (d.texture) {
       gl->glUniform1i(gl->glGetUniformLocation(p, "board"), 0);
       gl->glActiveTexture(GL_TEXTURE0);
@@ -442,18 +448,7 @@ struct Renderer::Impl {
 
   void draw_lit(const Drawable& d, LitPrograms::Kind kind, const MaterialSpec& material) {
     lit->use(kind, to_gl(d.model), material);
-    if (d.texture) {
-      gl->glUniform1i(gl->glGetUniformLocation(lit->program(kind), "board"), 0);
-      gl->glActiveTexture(GL_TEXTURE0);
-      gl->glBindTexture(GL_TEXTURE_2D, d.texture);
-    }
-    if (d.behind) {
-      gl->glEnable(GL_POLYGON_OFFSET_FILL);
-      gl->glPolygonOffset(1.0f, 4.0f);
-    }
-    gl->glBindVertexArray(d.vao);
-    gl->glDrawArrays(GL_TRIANGLES, 0, d.count);
-    if (d.behind) gl->glDisable(GL_POLYGON_OFFSET_FILL);
+    draw_with_current_program(d, lit->program(kind));
   }
 
   // The table and its boards under the lamp, once: they do not move. Every fragment is lit (the
