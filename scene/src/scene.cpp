@@ -342,7 +342,8 @@ double non_negative(const MapReader& m, const char* key, double fallback) {
 void read_camera(const MapReader& root, Scene& scene) {
   const auto c = root.optional_section(
       "camera", {"width", "height", "fx", "fy", "cx", "cy", "distortion", "position", "look_at",
-                 "up", "fps", "exposure", "latency", "latency_jitter"});
+                 "up", "fps", "exposure", "latency", "latency_jitter", "readout", "field_order",
+                 "readout_time", "readout_band_rows"});
   if (!c) return;
   CameraSpec cam;
   cam.width = static_cast<int>(c->integer_or("width", 1, kMaxCameraSide, cam.width));
@@ -370,6 +371,19 @@ void read_camera(const MapReader& root, Scene& scene) {
                                      sim::format_number(cam.latency) +
                                      " s): a frame cannot arrive before it is taken, got " +
                                      c->node("latency_jitter").Scalar());
+  ReadoutSpec& ro = cam.readout;
+  ro.mode = c->choice_or("readout", {"global", "interlaced", "rolling"}, ro.mode.c_str());
+  // A key of another readout would be silently ignored (even at its default value).
+  for (const auto& [key, mode] :
+       {std::pair{"field_order", "interlaced"}, std::pair{"readout_time", "rolling"},
+        std::pair{"readout_band_rows", "rolling"}})
+    if (c->has(key) && ro.mode != mode)
+      c->fail_at(key, std::string("applies to camera.readout: ") + mode + " only (the readout is " +
+                          ro.mode + ")");
+  ro.field_order = c->choice_or("field_order", {"even_first", "odd_first"}, ro.field_order.c_str());
+  ro.time = c->number_or("readout_time", ro.time);
+  ro.band_rows =
+      static_cast<int>(c->integer_or("readout_band_rows", 1, kMaxCameraSide, ro.band_rows));
 
   if (auto problem = camera_problem(cam)) c->fail_at(problem->field, problem->reason);
   scene.camera = cam;
@@ -659,6 +673,49 @@ int count_documents_up_to_two(const std::string& text) {
 
 }  // namespace
 
+namespace {
+
+/// camera_problem's rules for the readout (ReadoutSpec).
+std::optional<FieldProblem> readout_problem(const CameraSpec& cam) {
+  const ReadoutSpec& ro = cam.readout;
+  const auto problem = [](std::string field, std::string reason) {
+    return std::optional<FieldProblem>(FieldProblem{std::move(field), std::move(reason)});
+  };
+  const bool interlaced = ro.mode == "interlaced", rolling = ro.mode == "rolling";
+  if (!ro.global() && !interlaced && !rolling)
+    return problem("readout", "must be global, interlaced or rolling, got '" + ro.mode + "'");
+  if (ro.field_order != "even_first" && ro.field_order != "odd_first")
+    return problem("field_order", "must be even_first or odd_first, got '" + ro.field_order + "'");
+  // A field is exposed within its own field interval: the next field starts 1/(2 fps) later.
+  if (interlaced && !(cam.exposure <= 0.5 / cam.fps))
+    return problem("exposure",
+                   "an interlaced field's exposure must not exceed the field interval "
+                   "1/(2 fps) = " +
+                       sim::format_number(0.5 / cam.fps) + " s, got " +
+                       sim::format_number(cam.exposure));
+  if (!rolling) {
+    if (ro.time != 0)
+      return problem("readout_time",
+                     "applies to camera.readout: rolling only (the readout is " + ro.mode + ")");
+    if (ro.band_rows != 1)
+      return problem("readout_band_rows",
+                     "applies to camera.readout: rolling only (the readout is " + ro.mode + ")");
+    return std::nullopt;
+  }
+  // The last row is read before the next frame's first.
+  if (!(ro.time > 0) || !(ro.time <= 1.0 / cam.fps))
+    return problem("readout_time", "a rolling readout's time must be in (0, 1/fps = " +
+                                       sim::format_number(1.0 / cam.fps) + "] s, got " +
+                                       sim::format_number(ro.time));
+  if (ro.band_rows < 1 || ro.band_rows > cam.height)
+    return problem("readout_band_rows",
+                   "must be in [1, camera.height = " + std::to_string(cam.height) + "], got " +
+                       std::to_string(ro.band_rows));
+  return std::nullopt;
+}
+
+}  // namespace
+
 std::optional<FieldProblem> camera_problem(const CameraSpec& cam) {
   const auto problem = [](std::string field, std::string reason) {
     return std::optional<FieldProblem>(FieldProblem{std::move(field), std::move(reason)});
@@ -718,7 +775,7 @@ std::optional<FieldProblem> camera_problem(const CameraSpec& cam) {
     return problem("exposure", "must not exceed the frame interval 1/fps = " +
                                    sim::format_number(1.0 / cam.fps) + " s, got " +
                                    sim::format_number(cam.exposure));
-  return std::nullopt;
+  return readout_problem(cam);
 }
 
 std::optional<FieldProblem> lighting_problem(const LightingSpec& lighting,

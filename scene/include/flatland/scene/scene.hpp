@@ -24,6 +24,21 @@ class SceneError : public std::invalid_argument {
 /// Overhead camera (section `camera`). Pinhole + OpenCV distortion (k1, k2, p1, p2, k3); pose in
 /// the table frame (x, y in the table plane as in the simulator, origin at the hand pivot, z out
 /// of the table towards the camera).
+/// How the sensor reads a frame out (keys camera.readout, camera.field_order,
+/// camera.readout_time, camera.readout_band_rows). A frame's time stamp is its first row's
+/// (mid-exposure) time in every mode.
+struct ReadoutSpec {
+  /// "global": every row at the frame's time; "interlaced": two fields 1/(2 fps) apart, one of
+  /// the even rows (0, 2, ...), one of the odd; "rolling": row y at t + y * time / height.
+  std::string mode = "global";
+  std::string field_order = "even_first";  ///< interlaced: "even_first" or "odd_first"
+  double time = 0.0;                       ///< s, rolling: first row to the frame's end
+  /// rolling: rows rendered at one time (the band's middle row's): 1 is exact, more is faster and
+  /// shifts a row's time by up to (band_rows - 1) / 2 line times.
+  int band_rows = 1;
+  bool global() const { return mode == "global"; }
+};
+
 struct CameraSpec {
   int width = 640, height = 480;       ///< px
   double fx = 700, fy = 700;           ///< px
@@ -36,6 +51,7 @@ struct CameraSpec {
   double exposure = 0.0;        ///< s, exposure time (blur when > 0 and effects.blur_subframes > 1)
   double latency = 0.0;         ///< s, capture (mid-exposure) to arrival at the control loop
   double latency_jitter = 0.0;  ///< s, half-width of a uniform spread of the latency
+  ReadoutSpec readout;
 };
 
 /// The largest camera image side, px (beyond any GL framebuffer flatland renders into; the same
@@ -51,8 +67,10 @@ struct FieldProblem {
 /// The camera's rules, written once: the scene loader reports the first one broken as
 /// "origin: camera.FIELD: reason", model::compile_camera as "camera.FIELD: reason". Size in
 /// [1, kMaxCameraSide] px; fx, fy > 0; cx, cy, distortion, position, look_at, up finite; fps > 0;
-/// exposure in [0, 1/fps]; the camera above the table (z > 0), looking down at it, with `up` a
-/// non-zero vector not along the view. nullopt when none is broken.
+/// exposure in [0, 1/fps] (an interlaced field's in [0, 1/(2 fps)]); readout global, interlaced
+/// or rolling, its field order and rolling time and band only where they apply (readout time in
+/// (0, 1/fps], band rows in [1, height]); the camera above the table (z > 0), looking down at it,
+/// with `up` a non-zero vector not along the view. nullopt when none is broken.
 std::optional<FieldProblem> camera_problem(const CameraSpec& camera);
 
 /// Image effects (section `effects`); each is off unless the scene asks for it.
