@@ -152,8 +152,9 @@ std::optional<std::string> tracking_problem(const sim::ObjectSpec& object) {
 render::RenderSetup render_setup(const Model& model) {
   if (!model.camera)
     throw std::invalid_argument("camera: the scene has no camera section (needed to render)");
-  return {*model.camera,     model.hand,         model.boards, model.spec.sim.object,
-          model.spec.render, model.spec.effects, std::nullopt, model.spec.lighting};
+  return {*model.camera,         model.hand,          model.boards,
+          model.spec.sim.object, model.spec.render,   model.spec.effects,
+          std::nullopt,          model.spec.lighting, model.spec.camera->readout};
 }
 
 namespace {
@@ -188,6 +189,10 @@ render::RenderSetup spatial_render_setup(const Scene& scene, const sim::SpatialS
                                 ": effects: a spatial scene's frames have supersampling and the "
                                 "camera's distortion only (blur, noise, vignetting, jitter, drops "
                                 "and float images are not built for spatial scenes)");
+  if (!scene.camera->readout.global())
+    throw std::invalid_argument(scene.origin +
+                                ": camera.readout: a spatial scene's frames are read globally (" +
+                                scene.camera->readout.mode + " is built for planar scenes)");
   render::RenderSetup rs;
   rs.camera = compile_camera(*scene.camera);
   rs.render = scene.render;

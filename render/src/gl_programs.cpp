@@ -60,6 +60,24 @@ void main() {
 )";
 
 // Only ChArUco boards (their marker bits) need a texture.
+// The segmentation mask: each body one flat id (in red, id / 255), nothing shaded or textured. The
+// disk's top quad is cut to its circle (and a ring's hole) as kDiskFragmentShader cuts it.
+const char* const kMaskFragmentShader = R"(#version 330 core
+in vec3 lit_color;
+in vec2 tex_uv;
+uniform float object_id;   // 0..255
+uniform float round_cut;   // 1: the disk's top quad
+uniform float hole;        // a ring's hole, in radii
+out vec4 out_color;
+void main() {
+  if (round_cut > 0.5) {
+    float d2 = dot(tex_uv, tex_uv);
+    if (d2 > 1.0 || d2 < hole * hole) discard;
+  }
+  out_color = vec4(object_id / 255.0, 0.0, 0.0, 1.0);
+}
+)";
+
 const char* const kTexturedFragmentShader = R"(#version 330 core
 in vec3 lit_color;
 in vec2 tex_uv;

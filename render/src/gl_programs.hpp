@@ -77,7 +77,8 @@ namespace flatland::render {
   X(glBlendFunc)                 \
   X(glStencilFunc)               \
   X(glStencilOp)                 \
-  X(glDepthMask)
+  X(glDepthMask)                 \
+  X(glScissor)
 
 struct Gl {
 #define FLATLAND_GL_MEMBER(name) decltype(&::name) name = nullptr;
@@ -102,6 +103,8 @@ extern const char* const kVertexShader;
 extern const char* const kPlainFragmentShader;
 // The disk's top face: face, O-ring band and marker evaluated per fragment.
 extern const char* const kDiskFragmentShader;
+// The segmentation mask's flat ids.
+extern const char* const kMaskFragmentShader;
 // Only ChArUco boards (their marker bits) need a texture.
 extern const char* const kTexturedFragmentShader;
 

@@ -18,6 +18,8 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <tuple>
+#include <utility>
 #include <vector>
 
 namespace flatland::render {
@@ -68,8 +70,19 @@ struct Renderer::Impl {
     int count = 0;
     cv::Matx44d model = cv::Matx44d::eye();
     bool behind = false;  // drawn with a polygon offset: coplanar geometry drawn later wins
+    unsigned char id = kMaskBackground;  // the segmentation mask's id (MaskId)
+  };
+  // What a GL pass draws: the image, or the segmentation mask's flat ids.
+  enum class Pass { kImage, kMask };
+  // A rolling readout's band of sensor rows [v0, v1), read at t + time_offset, and the rows of
+  // the ideal (supersampled, undistorted) image its pixels are made from.
+  struct Band {
+    int v0 = 0, v1 = 0;
+    double time_offset = 0;  // s
+    int ideal_r0 = 0, ideal_r1 = 0;
   };
 
+  using StateAt = Renderer::StateAt;
   RenderSetup setup;
   camera::CameraModel& camera = setup.camera;
   DistortionMaps maps;
@@ -101,6 +114,18 @@ struct Renderer::Impl {
   // image before quantisation: reused.
   cv::Mat ideal_bgr, ideal_f32, distorted_f32, subframe, linear_scratch;
   cv::Mat downsampled_rgba;  // render_8u's supersampled readback averaged down, reused
+  // The readout (setup.readout): interlaced fields, or a rolling shutter's bands of rows.
+  bool interlaced = false, rolling = false;
+  double line_time = 0;     // s, a rolling readout's time from one row to the next
+  std::vector<Band> bands;  // a rolling readout's, top to bottom
+  cv::Mat second_field, band_subframe,
+      band_distorted;  // interlaced: the second field's image; blur's sub-frame
+  // The mask: its program (built at the first mask), its ideal image of ids, and where each
+  // sensor pixel's centre lies in it (empty when the ideal image is the sensor's: no
+  // supersampling, no distortion).
+  unsigned mask_program = 0;
+  int mask_id_location = -1, mask_round_location = -1, mask_model_location = -1;
+  cv::Mat ideal_ids, mask_map_x, mask_map_y;
 
   Impl(const RenderSetup& given, GlBackend backend) : setup(given), rng(given.effects.seed) {
     const RenderSetup& s = setup;
@@ -147,7 +172,16 @@ struct Renderer::Impl {
     }
     disk = upload(disk_side_mesh(disk_radius, s.render.disk_thickness, hole_radius));
     disk_top = upload(disk_top_quad(disk_radius, s.render.disk_thickness));
-    for (const camera::PlacedBoard& b : s.boards) targets.push_back(make_target(b));
+    table.id = kMaskTable;
+    hand.id = kMaskHand;
+    disk.id = disk_top.id = kMaskDisk;
+    for (std::size_t i = 0; i < s.boards.size(); ++i) {
+      const std::size_t first = targets.size();
+      targets.push_back(make_target(s.boards[i]));
+      // Beyond kMaxMaskBoards render_mask refuses; the id only has to fit.
+      const auto id = static_cast<unsigned char>(std::min<std::size_t>(kMaskFirstBoard + i, 255));
+      for (std::size_t j = first; j < targets.size(); ++j) targets[j].id = id;
+    }
     for (const Drawable& t : targets) textured_targets = textured_targets || t.texture != 0;
     readback.create(fbo_height, fbo_width, CV_8UC4);
     const float shade = static_cast<float>(kAmbient + (1.0 - kAmbient) * std::max(kLight[2], 0.0));
@@ -160,6 +194,52 @@ struct Renderer::Impl {
       locations[p] = {gl->glGetUniformLocation(p, "model"),
                       gl->glGetUniformLocation(p, "specular")};
     if (s.lighting) build_lighting(*s.lighting);
+    build_readout(s.readout);
+  }
+
+  // The readout's fields or bands. The scene's rules (camera_problem) are checked again here for
+  // a setup put together by hand.
+  void build_readout(const ReadoutSpec& readout) {
+    CameraSpec spec;
+    spec.height = camera.height;
+    spec.fps = camera.fps;
+    spec.exposure = camera.exposure;
+    spec.readout = readout;
+    if (auto problem = camera_problem(spec))
+      throw std::invalid_argument("camera." + problem->field + ": " + problem->reason);
+    if (readout.global()) return;
+    if (setup.spatial)
+      throw std::invalid_argument("camera.readout: a spatial scene's frames are read globally");
+    interlaced = readout.mode == "interlaced";
+    rolling = readout.mode == "rolling";
+    if (!rolling) return;
+    line_time = readout.time / camera.height;
+    for (int v0 = 0; v0 < camera.height; v0 += readout.band_rows) {
+      Band b;
+      b.v0 = v0;
+      b.v1 = std::min(v0 + readout.band_rows, camera.height);
+      b.time_offset = 0.5 * (b.v0 + b.v1 - 1) * line_time;
+      if (camera.distorted()) {
+        std::tie(b.ideal_r0, b.ideal_r1) =
+            ideal_rows_read(maps.map_y.rowRange(b.v0 * supersample, b.v1 * supersample));
+      } else {
+        b.ideal_r0 = b.v0 * supersample;
+        b.ideal_r1 = b.v1 * supersample;
+      }
+      bands.push_back(b);
+    }
+  }
+
+  // The rows [r0, r1) of the ideal image that a remap through these rows of a map of row
+  // coordinates reads (bilinear: the row below each coordinate and the next; one more each side
+  // for the fixed-point rounding of the coordinates).
+  std::pair<int, int> ideal_rows_read(const cv::Mat& map_rows) const {
+    double lo = 0, hi = 0;
+    cv::minMaxLoc(map_rows, &lo, &hi);
+    const int r0 = static_cast<int>(std::floor(lo)) - 1, r1 = static_cast<int>(std::floor(hi)) + 3;
+    // At least one row, for GL, where every coordinate lies outside the image.
+    const int first = std::clamp(r0, 0, fbo_height - 1);
+    return {first, std::clamp(r1, first + 1, fbo_height)};
   }
 
   void build_lighting(const LightingSpec& lighting) {
@@ -208,6 +288,7 @@ struct Renderer::Impl {
     gl->glDeleteProgram(program);
     gl->glDeleteProgram(textured_program);
     gl->glDeleteProgram(disk_program);
+    if (mask_program) gl->glDeleteProgram(mask_program);
   }
 
   void release(Drawable& d) {
@@ -393,8 +474,11 @@ struct Renderer::Impl {
     if (d.behind) gl->glDisable(GL_POLYGON_OFFSET_FILL);
   }
 
-  // Render the ideal (undistorted, supersampled) image into `readback` (BGRA, top row first).
-  void render_ideal(const SceneState& st) {
+  // Render the ideal (undistorted, supersampled) image into `readback` (RGBA, top row first): its
+  // rows [r0, r1) only (a scissored pass, the rest of `readback` left as it was), all by default.
+  void render_ideal(const SceneState& st, Pass pass = Pass::kImage, int r0 = 0, int r1 = -1) {
+    if (r1 < 0) r1 = fbo_height;
+    const bool band = r0 > 0 || r1 < fbo_height;
     context->make_current();
     gl->glBindFramebuffer(GL_FRAMEBUFFER, fbo);
     gl->glViewport(0, 0, fbo_width, fbo_height);
@@ -409,16 +493,111 @@ struct Renderer::Impl {
       gl->glClearColor(table_color[0], table_color[1], table_color[2], 1);
     else
       gl->glClearColor(0, 0, 0, 1);
-    if (setup.spatial) {
+    // Window row v is image row v (projection), so a band of image rows is a band of the window.
+    if (band) {
+      gl->glEnable(GL_SCISSOR_TEST);
+      gl->glScissor(0, r0, fbo_width, r1 - r0);
+    }
+    if (pass == Pass::kMask) {
+      draw_mask_scene(st);
+    } else if (setup.spatial) {
       draw_spatial(st);
     } else if (lit) {
       draw_lit_table_scene(st);
     } else {
       draw_table_scene(st);
     }
+    if (band) gl->glDisable(GL_SCISSOR_TEST);
     gl->glPixelStorei(GL_PACK_ALIGNMENT, 4);
     // RGBA is llvmpipe's fastest read format (BGRA and BGR go through slower paths).
-    gl->glReadPixels(0, 0, fbo_width, fbo_height, GL_RGBA, GL_UNSIGNED_BYTE, readback.data);
+    gl->glReadPixels(0, r0, fbo_width, r1 - r0, GL_RGBA, GL_UNSIGNED_BYTE, readback.ptr(r0));
+  }
+
+  // ---- the segmentation mask ----
+
+  // Each body in its flat id, nearest sample (the framebuffer has one sample per pixel).
+  void draw_mask_scene(const SceneState& st) {
+    const float background = table_fills_view ? static_cast<float>(kMaskTable) / 255.0f : 0.0f;
+    gl->glClearColor(background, 0, 0, 1);
+    gl->glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+    gl->glUseProgram(mask_program);
+    if (!table_fills_view) draw_id(table);
+    for (const Drawable& t : targets) draw_id(t);
+    disk.model = rigid(rot_z(st.disk_angle), {st.disk_center.x, st.disk_center.y, 0});
+    draw_id(disk);
+    disk_top.model = disk.model;
+    draw_id(disk_top, true);
+    hand.model = rigid(rot_z(st.hand_angle), {0, 0, 0});
+    draw_id(hand);
+  }
+
+  void draw_id(const Drawable& d, bool round_cut = false) {
+    const cv::Matx44f m = to_gl(d.model);
+    gl->glUniformMatrix4fv(mask_model_location, 1, GL_FALSE, m.val);
+    gl->glUniform1f(mask_id_location, static_cast<float>(d.id));
+    gl->glUniform1f(mask_round_location, round_cut ? 1.0f : 0.0f);
+    draw_with_current_program(d, mask_program);
+  }
+
+  // The mask's program and maps, made at the first mask: renderers that never draw one pay
+  // nothing.
+  void prepare_mask() {
+    if (setup.spatial)
+      throw std::invalid_argument("render: a spatial scene has no segmentation mask");
+    if (setup.boards.size() > static_cast<std::size_t>(kMaxMaskBoards))
+      throw std::invalid_argument("targets: " + std::to_string(setup.boards.size()) +
+                                  " boards; a mask's 8-bit ids tell at most " +
+                                  std::to_string(kMaxMaskBoards) + " apart");
+    if (mask_program) return;
+    context->make_current();
+    mask_program = link_program(*gl, kMaskFragmentShader);
+    set_frame_uniforms(mask_program);
+    mask_model_location = gl->glGetUniformLocation(mask_program, "model");
+    mask_id_location = gl->glGetUniformLocation(mask_program, "object_id");
+    mask_round_location = gl->glGetUniformLocation(mask_program, "round_cut");
+    gl->glUniform1f(gl->glGetUniformLocation(mask_program, "hole"),
+                    float(disk_radius > 0 ? hole_radius / disk_radius : 0.0));
+    ideal_ids.create(fbo_height, fbo_width, CV_8UC1);
+    if (!camera.distorted() && supersample == 1) return;
+    // A sensor pixel's centre in the ideal image: the mean of its s x s samples' positions.
+    if (camera.distorted()) {
+      downsample(maps.map_x, supersample, mask_map_x);
+      downsample(maps.map_y, supersample, mask_map_y);
+      mask_map_x = mask_map_x.clone();  // factor 1 hands back the cached maps themselves
+      mask_map_y = mask_map_y.clone();
+      return;
+    }
+    mask_map_x.create(camera.height, camera.width, CV_32FC1);
+    mask_map_y.create(camera.height, camera.width, CV_32FC1);
+    const float centre = 0.5f * static_cast<float>(supersample - 1);
+    for (int v = 0; v < camera.height; ++v)
+      for (int u = 0; u < camera.width; ++u) {
+        mask_map_x.at<float>(v, u) = static_cast<float>(u * supersample) + centre;
+        mask_map_y.at<float>(v, u) = static_cast<float>(v * supersample) + centre;
+      }
+  }
+
+  // Sensor rows [v0, v1) of `mask` (CV_8UC1, the camera's size): the ids of the state.
+  void render_mask_rows(const SceneState& st, int v0, int v1, cv::Mat& mask) {
+    prepare_mask();
+    int r0 = v0, r1 = v1;
+    if (!mask_map_y.empty()) std::tie(r0, r1) = ideal_rows_read(mask_map_y.rowRange(v0, v1));
+    render_ideal(st, Pass::kMask, r0, r1);
+    cv::Mat ids = ideal_ids.rowRange(r0, r1);
+    cv::extractChannel(readback.rowRange(r0, r1), ids, 0);
+    cv::Mat out = mask.rowRange(v0, v1);
+    if (mask_map_y.empty()) {
+      ids.copyTo(out);
+      return;
+    }
+    cv::remap(ideal_ids, out, mask_map_x.rowRange(v0, v1), mask_map_y.rowRange(v0, v1),
+              cv::INTER_NEAREST, cv::BORDER_CONSTANT, cv::Scalar(kMaskBackground));
+  }
+
+  cv::Mat render_mask(const SceneState& st) {
+    cv::Mat mask(camera.height, camera.width, CV_8UC1);
+    render_mask_rows(st, 0, camera.height, mask);
+    return mask;
   }
 
   // A spatial scene: the hand's surface and the object at their poses, on a dark background.
@@ -545,6 +724,34 @@ struct Renderer::Impl {
     return out;
   }
 
+  // A rolling band's sensor rows of the geometric image into `out` (CV_32FC3, the camera's size,
+  // allocated): the same pixels as render_linear's rows, from a scissored pass over the ideal rows
+  // they are made of.
+  void render_linear_rows(const SceneState& st, const Band& b, cv::Mat& out) {
+    render_ideal(st, Pass::kImage, b.ideal_r0, b.ideal_r1);
+    ideal_bgr.create(fbo_height, fbo_width, CV_8UC3);
+    cv::Mat bgr = ideal_bgr.rowRange(b.ideal_r0, b.ideal_r1);
+    cv::cvtColor(readback.rowRange(b.ideal_r0, b.ideal_r1), bgr, cv::COLOR_RGBA2BGR);
+    cv::Mat rows = out.rowRange(b.v0, b.v1);
+    const bool distorted = camera.distorted();
+    if (!distorted && supersample == 1) {
+      bgr.convertTo(rows, CV_32FC3);
+      return;
+    }
+    ideal_f32.create(fbo_height, fbo_width, CV_32FC3);
+    cv::Mat f32 = ideal_f32.rowRange(b.ideal_r0, b.ideal_r1);
+    bgr.convertTo(f32, CV_32FC3);
+    if (!distorted) {
+      downsample(f32, supersample, rows);
+      return;
+    }
+    const int s0 = b.v0 * supersample, s1 = b.v1 * supersample;
+    cv::Mat& remapped = supersample == 1 ? rows : band_distorted;
+    cv::remap(ideal_f32, remapped, maps.map_x.rowRange(s0, s1), maps.map_y.rowRange(s0, s1),
+              cv::INTER_LINEAR, cv::BORDER_CONSTANT);
+    if (supersample > 1) downsample(remapped, supersample, rows);
+  }
+
   // Fast path for 8-bit frames without effects: no float conversion when nothing resamples.
   cv::Mat render_8u(const SceneState& st) {
     if (!camera.distorted()) {
@@ -566,6 +773,87 @@ struct Renderer::Impl {
       return bgr;
     }
     return quantize(render_linear(st));
+  }
+
+  // ---- the readout: interlaced fields, rolling bands ----
+
+  // Sensor rows `rows` of `out` (CV_32FC3, allocated) exposed about time t: one render, or the
+  // exposure blur's sub-frames averaged as FrameMean averages a whole frame's.
+  void expose(const StateAt& state_at, double t, const Band& rows, cv::Mat& out) {
+    const double exposure = camera.exposure;
+    const int n = setup.effects.blur_subframes;
+    if (!(n > 1 && exposure > 0)) {
+      render_linear_rows(state_at(t), rows, out);
+      return;
+    }
+    cv::Mat sum = out.rowRange(rows.v0, rows.v1);
+    sum.setTo(0);
+    band_subframe.create(out.size(), CV_32FC3);
+    for (int i = 0; i < n; ++i) {
+      render_linear_rows(state_at(t - 0.5 * exposure + (i + 0.5) * exposure / n), rows,
+                         band_subframe);
+      sum += band_subframe.rowRange(rows.v0, rows.v1);
+    }
+    sum *= 1.0 / static_cast<double>(n);
+  }
+
+  // The geometric frame of an interlaced or rolling readout whose first row is taken at t into
+  // `linear` (and the mask, at the same rows' times, into `mask` if given).
+  void expose_readout(const StateAt& state_at, double t, cv::Mat& linear, cv::Mat* mask) {
+    const int H = camera.height;
+    linear.create(H, camera.width, CV_32FC3);
+    if (mask) mask->create(H, camera.width, CV_8UC1);
+    if (rolling) {
+      for (const Band& b : bands) {
+        expose(state_at, t + b.time_offset, b, linear);
+        if (mask) render_mask_rows(state_at(t + b.time_offset), b.v0, b.v1, *mask);
+      }
+      return;
+    }
+    // Two whole frames, one per field, and the second field's rows copied over the first's.
+    const Band all{0, H, 0.0, 0, fbo_height};
+    const double t_second = t + field_interval();
+    const int second_rows = setup.readout.field_order == "even_first" ? 1 : 0;
+    expose(state_at, t, all, linear);
+    second_field.create(linear.size(), CV_32FC3);
+    expose(state_at, t_second, all, second_field);
+    for (int v = second_rows; v < H; v += 2) second_field.row(v).copyTo(linear.row(v));
+    if (!mask) return;
+    render_mask_rows(state_at(t), 0, H, *mask);
+    const cv::Mat second_mask = render_mask(state_at(t_second));
+    for (int v = second_rows; v < H; v += 2) second_mask.row(v).copyTo(mask->row(v));
+  }
+
+  double field_interval() const { return 0.5 / camera.fps; }
+
+  double readout_duration() const {
+    if (interlaced) return field_interval();
+    return rolling ? setup.readout.time : 0.0;
+  }
+
+  // When the truth's state holds for a frame whose first row is taken at t (FrameTruth::t_state).
+  // Rolling: the time of the row where the disk's centre is, a fixed point (the row depends on
+  // where the disk is then); it contracts by the disk's image speed times the line time (px per
+  // row), far below 1, so a few steps reach it.
+  double state_time(const StateAt& state_at, double t) const {
+    if (interlaced) return t + 0.5 * field_interval();
+    if (!rolling) return t;
+    double ts = t;
+    for (int i = 0; i < 64; ++i) {
+      const double v = truth(state_at(ts)).disk_center_px.y;
+      if (!std::isfinite(v)) return ts;
+      const double next = t + row_time_offset(std::clamp(v, 0.0, camera.height - 1.0));
+      if (std::abs(next - ts) <= 1e-12) return next;
+      ts = next;
+    }
+    return ts;
+  }
+
+  // A rolling readout's time of image row v (continuous): v line times, or its band's time.
+  double row_time_offset(double v) const {
+    if (setup.readout.band_rows == 1) return v * line_time;
+    const auto row = static_cast<std::size_t>(std::lround(v));
+    return bands[row / static_cast<std::size_t>(setup.readout.band_rows)].time_offset;
   }
 
   FrameTruth truth(const SceneState& st) const {
@@ -604,27 +892,41 @@ cv::Mat Renderer::render_linear(const SceneState& state) { return impl_->render_
 cv::Mat Renderer::render_8u(const SceneState& state) { return impl_->render_8u(state); }
 FrameTruth Renderer::truth(const SceneState& state) const { return impl_->truth(state); }
 
-Frame Renderer::capture(const sim::Trajectory& trajectory, double t) {
+Frame Renderer::capture(const sim::Trajectory& trajectory, double t,
+                        const CaptureOptions& options) {
   return capture(
       [&](double ts) {
         return SceneState::from_sample(
             trajectory.sample(std::clamp(ts, trajectory.t_begin(), trajectory.t_end())));
       },
-      t);
+      t, options);
 }
 
-Frame Renderer::capture(const StateAt& state_at, double t) {
+double Renderer::readout_duration() const { return impl_->readout_duration(); }
+cv::Mat Renderer::render_mask(const SceneState& state) { return impl_->render_mask(state); }
+
+Frame Renderer::capture(const StateAt& state_at, double t, const CaptureOptions& options) {
   const EffectsSpec& fx = impl_->setup.effects;
   EffectsRng& rng = impl_->rng;
   Frame frame;
   const double t_capture = jittered_time(t, fx.jitter_s, rng);
   const SceneState mid = state_at(t_capture);
-  frame.truth = impl_->truth(mid);
+  const double t_state = impl_->state_time(state_at, t_capture);
+  frame.truth = impl_->truth(t_state == t_capture ? mid : state_at(t_state));
   frame.truth.t = t_capture;
+  frame.truth.t_state = t_state;
   if (dropped(fx.drop_probability, rng)) {
     frame.truth.dropped = true;
     return frame;
   }
+  if (!impl_->setup.readout.global()) {
+    cv::Mat unquantized;
+    cv::Mat& linear = fx.quantize ? impl_->linear_scratch : unquantized;
+    impl_->expose_readout(state_at, t_capture, linear, options.mask ? &frame.mask : nullptr);
+    finish_frame(linear, frame);
+    return frame;
+  }
+  if (options.mask) frame.mask = impl_->render_mask(mid);
   const double exposure = impl_->camera.exposure;
   const bool one_render = !(fx.blur_subframes > 1 && exposure > 0);
   const bool plain = fx.blur_subframes <= 1 && fx.noise_read_dn == 0 && fx.noise_shot_gain == 0 &&
@@ -656,11 +958,16 @@ Frame Renderer::capture(const StateAt& state_at, double t) {
   } else {
     impl_->render_linear(mid, linear);
   }
+  finish_frame(linear, frame);
+  return frame;
+}
+
+void Renderer::finish_frame(cv::Mat& linear, Frame& frame) {
+  const EffectsSpec& fx = impl_->setup.effects;
   if (fx.vignetting > 0)
     apply_vignetting(linear, fx.vignetting, {impl_->camera.K(0, 2), impl_->camera.K(1, 2)});
-  apply_noise(linear, fx.noise_read_dn, fx.noise_shot_gain, rng);
+  apply_noise(linear, fx.noise_read_dn, fx.noise_shot_gain, impl_->rng);
   frame.image = fx.quantize ? quantize(linear) : linear;
-  return frame;
 }
 
 }  // namespace flatland::render

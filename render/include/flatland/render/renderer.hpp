@@ -46,16 +46,38 @@ struct SceneState {
 
 /// Ground truth of one frame.
 struct FrameTruth {
-  double t = 0;  ///< capture time (with jitter), s
+  double t = 0;  ///< capture time (with jitter), s: the first row's mid-exposure time
+  /// When the fields below hold, s: t with a global readout; with a rolling one the time the row
+  /// of the disk's centre was read (where the disk's centre is in the rows that show it); with an
+  /// interlaced one halfway between the two fields (what the two fields' disks average).
+  double t_state = 0;
   double theta = 0, s_h = 0;
   cv::Point3d disk_center_table, marker_table;  ///< m; top face of the disk
   cv::Point2d disk_center_px, marker_px;        ///< cv::projectPoints of the above
   bool dropped = false;
 };
 
+/// The segmentation mask's ids (CV_8UC1, one per pixel): the body drawn there, nearest sample,
+/// no anti-aliasing, blur or other effect. Board i of RenderSetup::boards is kMaskFirstBoard + i.
+enum MaskId : unsigned char {
+  kMaskBackground = 0,  ///< nothing drawn (beyond the table)
+  kMaskTable = 1,
+  kMaskHand = 2,
+  kMaskDisk = 3,  ///< the object: disk, ring (its annulus) or ball (its equatorial disk)
+  kMaskFirstBoard = 4,
+};
+/// The most calibration boards a mask can tell apart (ids 4..255).
+constexpr int kMaxMaskBoards = 256 - kMaskFirstBoard;
+
 struct Frame {
   cv::Mat image;  ///< CV_8UC3 (BGR), or CV_32FC3 when effects.quantize is false
+  cv::Mat mask;   ///< CV_8UC1 MaskId per pixel, when CaptureOptions::mask asked for it
   FrameTruth truth;
+};
+
+/// What one capture returns besides its image.
+struct CaptureOptions {
+  bool mask = false;  ///< the segmentation mask, at the same rows' times as the image
 };
 
 /// A spatial scene's bodies: the hand's surface over `hand_extent` of its chart (an infinite side
@@ -79,8 +101,8 @@ struct RenderSetup {
   camera::CameraModel camera;
   sim::HandPtr hand;                        ///< the hand's outline (hand_plate_outline, extruded)
   std::vector<camera::PlacedBoard> boards;  ///< calibration boards on the table
-  sim::ObjectSpec object;                   ///< a disk, ring (annulus) or ball (its equatorial disk): radii
-  RenderSpec render;                        ///< backend, thicknesses, table extent
+  sim::ObjectSpec object;  ///< a disk, ring (annulus) or ball (its equatorial disk): radii
+  RenderSpec render;       ///< backend, thicknesses, table extent
   EffectsSpec effects;
   /// A spatial scene: these bodies instead of the hand and the disk (no table); `hand` and
   /// `object` are then unused. Frames come from render_linear / render_8u with SceneState::spatial.
@@ -88,6 +110,8 @@ struct RenderSetup {
   /// A lamp over the table (lighting.hpp); absent: the fixed distant light, shading flat faces
   /// evenly, and no shadows (the frames of scenes without a `lighting` section).
   std::optional<LightingSpec> lighting;
+  /// How the sensor reads a frame (the scene's camera.readout...): global, interlaced or rolling.
+  ReadoutSpec readout;
 };
 
 class Renderer {
@@ -113,15 +137,28 @@ class Renderer {
   /// exposure ending at t (sub-frames from the trajectory), timing jitter, noise, vignetting,
   /// quantisation, dropped frames, per the scene's effects. The renderer's RNG
   /// (scene.effects.seed) advances frame by frame, so a scene and seed give identical frames.
-  Frame capture(const sim::Trajectory& trajectory, double t);
+  ///
+  /// With an interlaced readout the frame's fields are each such a frame at their own times (t
+  /// and t + 1/(2 fps), the first field's rows per readout.field_order), with a rolling one row y
+  /// is one at t + y * readout.time / height (to the band's middle row with readout.band_rows >
+  /// 1); noise, vignetting and quantisation then apply to the whole frame.
+  Frame capture(const sim::Trajectory& trajectory, double t, const CaptureOptions& options = {});
   /// The same for a world that is not a finished run (a closed loop in progress): `state_at`
   /// gives the scene at any time the exposure needs (it clamps to what it knows).
   using StateAt = std::function<SceneState(double t)>;
-  Frame capture(const StateAt& state_at, double t);
+  Frame capture(const StateAt& state_at, double t, const CaptureOptions& options = {});
+  /// How long after a frame's time stamp its last row is taken, s (0 for a global readout): a
+  /// caller rendering as a world runs must have simulated to t + this + exposure / 2.
+  double readout_duration() const;
+  /// The segmentation mask of one state (CV_8UC1, MaskId), at the camera's resolution. Throws
+  /// std::invalid_argument for a spatial scene or more than kMaxMaskBoards boards.
+  cv::Mat render_mask(const SceneState& state);
   /// Truth for a state (also usable without rendering).
   FrameTruth truth(const SceneState& state) const;
 
  private:
+  /// Vignetting, noise and quantisation on a frame's geometric image, into frame.image.
+  void finish_frame(cv::Mat& linear, Frame& frame);
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
