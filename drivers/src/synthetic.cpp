@@ -443,11 +443,13 @@ SyntheticCamera::SyntheticCamera(std::shared_ptr<const model::Model> model, cons
 
 std::optional<CameraFrame> SyntheticCamera::poll(double now) {
   // A frame is rendered once the world has been simulated past its exposure, allowing for the
-  // capture-time jitter (4 sigma) and the last servo period.
+  // capture-time jitter (4 sigma) and the last servo period; an interlaced or rolling readout
+  // takes its last rows later than its time stamp (its first row's time).
   const double margin = 2.0 * world_.servo_period() + 4.0 * capture_jitter_;
+  const double readout = renderer_.readout_duration();
   for (;;) {
     const double tn = t_start_ + static_cast<double>(next_) / camera_.fps;
-    if (tn + 0.5 * camera_.exposure + margin > now) break;
+    if (tn + readout + 0.5 * camera_.exposure + margin > now) break;
     if (faults_.camera_stop && tn >= *faults_.camera_stop) break;
     if (faults_.camera_stall && tn >= *faults_.camera_stall) {
       // A stalled camera keeps delivering its last image with its old stamp.
