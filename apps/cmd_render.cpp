@@ -36,7 +36,7 @@ namespace {
 struct RenderOptions {
   CommonOptions common;
   std::string view, gl;
-  bool overlay = false, solve = false;
+  bool overlay = false, solve = false, mask = false;
   double fps = 0, duration = 0;
   CLI::Option* view_opt = nullptr;
   CLI::Option* gl_opt = nullptr;
@@ -62,8 +62,12 @@ const char* kTruthColumns =
     "frame,t,dropped,theta,s_h,disk_x,disk_y,disk_z,disk_u,disk_v,marker_x,marker_y,marker_z,"
     "marker_u,marker_v";
 
-/// One truth.csv row. `frame` is the image's index in the output, -1 for a dropped frame.
-std::string truth_row(long frame, const render::FrameTruth& t) {
+/// The column a readout other than global adds: when the row's state holds (FrameTruth::t_state).
+const char* kTruthStateColumn = "t_state";
+
+/// One truth.csv row. `frame` is the image's index in the output, -1 for a dropped frame; with
+/// `state_time`, t_state last.
+std::string truth_row(long frame, const render::FrameTruth& t, bool state_time) {
   const double v[] = {t.t,
                       t.theta,
                       t.s_h,
@@ -82,6 +86,7 @@ std::string truth_row(long frame, const render::FrameTruth& t) {
   // Appended piece by piece: GCC 12's -Wrestrict misfires on "literal" + std::string&&.
   for (std::size_t i = 1; i < sizeof v / sizeof v[0]; ++i)
     row.append(",").append(format_number(v[i]));
+  if (state_time) row.append(",").append(format_number(t.t_state));
   return row + "\n";
 }
 
@@ -193,17 +198,23 @@ constexpr long kMaxRenderFrames = 200000;
 constexpr double kMaxRenderFps = 1000;
 
 /// One frame into the MP4 (when `video` is given) or as DIR/frame_NNNNNN.png, staged.
+void write_png(const cv::Mat& image, const char* prefix, long index, OutputSet& outputs,
+               const fs::path& dir, std::vector<unsigned char>& png) {
+  if (!cv::imencode(".png", image, png))
+    throw std::runtime_error(std::string("cannot encode ") + prefix + std::to_string(index) +
+                             " as PNG");
+  char name[48];
+  std::snprintf(name, sizeof name, "%s_%06ld.png", prefix, index);
+  outputs.stage(dir / name, std::string(png.begin(), png.end()));
+}
+
 void write_frame(const cv::Mat& bgr, long index, render::Mp4Writer* video, OutputSet& outputs,
                  const fs::path& dir, std::vector<unsigned char>& png) {
   if (video) {
     video->write(bgr);
     return;
   }
-  if (!cv::imencode(".png", bgr, png))
-    throw std::runtime_error("cannot encode frame " + std::to_string(index) + " as PNG");
-  char name[32];
-  std::snprintf(name, sizeof name, "frame_%06ld.png", index);
-  outputs.stage(dir / name, std::string(png.begin(), png.end()));
+  write_png(bgr, "frame", index, outputs, dir, png);
 }
 
 /// --duration and --fps into the scene (UsageError for a bad value, or a frame interval shorter
@@ -224,6 +235,11 @@ void apply_duration_and_fps(const RenderOptions& o, std::optional<double>& durat
                        " s is shorter than camera.exposure (" + format_number(camera.exposure) +
                        " s)");
     camera.fps = o.fps;
+    // The readout's rules that depend on the rate (a rolling readout within the frame interval,
+    // an interlaced field's exposure within the field interval).
+    if (auto problem = camera_problem(camera))
+      throw UsageError("--fps: " + format_number(o.fps) + " frames per s breaks camera." +
+                       problem->field + ": " + problem->reason);
   }
 }
 
@@ -234,6 +250,7 @@ void run_render_spatial(const RenderOptions& o, Scene scene) {
   if (!scene.camera)
     throw UsageError(scene.origin + ": camera: the scene has no camera section (needed by render)");
   if (o.overlay) throw UsageError("--overlay: only for planar scenes");
+  if (o.mask) throw UsageError("--mask: only for planar scenes");
   if (o.solve) throw UsageError("--solve: only for planar scenes");
   if (o.view_opt->count())
     throw UsageError("--view: only for planar scenes (a spatial scene is seen by its camera)");
@@ -433,6 +450,9 @@ void run_render(const RenderOptions& o) {
                       o.common.force);
     check_output_file("--out", out.parent_path() / (out.stem().string() + ".encoder.csv"),
                       o.common.force);
+    if (o.mask)
+      check_output_directory("--mask", out.parent_path() / (out.stem().string() + ".masks"),
+                             o.common.force);
   } else {
     check_output_directory("--out", out, o.common.force);
   }
@@ -440,6 +460,10 @@ void run_render(const RenderOptions& o) {
   // The renderer validates the camera and effects (bad input) and makes the GL context (a
   // runtime failure), both before any file exists.
   const render::RenderSetup setup = model::render_setup(*compiled);
+  if (o.mask && setup.boards.size() > static_cast<std::size_t>(render::kMaxMaskBoards))
+    throw UsageError("--mask: the scene has " + std::to_string(setup.boards.size()) +
+                     " targets; a mask's 8-bit ids tell at most " +
+                     std::to_string(render::kMaxMaskBoards) + " boards apart");
   render::Renderer renderer(setup, backend);
   const camera::CameraModel& model = renderer.camera();
   const std::string gl = renderer.gl_description();
@@ -448,7 +472,7 @@ void run_render(const RenderOptions& o) {
   OutputSet outputs(o.common.force);
   const cv::Size size(model.width, model.height);
   const double fps = model.fps;
-  fs::path truth_path, meta_path, camera_path, encoder_path, video_tmp;
+  fs::path truth_path, meta_path, camera_path, encoder_path, video_tmp, mask_dir;
   render::Mp4Writer writer;  // declared after `outputs`: released before its files are removed
   std::string codec;
   if (mp4) {
@@ -462,8 +486,13 @@ void run_render(const RenderOptions& o) {
     meta_path = dir / (out.stem().string() + ".json");
     camera_path = dir / (out.stem().string() + ".camera.yaml");
     encoder_path = dir / (out.stem().string() + ".encoder.csv");
+    if (o.mask) {
+      mask_dir = dir / (out.stem().string() + ".masks");
+      outputs.begin_directory(mask_dir);
+    }
   } else {
     outputs.begin_directory(out);
+    mask_dir = out;
     truth_path = out / "truth.csv";
     meta_path = out / "meta.json";
     camera_path = out / "camera.yaml";
@@ -491,7 +520,13 @@ void run_render(const RenderOptions& o) {
   // ---- render
   const long n = static_cast<long>(std::floor((t_end - t0) * fps + 1e-9)) + 1;
   const sim::HandCurve& hand = *compiled->hand;
-  std::string truth_csv = std::string(kTruthColumns) + "\n";
+  // A readout other than global adds when each row's state holds (FrameTruth::t_state).
+  const bool state_time = !setup.readout.global();
+  const std::string truth_columns =
+      std::string(kTruthColumns) + (state_time ? std::string(",") + kTruthStateColumn : "");
+  std::string truth_csv = truth_columns + "\n";
+  render::CaptureOptions capture_options;
+  capture_options.mask = o.mask;
   long written = 0, dropped = 0;
   std::vector<unsigned char> png;
   std::cerr << "flatland: rendering " << n << " frames at " << format_number(fps) << " fps, "
@@ -501,10 +536,10 @@ void run_render(const RenderOptions& o) {
     ProgressBar bar("render");
     for (long i = 0; i < n; ++i) {
       const double t = std::min(t0 + static_cast<double>(i) / fps, t_end);
-      render::Frame frame = renderer.capture(run.trajectory, t);
+      render::Frame frame = renderer.capture(run.trajectory, t, capture_options);
       if (frame.truth.dropped) {
         ++dropped;
-        truth_csv += truth_row(-1, frame.truth);
+        truth_csv += truth_row(-1, frame.truth, state_time);
         bar.update(i + 1, n);
         continue;
       }
@@ -520,7 +555,8 @@ void run_render(const RenderOptions& o) {
                      frame.truth);
       }
       write_frame(bgr, written, mp4 ? &writer : nullptr, outputs, out, png);
-      truth_csv += truth_row(written, frame.truth);
+      if (o.mask) write_png(frame.mask, "mask", written, outputs, mask_dir, png);
+      truth_csv += truth_row(written, frame.truth, state_time);
       ++written;
       bar.update(i + 1, n);
     }
@@ -573,7 +609,27 @@ void run_render(const RenderOptions& o) {
   meta["effects"] = effects_json(scene.effects);
   meta["gl"] = {{"backend", render::to_string(backend)}, {"description", gl}};
   meta["overlay"] = o.overlay;
-  meta["truth_columns"] = kTruthColumns;
+  meta["truth_columns"] = truth_columns;
+  if (state_time || o.mask) {  // absent by default: the outputs of earlier versions unchanged
+    meta["readout"] = {{"mode", setup.readout.mode}};
+    if (setup.readout.mode == "interlaced") {
+      meta["readout"]["field_order"] = setup.readout.field_order;
+      meta["readout"]["field_interval_s"] = 0.5 / fps;
+    } else if (setup.readout.mode == "rolling") {
+      meta["readout"]["time_s"] = setup.readout.time;
+      meta["readout"]["band_rows"] = setup.readout.band_rows;
+    }
+  }
+  if (o.mask) {
+    meta["mask"] = {{"directory", mask_dir.string()},
+                    {"files", "mask_%06d.png"},
+                    {"ids",
+                     {{"background", int(render::kMaskBackground)},
+                      {"table", int(render::kMaskTable)},
+                      {"hand", int(render::kMaskHand)},
+                      {"disk", int(render::kMaskDisk)},
+                      {"first_board", int(render::kMaskFirstBoard)}}}};
+  }
   outputs.stage(meta_path, meta.dump(2) + "\n");
   outputs.commit();
 
@@ -592,6 +648,7 @@ void run_render(const RenderOptions& o) {
     j["meta"] = meta_path.string();
     j["camera_file"] = camera_path.string();
     j["encoder"] = encoder_path.string();
+    if (o.mask) j["masks"] = mask_dir.string();
     j["k"] = butterfly ? number(spec.motion.k) : Json(nullptr);
     j["gl"] = {{"backend", render::to_string(backend)}, {"description", gl}};
     emit_json(j);
@@ -609,6 +666,7 @@ void run_render(const RenderOptions& o) {
      << "  wrote              " << out.string() << (mp4 ? " (" + codec + ")" : "") << "\n"
      << "  wrote              " << truth_path.string() << "\n"
      << "  wrote              " << meta_path.string() << "\n"
+     << (o.mask ? "  wrote              " + mask_dir.string() + "/mask_*.png\n" : "")
      << "  wrote              " << camera_path.string() << ", " << encoder_path.string()
      << " (for flatland track --camera --encoder)\n";
   std::cout << os.str();
@@ -646,6 +704,11 @@ Command add_render_command(CLI::App& app) {
       "--overlay", o->overlay,
       "Draw on each frame: t (s), s_h, and the hand's contact force as an arrow from the "
       "contact point (0.1 m on the table per in-plane weight m g sin(tilt)). Default: off");
+  cmd->add_flag("--mask", o->mask,
+                "Planar scenes: a segmentation mask beside each frame, mask_000000.png ... (8-bit, "
+                "one id per body: 0 background, 1 table, 2 hand, 3 disk, 4 + i board i of the "
+                "scene's targets; nearest sample, no effects; at the same rows' times as the "
+                "frame), in the frame directory, or FILE.masks/ beside FILE.mp4. Default: off");
   cmd->add_flag("--solve", o->solve,
                 "Butterfly only: first solve k for the scene's period (as `flatland solve`) and "
                 "film that motion. Default: off (the scene's k)");

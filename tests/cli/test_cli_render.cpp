@@ -4,9 +4,11 @@
 // straight down, never against the program's own numbers.
 #include "cli_support.hpp"
 
-#include <Eigen/Dense>
 #include <gtest/gtest.h>
+#include <Eigen/Dense>
 #include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include <cmath>
 #include <cstdint>
@@ -438,6 +440,101 @@ TEST_F(CliRenderTest, Mp4VideoHasEveryFrame) {
   EXPECT_EQ(s.value("width", -1), 160);
   EXPECT_EQ(s.value("height", -1), 120);
   EXPECT_EQ(s.value("nb_read_frames", ""), "7");
+}
+
+// Each readout key's bad values: one line naming the field, exit 2, nothing written.
+TEST_F(CliRenderTest, BadReadoutKeysAreRefused) {
+  const std::string exposure = "exposure: 0.0           # s; instantaneous (no motion blur)";
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"readout: fast", "camera.readout"},
+      {"field_order: even_first", "camera.field_order"},
+      {"readout_time: 0.01", "camera.readout_time"},
+      {"readout_band_rows: 4", "camera.readout_band_rows"},
+      {"readout: interlaced\n  field_order: top", "camera.field_order"},
+      {"readout: rolling", "camera.readout_time"},
+      {"readout: rolling\n  readout_time: 0", "camera.readout_time"},
+      {"readout: rolling\n  readout_time: 0.05", "camera.readout_time"},
+      {"readout: rolling\n  readout_time: .nan", "camera.readout_time"},
+      {"readout: rolling\n  readout_time: 0.02\n  readout_band_rows: 0",
+       "camera.readout_band_rows"},
+      {"readout: rolling\n  readout_time: 0.02\n  readout_band_rows: 481",
+       "camera.readout_band_rows"},
+      {"readout: rolling\n  readout_time: 0.02\n  readout_band_rows: 2.5",
+       "camera.readout_band_rows"},
+      {"readout: interlaced\n  exposure: 0.02", "camera.exposure"},
+  };
+  for (std::size_t i = 0; i < cases.size(); ++i) {
+    const fs::path scene =
+        camera_scene_with("bad" + std::to_string(i) + ".yaml",
+                          {{exposure, cases[i].first.find("exposure") == std::string::npos
+                                          ? "exposure: 0.0\n  " + cases[i].first
+                                          : cases[i].first}});
+    expect_bad_input("render --scene " + quote(scene.string()) + " --duration 0.1 --out out",
+                     cases[i].second, "out");
+  }
+  // --fps that a readout cannot keep up with names the option.
+  const fs::path rolling = camera_scene_with(
+      "rolling.yaml", {{exposure, "exposure: 0.0\n  readout: rolling\n  readout_time: 0.03"}});
+  expect_bad_input("render --scene " + quote(rolling.string()) + " --fps 60 --out out", "--fps",
+                   "out");
+  // A spatial scene's frames have no readout and no mask.
+  expect_bad_input(
+      "render --scene " +
+          quote((fs::path(FLATLAND_ASSET_DIR) / "scenes" / "ball-in-bowl.yaml").string()) +
+          " --mask --out out",
+      "--mask", "out");
+}
+
+// --mask: a mask PNG beside each frame, one 8-bit id per body where the truth puts the bodies; a
+// rolling readout adds t_state to the truth and the readout to the metadata. Without the options
+// the outputs keep their columns (tests above) and the digests (scripts/output_digest.sh).
+TEST_F(CliRenderTest, MaskBesideEachFrameWithItsIds) {
+  const fs::path scene = camera_scene_with(
+      "rolling.yaml", {{"exposure: 0.0           # s; instantaneous (no motion blur)",
+                        "exposure: 0.0\n  readout: rolling\n  readout_time: 0.03"}});
+  const Result r =
+      run("render --scene " + quote(scene.string()) + " --duration 0.1 --mask --out frames --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const json j = parse_json(r);
+  ASSERT_EQ(j.value("frames", -1), 4);
+  EXPECT_EQ(j.value("masks", ""), "frames");
+  const auto rows = lines_of(read_text(dir_ / "frames" / "truth.csv"));
+  ASSERT_EQ(rows.size(), 5u);
+  EXPECT_EQ(rows[0], std::string(kTruthHeader) + ",t_state");
+  json meta;
+  ASSERT_NO_THROW(meta = json::parse(read_text(dir_ / "frames" / "meta.json")));
+  EXPECT_EQ(meta["readout"].value("mode", ""), "rolling");
+  EXPECT_EQ(meta["mask"]["ids"].value("disk", -1), 3);
+  for (int i = 0; i < 4; ++i) {
+    char name[32];
+    std::snprintf(name, sizeof name, "mask_%06d.png", i);
+    const cv::Mat mask = cv::imread((dir_ / "frames" / name).string(), cv::IMREAD_UNCHANGED);
+    ASSERT_EQ(mask.type(), CV_8UC1) << name;
+    ASSERT_EQ(mask.size(), cv::Size(640, 480));
+    const std::vector<double> f = fields_of(rows[static_cast<std::size_t>(i) + 1]);
+    const double u = f[8], v = f[9], t = f[1], t_state = f[15];
+    // The disk's row is read v line times after the frame's first.
+    EXPECT_NEAR(t_state - t, v * 0.03 / 480, 1e-9);
+    // The disk's region: centred on the truth's image point (its area's centroid; the disk is
+    // seen straight down, so its outline is a circle about that point), 0.051 m at 1.2 m under
+    // fx = 900 px: radius 38.25 px, area pi r^2 to a pixel's width of its outline.
+    cv::Mat disk = mask == 3;
+    const cv::Moments m = cv::moments(disk, true);
+    ASSERT_GT(m.m00, 0.0);
+    EXPECT_NEAR(m.m10 / m.m00, u, 0.3) << name;
+    EXPECT_NEAR(m.m01 / m.m00, v, 0.3) << name;
+    const double radius = 0.051 * 900 / (1.2 - 0.006);
+    EXPECT_NEAR(m.m00, M_PI * radius * radius, 2 * M_PI * radius) << name;
+    // The table all around (the image's corners), the hand under the disk, nothing else.
+    EXPECT_EQ(mask.at<unsigned char>(0, 0), 1);
+    EXPECT_EQ(mask.at<unsigned char>(479, 639), 1);
+    EXPECT_EQ(mask.at<unsigned char>(static_cast<int>(v + radius + 8), static_cast<int>(u)), 2)
+        << name;
+    double lo = 0, hi = 0;
+    cv::minMaxLoc(mask, &lo, &hi);
+    EXPECT_EQ(lo, 1.0);
+    EXPECT_EQ(hi, 3.0);
+  }
 }
 
 }  // namespace
