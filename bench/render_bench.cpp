@@ -14,6 +14,7 @@
 
 #include <filesystem>
 #include <string>
+#include <utility>
 
 using namespace flatland;
 
@@ -179,6 +180,34 @@ void RenderButterflyCamera(benchmark::State& state) {
       benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
 }
 
+// A frame of the bundled butterfly-camera scene (640 x 480, 2 x 2 supersampling, no lamp) through
+// Renderer::capture with each readout: global (the peer), interlaced (two fields), rolling
+// (30 ms readout) with one row per GL pass (exact) or bands of 8 and 32 rows; each with its mask
+// too when `mask`.
+void CaptureReadout(benchmark::State& state, std::string readout, int band_rows, bool mask) {
+  Scene scene = load_scene(std::string(FLATLAND_ASSET_DIR) + "/scenes/butterfly-camera.yaml");
+  scene.camera->readout.mode = readout;
+  if (readout == "rolling") {
+    scene.camera->readout.time = 0.03;
+    scene.camera->readout.band_rows = band_rows;
+  }
+  const auto model = model::compile(scene);
+  render::Renderer r(model::render_setup(*model));
+  sim::SimulationSpec spec = model->spec.sim;
+  spec.run.record = true;
+  const sim::RunResult run = sim::run_spec(spec);
+  render::CaptureOptions options;
+  options.mask = mask;
+  double t = 0.3;
+  for (auto _ : state) {
+    render::Frame f = r.capture(run.trajectory, t, options);
+    benchmark::DoNotOptimize(f.image.data);
+    t = t < 0.9 ? t + 1.0 / 30 : 0.3;
+  }
+  state.counters["fps"] =
+      benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
+}
+
 // H.264 encoding of rendered 640x480 frames: flatland's writer (libavcodec, a key frame a second)
 // against OpenCV's FFmpeg writer (its peer: same codec and CRF, x264's 250-frame key interval).
 void Mp4Encode(benchmark::State& state, bool opencv) {
@@ -257,6 +286,17 @@ void register_all() {
   benchmark::RegisterBenchmark("BM_RenderButterflyCamera", RenderButterflyCamera)
       ->Unit(benchmark::kMicrosecond)
       ->UseRealTime();
+  for (const bool mask : {false, true})
+    for (const auto& [readout, bands] :
+         {std::pair{"global", 1}, std::pair{"interlaced", 1}, std::pair{"rolling", 1},
+          std::pair{"rolling", 8}, std::pair{"rolling", 32}}) {
+      std::string name = std::string("BM_CaptureReadout/") + readout;
+      if (std::string(readout) == "rolling") name += "/band_rows:" + std::to_string(bands);
+      if (mask) name += "/mask";
+      benchmark::RegisterBenchmark(name.c_str(), CaptureReadout, std::string(readout), bands, mask)
+          ->Unit(benchmark::kMicrosecond)
+          ->UseRealTime();
+    }
   for (const bool opencv : {false, true})
     benchmark::RegisterBenchmark(
         (std::string("BM_Mp4Encode/640x480/") + (opencv ? "opencv" : "flatland")).c_str(),
