@@ -91,6 +91,8 @@ void run_tracker_study(const StudyOptions& o) {
   j["study"] = "tracker";
   j["scene"] = scene.origin;
   j["camera"] = camera_summary(*scene.camera);
+  // An interlaced camera's exposures are fractions of its field interval (fraction_of_frame).
+  j["readout"] = scene.camera->readout.mode;
   j["supersample"] = scene.effects.supersample;
   j["gl"] = study.gl;
   j["frames"] = times.size();

@@ -119,11 +119,14 @@ TrackerStudyResult run_tracker_study(const model::Model& model,
                                 " s) gives fewer than 3 frames");
 
   const camera::CameraModel& cam0 = *model.camera;
+  // The longest exposure the camera allows: the frame interval, or an interlaced camera's field
+  // interval (each field is exposed on its own; camera_problem).
+  const double longest_exposure = scene.camera->readout.mode == "interlaced" ? 0.5 / fps : 1 / fps;
   std::vector<TrackerStudyBlur>& blurs = out.blurs;
   for (double f : fractions) {
     TrackerStudyBlur b;
     b.fraction = f;
-    b.exposure = f / fps;
+    b.exposure = f * longest_exposure;
     for (double t : times) {
       const double s = streak_px(cam0, tr, z, t, b.exposure);
       b.px_mean += s / static_cast<double>(times.size());

@@ -294,3 +294,31 @@ TEST_F(StudyVision, Plots) {
       EXPECT_NE(r.out.find("wrote " + study + "/" + f), std::string::npos) << r.out;
   }
 }
+
+// An interlaced camera exposes each field for at most the field interval (1/(2 fps)), so the
+// study's exposures are fractions of that, and its fields are tracked like any frame: the edge
+// fit within the tracker's acceptance (docs/VISION.md: 0.1 px) on the combed frames, nothing lost.
+TEST_F(StudyVision, TrackerQuickOnAnInterlacedCamera) {
+  std::string scene = read_text(fs::path(FLATLAND_ASSET_DIR) / "scenes" / "butterfly-camera.yaml");
+  const auto at = scene.find("\n  exposure: ");
+  ASSERT_NE(at, std::string::npos);
+  scene.insert(at + 1, "  readout: interlaced\n");
+  const auto d = scene.find("\nduration: ");
+  ASSERT_NE(d, std::string::npos);
+  scene.replace(d + 1, scene.find('\n', d + 1) - d - 1, "duration: 1.0");
+  write_text(dir_ / "interlaced.yaml", scene);
+  const json j = run_json("study tracker --scene interlaced.yaml --quick --json --no-plot --out t");
+  EXPECT_EQ(j["readout"], "interlaced");
+  const double fps = j["camera"]["fps"].get<double>();
+  ASSERT_GE(j["exposures"].size(), 2u);
+  EXPECT_NEAR(j["exposures"].back()["exposure_s"].get<double>(), 0.5 / fps, 1e-12);
+  const Csv csv = read_csv(dir_ / "t" / "tracker.csv");
+  int edge_rows = 0;
+  for (std::size_t i = 0; i < csv.rows.size(); ++i) {
+    if (csv.rows[i].at("method") != "edge") continue;
+    ++edge_rows;
+    EXPECT_EQ(csv.num(i, "lost"), 0.0) << "row " << i;
+    EXPECT_LT(csv.num(i, "err_rms_px"), 0.1) << "row " << i;
+  }
+  EXPECT_GT(edge_rows, 0);
+}

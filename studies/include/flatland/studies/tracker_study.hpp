@@ -35,14 +35,15 @@ struct TrackerStudyMethod {
 /// frame of the camera's rate (quick: every third).
 struct TrackerStudyGrid {
   std::vector<TrackerStudyMethod> methods;
-  std::vector<double> noises;     ///< DN
-  std::vector<double> fractions;  ///< exposure, of the frame interval
+  std::vector<double> noises;  ///< DN
+  /// exposure, of the frame interval (an interlaced camera's: of the field interval)
+  std::vector<double> fractions;
   int stride = 1;
 };
 TrackerStudyGrid tracker_study_grid(bool quick);
 
 struct TrackerStudyBlur {
-  double fraction = 0;  ///< of the frame interval
+  double fraction = 0;  ///< of the frame interval (interlaced: of the field interval)
   double exposure = 0;  ///< s
   int subframes = 1;
   double px_mean = 0, px_max = 0;  ///< streak of the disk centre over the exposure
