@@ -297,15 +297,19 @@ class Renderer:
         self._native = _flatland.Renderer(_scene("model", model), _text("backend", backend, True),
                                           _number("duration", duration, True))
 
-    def render(self, t: Optional[float] = None, state: Optional[Dict[str, Any]] = None
-               ) -> Tuple[Optional[np.ndarray], Dict[str, Any]]:
+    def render(self, t: Optional[float] = None, state: Optional[Dict[str, Any]] = None,
+               mask: bool = False) -> Tuple[Optional[np.ndarray], Dict[str, Any]]:
         """(image, truth) at time ``t`` s of the run, or of ``state``, a dict with hand_angle
         (rad), disk_center ((x, y), m, table frame), disk_angle (rad) and optionally t. A
-        dropped frame's image is None."""
+        dropped frame's image is None. truth["t_state"] is when its positions hold (the disk
+        row's time under a rolling shutter). With ``mask``, truth["mask"] is the segmentation
+        mask, H x W uint8: 0 background, 1 table, 2 hand, 3 disk, 4 + i board i (planar
+        scenes)."""
         if (t is None) == (state is None):
             raise ValueError("render: give exactly one of t and state")
+        with_mask = _flag("mask", mask)
         if t is not None:
-            return self._native.render_at(_number("t", t))
+            return self._native.render_at(_number("t", t), with_mask)
         _mapping("state", state)
         unknown = set(state) - {"hand_angle", "disk_center", "disk_angle", "t"}
         if unknown:
@@ -320,7 +324,7 @@ class Renderer:
             (_number("state.disk_center[0]", center[0]),
              _number("state.disk_center[1]", center[1])),
             _number("state.disk_angle", state.get("disk_angle", 0.0)),
-            _number("state.t", state.get("t", 0.0)))
+            _number("state.t", state.get("t", 0.0)), with_mask)
 
     @property
     def camera(self) -> Dict[str, Any]:

@@ -62,6 +62,7 @@ py::dict truth_to_python(const render::FrameTruth& t) {
   d["disk_center_px"] = point(t.disk_center_px);
   d["marker_px"] = point(t.marker_px);
   d["dropped"] = t.dropped;
+  d["t_state"] = t.t_state;
   return d;
 }
 
@@ -99,9 +100,15 @@ class PyRenderer {
     renderer_ = std::make_unique<render::Renderer>(model::render_setup(*model_), gl);
   }
 
-  py::tuple render_at(double t) {
+  /// With `mask`, the truth holds the segmentation mask (H x W uint8 MaskId) under "mask".
+  py::tuple render_at(double t, bool mask) {
     if (!std::isfinite(t)) throw std::invalid_argument("t: must be a finite time, s");
-    if (spatial_) return render_spatial_at(t);
+    if (spatial_) {
+      if (mask) throw std::invalid_argument("mask: a spatial scene has no segmentation mask");
+      return render_spatial_at(t);
+    }
+    render::CaptureOptions capture_options;
+    capture_options.mask = mask;
     render::Frame frame = run_interruptible([&] {
       const std::lock_guard<std::mutex> lock(mutex_);
       if (!run_) {
@@ -115,15 +122,16 @@ class PyRenderer {
       if (t < t0 - 1e-12 || t > t1 + 1e-12)
         throw std::invalid_argument("t: outside the scene's run [" + sim::format_number(t0) + ", " +
                                     sim::format_number(t1) + "] s, got " + sim::format_number(t));
-      return renderer_->capture(run_->trajectory, t);
+      return renderer_->capture(run_->trajectory, t, capture_options);
     });
+    py::dict truth = truth_to_python(frame.truth);
+    if (mask && !frame.truth.dropped) truth["mask"] = image_to_numpy(frame.mask);
     return py::make_tuple(
-        frame.truth.dropped ? py::object(py::none()) : image_to_numpy(frame.image),
-        truth_to_python(frame.truth));
+        frame.truth.dropped ? py::object(py::none()) : image_to_numpy(frame.image), truth);
   }
 
   py::tuple render_state(double hand_angle, std::pair<double, double> disk_center,
-                         double disk_angle, double t) {
+                         double disk_angle, double t, bool mask) {
     if (spatial_)
       throw std::invalid_argument(
           "state: a planar scene's state (hand angle, disk centre); a spatial scene renders its "
@@ -135,15 +143,18 @@ class PyRenderer {
     state.disk_angle = disk_angle;
     for (double v : {hand_angle, disk_center.first, disk_center.second, disk_angle, t})
       if (!std::isfinite(v)) throw std::invalid_argument("state: every value must be finite");
-    cv::Mat image;
+    cv::Mat image, ids;
     render::FrameTruth truth;
     {
       py::gil_scoped_release release;
       const std::lock_guard<std::mutex> lock(mutex_);
       image = renderer_->render_8u(state);
       truth = renderer_->truth(state);
+      if (mask) ids = renderer_->render_mask(state);
     }
-    return py::make_tuple(image_to_numpy(image), truth_to_python(truth));
+    py::dict truth_dict = truth_to_python(truth);
+    if (mask) truth_dict["mask"] = image_to_numpy(ids);
+    return py::make_tuple(image_to_numpy(image), truth_dict);
   }
 
   /// The run's end: the scene's (or the duration's) until the run is made, then where it stopped.
@@ -512,9 +523,9 @@ void bind_camera(py::module_& m) {
   py::class_<PyRenderer>(m, "Renderer")
       .def(py::init<const py::object&, const std::optional<std::string>&, std::optional<double>>(),
            "model"_a, "backend"_a = py::none(), "duration"_a = py::none())
-      .def("render_at", &PyRenderer::render_at, "t"_a)
+      .def("render_at", &PyRenderer::render_at, "t"_a, "mask"_a = false)
       .def("render_state", &PyRenderer::render_state, "hand_angle"_a, "disk_center"_a,
-           "disk_angle"_a, "t"_a)
+           "disk_angle"_a, "t"_a, "mask"_a = false)
       .def_property_readonly("t_end", &PyRenderer::t_end)
       .def_property_readonly("gl", &PyRenderer::gl)
       .def_property_readonly("camera", &PyRenderer::camera);

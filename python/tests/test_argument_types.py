@@ -95,6 +95,7 @@ PUBLIC = {
         "model": "scene", "backend": "optional_text", "duration": "optional_number"}),
     "Renderer.render/t": (lambda: renderer().render, {}, {"t": "optional_number"}),
     "Renderer.render/state": (lambda: renderer().render, {}, {"state": "optional_dict"}),
+    "Renderer.render/mask": (lambda: renderer().render, {"t": 0.0}, {"mask": "flag"}),
     "Tracker": (lambda: flatland.Tracker, {}, {"model": "scene", "method": "optional_text"}),
     "Tracker.track": (lambda: tracker().track, {"frame": np.zeros((8, 8), np.uint8)},
                       {"frame": "array", "theta": "optional_number"}),

@@ -51,6 +51,32 @@ def test_a_state_renders_where_its_truth_projects():
     assert image[int(round(v)), int(round(u))].mean() > 128
 
 
+def test_the_mask_holds_the_disk_where_its_truth_projects():
+    # The disk's id fills the disk's projected circle (the overhead camera: radius
+    # r_px = 900 r / (1.2 - z) about the projected centre) to its rim's pixel: every pixel more
+    # than 1.5 px inside is the disk unless the hand (its top face 6 mm above the disk's) covers
+    # it, and none more than 1.5 px outside is.
+    renderer = flatland.Renderer(flatland.load(CAMERA))
+    for truth in (renderer.render(state={"hand_angle": 0.3, "disk_center": (0.05, 0.16)},
+                                  mask=True)[1],
+                  renderer.render(t=0.5, mask=True)[1]):
+        mask = truth["mask"]
+        assert mask.shape == (480, 640) and mask.dtype == np.uint8
+        assert set(np.unique(mask)) <= {0, 1, 2, 3}
+        assert {1, 2, 3} <= set(np.unique(mask))  # table, hand and disk all in view
+        u, v = truth["disk_center_px"]
+        r_px = 900 * 0.051 / (1.2 - truth["disk_center_table"][2])  # the scene's disk.radius
+        vs, us = np.mgrid[0:480, 0:640]
+        d = np.hypot(us - u, vs - v)
+        inside = mask[d < r_px - 1.5]
+        assert np.all((inside == 3) | (inside == 2))
+        assert np.count_nonzero(inside == 3) > 0.8 * inside.size
+        assert not np.any(mask[d > r_px + 1.5] == 3)
+        assert truth["t_state"] == truth["t"]  # a global shutter
+    _, plain = renderer.render(t=0.5)
+    assert "mask" not in plain
+
+
 def test_the_tracker_finds_the_disk_and_its_contact():
     model = flatland.load(CAMERA)
     renderer = flatland.Renderer(model)
