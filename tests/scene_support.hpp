@@ -4,10 +4,25 @@
 
 #include "flatland/scene/scene.hpp"
 
+#include <array>
 #include <cstdint>
 #include <numbers>
 
 namespace flatland_test {
+
+/// A 640 x 480 camera (f = 900 px, principal point at the centre) at `position`, looking
+/// straight down at the table point below it: the table and the disk's face are fronto-parallel.
+inline flatland::CameraSpec overhead_camera(const std::array<double, 3>& position) {
+  flatland::CameraSpec cam;
+  cam.width = 640;
+  cam.height = 480;
+  cam.fx = cam.fy = 900;
+  cam.cx = 319.5;
+  cam.cy = 239.5;
+  cam.position = position;
+  cam.look_at = {position[0], position[1], 0.0};
+  return cam;
+}
 
 /// `blur`: a full-frame exposure averaged over 8 sub-frames; `noise_dn`: read noise sigma.
 inline flatland::Scene air_table_experiment(double noise_dn, bool blur, std::uint64_t seed) {
@@ -16,14 +31,7 @@ inline flatland::Scene air_table_experiment(double noise_dn, bool blur, std::uin
   s.sim.motion.period = 4.0;
   s.sim.motion.k = -1.1395840;
   s.sim.duration = 4.0;
-  flatland::CameraSpec cam;
-  cam.width = 640;
-  cam.height = 480;
-  cam.fx = cam.fy = 900;
-  cam.cx = 319.5;
-  cam.cy = 239.5;
-  cam.position = {0.0, 0.0, 1.2};
-  cam.look_at = {0.0, 0.0, 0.0};
+  flatland::CameraSpec cam = overhead_camera({0.0, 0.0, 1.2});
   cam.fps = 30;
   cam.exposure = blur ? 1.0 / 30.0 : 0.0;
   s.camera = cam;

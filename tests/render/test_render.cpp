@@ -24,20 +24,7 @@ using namespace flatland::render;
 
 namespace {
 
-Scene overhead_scene(int supersample) {
-  Scene s;  // the paper's butterfly hand and disk
-  CameraSpec cam;
-  cam.width = 640;
-  cam.height = 480;
-  cam.fx = cam.fy = 900;
-  cam.cx = 319.5;
-  cam.cy = 239.5;
-  cam.position = {0.05, 0.08, 1.0};
-  cam.look_at = {0.05, 0.08, 0.0};  // looking straight down: the disk's face is fronto-parallel
-  s.camera = cam;
-  s.effects.supersample = supersample;
-  return s;
-}
+using flatland_test::overhead_scene;
 
 // Intensity centroid of the disk's bright face: weights are the excess over the table
 // (the dark O-ring and rubber side are clipped to zero), inside a window around the disk.
@@ -75,7 +62,8 @@ double corner_rms(const cv::Mat& bgr, const TargetSpec& board, const camera::Cam
     return -1;
   cv::cornerSubPix(gray, found, cv::Size(5, 5), cv::Size(-1, -1),
                    cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 100, 1e-4));
-  const std::vector<cv::Point2d> truth = cam.project(camera::corners_in_table(flatland::model::compile_target(board)));
+  const std::vector<cv::Point2d> truth =
+      cam.project(camera::corners_in_table(flatland::model::compile_target(board)));
   // OpenCV may report the grid from either end: match each truth corner to its nearest detection.
   double sum = 0;
   for (const cv::Point2d& t : truth) {

@@ -24,20 +24,10 @@ using namespace flatland::render;
 
 namespace {
 
-// Straight down from 1 m, as tests/render/test_render.cpp's overhead scene, with a lamp low and
+// The overhead scene (render_support.hpp) with a lamp low and
 // well off-axis so that the shadows are long.
 Scene lit_scene(int supersample) {
-  Scene s;  // the paper's butterfly hand and disk (radius 0.051 m)
-  CameraSpec cam;
-  cam.width = 640;
-  cam.height = 480;
-  cam.fx = cam.fy = 900;
-  cam.cx = 319.5;
-  cam.cy = 239.5;
-  cam.position = {0.05, 0.08, 1.0};
-  cam.look_at = {0.05, 0.08, 0.0};
-  s.camera = cam;
-  s.effects.supersample = supersample;
+  Scene s = flatland_test::overhead_scene(supersample);
   s.render.disk_thickness = 0.03;  // a tall disk: a shadow tens of pixels long
   LightingSpec lamp;
   lamp.position = {-0.15, 0.05, 0.6};

@@ -23,22 +23,7 @@ using namespace flatland::render;
 
 namespace {
 
-// Straight down from 1 m over (0.05, 0.08), as test_render.cpp's overhead scene.
-Scene overhead_scene(int supersample, double k1 = 0.0) {
-  Scene s;  // the paper's butterfly hand and disk (radius 0.051 m)
-  CameraSpec cam;
-  cam.width = 640;
-  cam.height = 480;
-  cam.fx = cam.fy = 900;
-  cam.cx = 319.5;
-  cam.cy = 239.5;
-  cam.distortion = {k1, 0, 0, 0, 0};
-  cam.position = {0.05, 0.08, 1.0};
-  cam.look_at = {0.05, 0.08, 0.0};
-  s.camera = cam;
-  s.effects.supersample = supersample;
-  return s;
-}
+using flatland_test::overhead_scene;
 
 // A fast world: the disk crosses the image at 0.6 m/s (540 px/s) and turns, the hand turns, so
 // that times a field or a few rows apart give different pixels.
