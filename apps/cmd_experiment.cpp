@@ -3,6 +3,7 @@
 // theta(t) and s_h(t) planned vs actual, optionally a video of what the loop saw and a recording.
 #include "common.hpp"
 
+#include "flatland/render/effects.hpp"
 #include "flatland/render/overlay_text.hpp"
 
 #include "flatland/control/choice.hpp"
@@ -73,14 +74,6 @@ struct KeptFrame {
   vision::TrackResult track;
   std::optional<double> s_meas;
 };
-
-cv::Mat to_bgr8(const cv::Mat& image) {
-  cv::Mat out = image;
-  if (out.depth() != CV_8U) out.convertTo(out, CV_8U);
-  if (out.channels() == 1) cv::cvtColor(out, out, cv::COLOR_GRAY2BGR);
-  if (out.channels() == 4) cv::cvtColor(out, out, cv::COLOR_BGRA2BGR);
-  return out;
-}
 
 /// --video overlay: time, stage, estimated and measured s_h, the tracked circle.
 void draw_overlay(cv::Mat& bgr, const KeptFrame& f, const drivers::TickLog* row) {
@@ -273,7 +266,7 @@ void run_experiment(const ExperimentOptions& o) {
     if (z) k.s_meas = z->s_h;
     // An unreadable frame keeps its place in the video as a black picture.
     const cv::Mat picture =
-        f.image.empty() ? cv::Mat(size, CV_8UC3, cv::Scalar::all(0)) : to_bgr8(f.image);
+        f.image.empty() ? cv::Mat(size, CV_8UC3, cv::Scalar::all(0)) : render::to_bgr8(f.image);
     if (!cv::imencode(".jpg", picture, k.jpeg, jpeg_params))
       throw std::runtime_error("--video: cannot encode frame " + std::to_string(f.index));
     kept.push_back(std::move(k));

@@ -6,6 +6,7 @@
 
 #include "flatland/model/compile.hpp"
 #include "flatland/model/model.hpp"
+#include "flatland/render/effects.hpp"
 #include "flatland/render/overlay_text.hpp"
 #include "flatland/render/renderer.hpp"
 #include "flatland/render/video_writer.hpp"
@@ -101,15 +102,6 @@ std::string encoder_csv(const sim::Trajectory& trajectory) {
     csv += format_number(t) + "," + format_number(trajectory.sample(t).theta) + "\n";
   }
   return csv;
-}
-
-/// The image as 8-bit BGR (a float image from effects.quantize = false is rounded and saturated).
-cv::Mat to_bgr8(const cv::Mat& image) {
-  cv::Mat out = image;
-  if (out.depth() != CV_8U) out.convertTo(out, CV_8U);
-  if (out.channels() == 1) cv::cvtColor(out, out, cv::COLOR_GRAY2BGR);
-  if (out.channels() == 4) cv::cvtColor(out, out, cv::COLOR_BGRA2BGR);
-  return out;
 }
 
 /// --overlay: time, s_h, the contact's mode and the hand's contact force on the frame. The force f
@@ -543,7 +535,7 @@ void run_render(const RenderOptions& o) {
         bar.update(i + 1, n);
         continue;
       }
-      cv::Mat bgr = to_bgr8(frame.image);
+      cv::Mat bgr = render::to_bgr8(frame.image);
       if (bgr.cols != size.width || bgr.rows != size.height)
         throw std::runtime_error("the renderer returned a " + std::to_string(bgr.cols) + " x " +
                                  std::to_string(bgr.rows) + " image for a " +

@@ -430,6 +430,14 @@ cv::Mat quantize(const cv::Mat& image_f32) {
   return out;
 }
 
+cv::Mat to_bgr8(const cv::Mat& image) {
+  cv::Mat out = image;
+  if (out.depth() != CV_8U) out.convertTo(out, CV_8U);
+  if (out.channels() == 1) cv::cvtColor(out, out, cv::COLOR_GRAY2BGR);
+  if (out.channels() == 4) cv::cvtColor(out, out, cv::COLOR_BGRA2BGR);
+  return out;
+}
+
 double jittered_time(double nominal, double sigma, EffectsRng& rng) {
   if (!(sigma >= 0) || !std::isfinite(sigma))
     fail("effects.jitter_s", "must be >= 0 and finite, got " + sim::format_significant(sigma, 9));

@@ -51,6 +51,9 @@ void apply_noise_8u(cv::Mat& image_u8, double read_sigma_dn, double shot_gain, E
 const float* gaussian_quantiles();
 /// Round and saturate to 8 bits.
 cv::Mat quantize(const cv::Mat& image_f32);
+/// Any frame as 8-bit BGR, as image files and videos take it: a float frame (effects.quantize
+/// false) rounded and saturated, grey or BGRA converted.
+cv::Mat to_bgr8(const cv::Mat& image);
 /// Capture time of frame i with timing jitter (sigma s), and whether it is dropped.
 double jittered_time(double nominal, double sigma, EffectsRng& rng);
 bool dropped(double probability, EffectsRng& rng);
