@@ -24,6 +24,7 @@ struct MonteCarloOptions {
   std::int64_t seed = 1;  // read signed: a negative seed is refused, not wrapped around
   std::vector<std::string> controllers = {"open-loop", "feedback"};
   unsigned threads = 0;
+  CLI::Option* threads_opt = nullptr;
   drivers::Perturbations p;
 };
 
@@ -181,16 +182,17 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
   for (const std::string& name : o.controllers)
     model::compile(drivers::scene_for_controller(scene, name, "--controller"));
 
-  const unsigned threads =
-      o.threads ? o.threads : std::max(1u, std::thread::hardware_concurrency());
+  const auto engine = make_sweep_engine(o.threads, o.threads_opt->count() > 0);
+  const unsigned threads = engine->threads();
+  rasterise_on_workers(*engine);
   const long experiments = static_cast<long>(o.n) * static_cast<long>(o.controllers.size());
   std::cerr << "flatland: " << o.n << " runs x " << o.controllers.size() << " controllers on "
-            << threads << " threads, seed " << o.seed << ", " << scene.origin << "\n";
+            << where_it_runs(*engine) << ", seed " << o.seed << ", " << scene.origin << "\n";
   drivers::MonteCarloResult r;
   {
     ProgressBar bar("montecarlo");
     r = drivers::run_montecarlo(*nominal, o.p, o.n, static_cast<std::uint64_t>(o.seed),
-                                drivers::controllers_by_name(o.controllers), threads,
+                                drivers::controllers_by_name(o.controllers), *engine,
                                 bar.callback());
   }
   const double per_second = r.seconds > 0 ? static_cast<double>(experiments) / r.seconds : 0;
@@ -240,6 +242,7 @@ void run_montecarlo_command(const MonteCarloOptions& o) {
   j["seconds"] = number(r.seconds);
   j["seed"] = o.seed;
   j["threads"] = threads;
+  j["ranks"] = engine->processes();
   j["controllers"] = o.controllers;
   j["scene"] = scene.origin;
 
@@ -299,9 +302,10 @@ Command add_montecarlo_command(CLI::App& app) {
              "controller.type; a type: that controller in feedback mode). Default: "
              "open-loop,feedback")
       ->delimiter(',');
-  cmd->add_option("--threads", o->threads,
-                  "Worker threads, each running whole experiments with its own GL context (0 = "
-                  "all cores). Results do not depend on it. Default: 0");
+  o->threads_opt = cmd->add_option(
+      "--threads", o->threads,
+      "Worker threads, each running whole experiments with its own GL context (0 = all cores). "
+      "Under mpirun: per rank, >= 1 (default 1). Results do not depend on it. Default: 0");
   const std::string g = "Perturbations (uniform +-half-widths around the scene's values)";
   const drivers::Perturbations d;
   const auto def = [](double v) { return " Default: " + format_number(v); };

@@ -293,6 +293,10 @@ void run_study(const StudyOptions& o) {
   if (!o.controllers.empty() && o.name != "closed-loop")
     throw UsageError("--controller: only the closed-loop study has a controller axis, not '" +
                      o.name + "'");
+  // The other studies measure speed and accuracy on one machine; only closed-loop is a sweep.
+  if (sweeps_on_mpi() && o.name != "closed-loop")
+    throw UsageError("study " + o.name +
+                     ": not a sweep; run it without mpirun or srun (under MPI: study closed-loop)");
   if (o.name == "sim") return run_sim_study(o);
   if (o.name == "calibration") return run_calibration_study(o);
   if (o.name == "render") return run_render_study(o);

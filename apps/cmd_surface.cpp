@@ -14,6 +14,7 @@ struct SurfaceOptions {
   CommonOptions common;
   double k_from = -1.6, k_to = -0.8, p_from = 0.8, p_to = 2.0;
   int nk = 50, np = 50, threads = 0;
+  CLI::Option* threads_opt = nullptr;
 };
 
 std::string surface_csv(const sim::SurfaceResult& s) {
@@ -58,12 +59,15 @@ void run_surface(const SurfaceOptions& o) {
   const bool plots = !dir.empty() && !o.common.no_plot;
   if (plots) require_gnuplot();
 
-  std::cerr << "flatland: s_h(T) on a " << o.nk << " x " << o.np << " grid (k x 2T)\n";
+  const auto engine =
+      make_sweep_engine(static_cast<unsigned>(o.threads), o.threads_opt->count() > 0);
+  std::cerr << "flatland: s_h(T) on a " << o.nk << " x " << o.np << " grid (k x 2T) on "
+            << where_it_runs(*engine) << "\n";
   const auto start = std::chrono::steady_clock::now();
   sim::SurfaceResult s;
   {
     ProgressBar bar("surface");
-    s = api::surface(spec, request, bar.callback());
+    s = api::surface(spec, request, bar.callback(), engine.get());
   }
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -149,11 +153,15 @@ Command add_surface_command(CLI::App& app) {
   cmd->add_option("--k-from", o->k_from, "Smallest k (dimensionless). Default: -1.6");
   cmd->add_option("--k-to", o->k_to,
                   "Largest k (> K-FROM; the range must not contain -2). Default: -0.8");
-  cmd->add_option("--nk", o->nk, "Grid points in k (2 to 10000; nk x np at most 1000000). Default: 50");
+  cmd->add_option("--nk", o->nk,
+                  "Grid points in k (2 to 10000; nk x np at most 1000000). Default: 50");
   cmd->add_option("--period-from", o->p_from, "Shortest duration 2T, s (> 0). Default: 0.8 s");
   cmd->add_option("--period-to", o->p_to, "Longest duration 2T, s (> PERIOD-FROM). Default: 2.0 s");
   cmd->add_option("--np", o->np, "Grid points in 2T (2 to 10000). Default: 50");
-  cmd->add_option("--threads", o->threads, "Worker threads (>= 0; 0 = all cores). Default: 0");
+  o->threads_opt = cmd->add_option(
+      "--threads", o->threads,
+      "Worker threads (>= 0; 0 = all cores; under mpirun: per rank, >= 1, default 1). Results do "
+      "not depend on it. Default: 0");
   return {cmd, [o] { run_surface(*o); }};
 }
 

@@ -3,6 +3,7 @@
 #include "common.hpp"
 
 #include <cstdio>
+#include <cstdlib>
 #include <iostream>
 #include <stdexcept>
 #include <string>
@@ -80,10 +81,17 @@ constexpr CommandInfo kCommands[] = {
 
 }  // namespace
 
+namespace {
+std::string g_last_failure;  // fail()'s last message (main's thread only)
+}  // namespace
+
+const std::string& last_failure() { return g_last_failure; }
+
 int fail(int code, const std::string& message) {
   std::string line = message;
   for (char& c : line)
     if (c == '\n' || c == '\r') c = ' ';
+  g_last_failure = line;
   std::cout.flush();
   std::fprintf(stderr, "flatland: error: %s\n", line.c_str());
   return code;
@@ -108,6 +116,18 @@ fs::path camera_program_path() {
     throw std::runtime_error("cannot locate the flatland program (/proc/self/exe): " +
                              ec.message());
   return self.parent_path().parent_path() / "libexec" / "flatland" / "flatland-camera";
+}
+
+fs::path mpi_program_path() { return camera_program_path().parent_path() / "flatland-mpi"; }
+
+bool launched_by_mpi() {
+  for (const char* name : {"OMPI_COMM_WORLD_SIZE", "PMIX_RANK", "PMI_RANK"})
+    if (const char* v = std::getenv(name); v && *v) return true;
+  return false;
+}
+
+bool is_sweep_command(const std::string& name) {
+  return name == "montecarlo" || name == "study" || name == "surface" || name == "locus";
 }
 
 int run_cli(int argc, char** argv, const std::map<std::string, AddCommand>& programs) {

@@ -58,10 +58,20 @@ int run_cli(int argc, char** argv, const std::map<std::string, AddCommand>& comm
 
 /// Print "flatland: error: MESSAGE" as one line on stderr (scripts grep it) and return `code`.
 int fail(int code, const std::string& message);
+/// The message of the last fail() (flatland-mpi sends a rank's to rank 0).
+const std::string& last_failure();
 
 /// flatland-camera, beside flatland in the installed layout (PREFIX/bin/flatland,
 /// PREFIX/libexec/flatland/flatland-camera) and in the build tree (build/bin,
 /// build/libexec/flatland).
 std::filesystem::path camera_program_path();
+/// flatland-mpi, beside flatland-camera (built when MPI was found).
+std::filesystem::path mpi_program_path();
+
+/// True if an MPI launcher started this process (Open MPI's mpirun; a PMIx or PMI-2 launcher
+/// such as Slurm's srun --mpi=pmix): the environment it leaves. No MPI library needed.
+bool launched_by_mpi();
+/// The commands that are sweeps of independent runs, which flatland-mpi spreads over the ranks.
+bool is_sweep_command(const std::string& name);
 
 }  // namespace flatland::app

@@ -15,6 +15,7 @@
 
 #include <fcntl.h>
 #include <glob.h>
+#include <sched.h>
 #include <signal.h>
 #include <spawn.h>
 #include <stdio.h>
@@ -122,18 +123,61 @@ extern "C" void on_interrupt(int sig) {
   errno = saved;
 }
 
+std::mutex g_explain_mutex;
+std::function<std::string(int)> g_explain;  // set_interrupt_explanation
+
 [[noreturn]] void interrupted(int sig) {
   const bool any = files::abandon_outputs([] {
     std::lock_guard lock(g_child_mutex);
     if (g_child > 0) ::kill(g_child, SIGTERM);
   });
-  std::fprintf(stderr, "\nflatland: error: interrupted by %s%s\n",
-               sig == SIGINT ? "SIGINT" : "SIGTERM", any ? "; partial outputs removed" : "");
+  std::string why;
+  {
+    std::lock_guard lock(g_explain_mutex);
+    if (g_explain) why = g_explain(sig);
+  }
+  std::fprintf(stderr, "\nflatland: error: interrupted by %s%s%s%s\n",
+               sig == SIGINT ? "SIGINT" : "SIGTERM", why.empty() ? "" : ": ", why.c_str(),
+               any ? "; partial outputs removed" : "; nothing written");
   std::fflush(stderr);
   ::_exit(128 + sig);
 }
 
 }  // namespace
+
+void set_interrupt_explanation(std::function<std::string(int signal)> explain) {
+  std::lock_guard lock(g_explain_mutex);
+  g_explain = std::move(explain);
+}
+
+namespace {
+SweepFactory g_sweep_factory;  // set once by flatland-mpi's main, before any thread
+}  // namespace
+
+void set_sweep_factory(SweepFactory factory) { g_sweep_factory = std::move(factory); }
+
+std::shared_ptr<const sim::SweepEngine> make_sweep_engine(unsigned threads, bool threads_given) {
+  if (g_sweep_factory) return g_sweep_factory(threads, threads_given);
+  return std::make_shared<const sim::ThreadSweep>(threads);
+}
+
+void rasterise_on_workers(const sim::SweepEngine& engine) {
+  if (std::getenv("LP_NUM_THREADS")) return;  // the user's choice
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  const int cores = ::sched_getaffinity(0, sizeof set, &set) == 0 ? CPU_COUNT(&set) : 1;
+  if (engine.processes() > 1 || static_cast<int>(engine.threads()) >= cores)
+    ::setenv("LP_NUM_THREADS", "0", 0);  // read by Mesa when it creates a context
+}
+
+bool sweeps_on_mpi() { return static_cast<bool>(g_sweep_factory); }
+
+std::string where_it_runs(const sim::SweepEngine& engine) {
+  const std::string threads =
+      std::to_string(engine.threads()) + (engine.threads() == 1 ? " thread" : " threads");
+  if (engine.processes() == 1) return threads;
+  return std::to_string(engine.processes()) + " ranks x " + threads;
+}
 
 void install_interrupt_handler() {
   if (g_signal_pipe[0] >= 0) return;

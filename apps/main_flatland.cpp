@@ -16,6 +16,21 @@
 
 int main(int argc, char** argv) {
   using namespace flatland::app;
+  // Started by mpirun or srun: every command runs in flatland-mpi, which refuses the ones that
+  // are not sweeps. Without a launcher nothing here loads MPI.
+  if (launched_by_mpi()) {
+    std::string program;
+    try {
+      program = mpi_program_path().string();
+    } catch (const std::exception& e) {
+      return fail(1, e.what());
+    }
+    ::execv(program.c_str(), argv);
+    return fail(1, "started by an MPI launcher, but flatland-mpi could not be started (" + program +
+                       ": " + std::strerror(errno) +
+                       "); this flatland was built without MPI: apt-get install libopenmpi-dev "
+                       "and build again (docs/CLUSTER.md)");
+  }
   if (argc > 1) {
     for (const CommandInfo& c : command_table()) {
       if (!c.camera_stack || std::strcmp(argv[1], c.name) != 0) continue;

@@ -112,7 +112,7 @@ std::string plot_body(const studies::ClosedLoopGrid& grid, int n) {
                "f_n min / (m g sin tilt)", 15, "", false, 16) +
          "set logscale y\n" +
          panel("estimate error in the servo stage", "RMS error of s_h", 18, "", false) +
-         panel("cost per experiment", "CPU s per experiment (process, all threads)", 22,
+         panel("cost per experiment", "CPU s per experiment (its thread)", 22,
                "1.0 / " + std::to_string(n) + " * ", false) +
          "unset multiplot\n";
 }
@@ -148,21 +148,22 @@ void run_closed_loop_study(const StudyOptions& o) {
 
   const int n = grid.runs_per_cell;
   const std::uint64_t seed = studies::kClosedLoopSeed;
-  studies::ClosedLoopStudyOptions so;
-  so.threads = std::max(1u, std::thread::hardware_concurrency());
+  // Every core (no --threads: the experiments are whole and independent); under MPI, one
+  // thread per rank.
+  const auto engine = make_sweep_engine(0, false);
+  rasterise_on_workers(*engine);
   std::string axis;
   for (const std::string& c : controllers) axis += (axis.empty() ? "" : ", ") + c;
   std::cerr << "flatland: study closed-loop: " << grid.cells.size() << " cells ("
             << controllers.size() << " controllers (" << axis << ") x " << grid.rates.size()
             << " rates x " << grid.latencies.size() << " latencies"
             << (grid.open_loop_baseline ? "; open-loop baseline" : "") << ") x " << n
-            << " worlds (seed " << seed << ") on " << so.threads << " threads, " << scene.origin
+            << " worlds (seed " << seed << ") on " << where_it_runs(*engine) << ", " << scene.origin
             << "\n";
   studies::ClosedLoopStudyResult study;
   {
     ProgressBar bar("study closed-loop");
-    so.progress = bar.callback();
-    study = studies::run_closed_loop_study(*nominal, grid, so);
+    study = studies::run_closed_loop_study(*nominal, grid, *engine, bar.callback());
   }
   const std::vector<double>& rates = grid.rates;
   const std::vector<double>& latencies = grid.latencies;
@@ -190,6 +191,7 @@ void run_closed_loop_study(const StudyOptions& o) {
   for (const studies::ClosedLoopCellResult& c : study.cells) rows.push_back(cell_json(c, n));
   j["rows"] = rows;
   j["threads"] = study.threads;
+  j["ranks"] = study.processes;
   j["seconds"] = study.seconds;
   j["cpu_seconds"] = study.cpu_seconds;
 

@@ -17,9 +17,10 @@ set(FLATLAND_LAYERS
   "control:sim"
   "identify:sim"
   "drivers:control,vision,render,calibration,model,scene,camera,sim,files"
-  "studies:drivers,control,vision,render,calibration,model,scene,camera,sim,files")
+  "studies:drivers,control,vision,render,calibration,model,scene,camera,sim,files"
+  "cluster:sim")
 # Modules whose headers must not include flatland/scene, flatland/model or flatland/render.
-set(FLATLAND_BELOW_MODEL files sim camera vision calibration control identify)
+set(FLATLAND_BELOW_MODEL files sim camera vision calibration control identify cluster)
 # Modules that read the scene's sections but sit below the compiled Model: no flatland/model.
 set(FLATLAND_BELOW_MODEL_WITH_SCENE render api)
 
@@ -60,6 +61,9 @@ function(flatland_check_layers)
     if(n GREATER 1)
       list(GET parts 1 allowed)
       string(REPLACE "," ";" allowed "${allowed}")
+    endif()
+    if(NOT TARGET flatland_${module})
+      continue()  # an optional module not built here (cluster without MPI)
     endif()
     flatland_module_closure(flatland_${module} reached)
     foreach(other ${reached})

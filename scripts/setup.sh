@@ -30,6 +30,7 @@ packages=(
   libopencv-dev libavutil-dev libavcodec-dev libavformat-dev libswscale-dev libosmesa6-dev mesa-common-dev libegl-dev libegl-mesa0 ffmpeg
   libceres-dev libboost-dev
   clang libclang-rt-14-dev
+  openmpi-bin libopenmpi-dev python3-mpi4py
 )
 
 missing=()

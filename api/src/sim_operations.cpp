@@ -361,7 +361,10 @@ sim::SimulationSpec prepare_surface(Scene scene, const SurfaceRequest& r, Spelli
 }
 
 sim::SurfaceResult surface(const sim::SimulationSpec& spec, const SurfaceRequest& r,
-                           const sim::Progress& progress) {
+                           const sim::Progress& progress, const sim::SweepEngine* engine) {
+  if (engine)
+    return sim::surface(spec, r.k_from, r.k_to, r.nk, r.period_from, r.period_to, r.np, *engine,
+                        progress);
   return sim::surface(spec, r.k_from, r.k_to, r.nk, r.period_from, r.period_to, r.np, r.threads,
                       progress);
 }

@@ -157,6 +157,61 @@ MonteCarloResult run_montecarlo(const model::Model& nominal_model, const Perturb
                                 const std::vector<MonteCarloController>& controllers,
                                 unsigned threads, const MonteCarloProgress& progress,
                                 const WorldEdit& edit) {
+  return run_montecarlo(nominal_model, p, n, seed, controllers, sim::ThreadSweep(threads), progress,
+                        edit);
+}
+
+sim::ItemCodec records_codec(std::vector<RunRecord>& records) {
+  sim::ItemCodec codec;
+  codec.pack = [&records](long i, sim::ByteWriter& w) {
+    const RunRecord& r = records[static_cast<std::size_t>(i)];
+    w.put(r.run);
+    w.put(r.seed);
+    w.put(r.controller);
+    w.put(r.success);
+    w.put(r.outcome);
+    w.put(r.failure);
+    for (double v : {r.slide_s, r.flight_s}) w.put(v);
+    w.put(r.impacts);
+    for (double v : {r.duration_s, r.s_end, r.fn_min_ratio, r.mu_max}) w.put(v);
+    w.put(r.safe_stop);
+    w.put(r.frames);
+    w.put(r.frames_lost);
+    static_assert(std::is_trivially_copyable_v<DrawnPerturbation>);
+    w.put(r.drawn);
+    w.put(r.stop_cause);
+    w.put(r.mu);
+  };
+  codec.unpack = [&records](long i, sim::ByteReader& in) {
+    RunRecord& r = records[static_cast<std::size_t>(i)];
+    in.get(r.run);
+    in.get(r.seed);
+    in.get(r.controller);
+    in.get(r.success);
+    in.get(r.outcome);
+    in.get(r.failure);
+    in.get(r.slide_s);
+    in.get(r.flight_s);
+    in.get(r.impacts);
+    in.get(r.duration_s);
+    in.get(r.s_end);
+    in.get(r.fn_min_ratio);
+    in.get(r.mu_max);
+    in.get(r.safe_stop);
+    in.get(r.frames);
+    in.get(r.frames_lost);
+    in.get(r.drawn);
+    in.get(r.stop_cause);
+    in.get(r.mu);
+  };
+  return codec;
+}
+
+MonteCarloResult run_montecarlo(const model::Model& nominal_model, const Perturbations& p, int n,
+                                std::uint64_t seed,
+                                const std::vector<MonteCarloController>& controllers,
+                                const sim::SweepEngine& engine, const MonteCarloProgress& progress,
+                                const WorldEdit& edit) {
   const Scene& nominal = nominal_model.spec;
   validate(p);
   if (n < 1) throw std::invalid_argument("run_montecarlo: n must be >= 1");
@@ -186,10 +241,15 @@ MonteCarloResult run_montecarlo(const model::Model& nominal_model, const Perturb
   out.runs = n;
   out.records.resize(static_cast<std::size_t>(total));
 
+  sim::ItemCodec codec = records_codec(out.records);
+  codec.describe = [&](long job) {
+    return "run " + std::to_string(job / static_cast<long>(nc)) + " (seed " + std::to_string(seed) +
+           ") under " + controllers[static_cast<std::size_t>(job % static_cast<long>(nc))].name;
+  };
   const auto start = std::chrono::steady_clock::now();
   // Experiment `job` is run job / nc under controller job % nc, whichever thread takes it.
-  sim::parallel_for(
-      total, threads,
+  engine.run(
+      total,
       [&](long job) {
         const int run = static_cast<int>(job / static_cast<long>(nc));
         const std::size_t ci = static_cast<std::size_t>(job % static_cast<long>(nc));
@@ -235,6 +295,7 @@ MonteCarloResult run_montecarlo(const model::Model& nominal_model, const Perturb
         rec.frames_lost = r.loop.frames_lost;
         out.records[static_cast<std::size_t>(job)] = std::move(rec);
       },
+      codec,
       [&](long finished) {
         if (progress) progress(finished, total);
       });

@@ -48,3 +48,15 @@ void parallel_for(long n, unsigned threads, const std::function<void(long i)>& b
 }
 
 }  // namespace flatland::sim
+
+namespace flatland::sim {
+
+ThreadSweep::ThreadSweep(unsigned threads)
+    : threads_(threads ? threads : std::max(1u, std::thread::hardware_concurrency())) {}
+
+void ThreadSweep::run(long n, const std::function<void(long i)>& body, const ItemCodec&,
+                      const std::function<void(long finished)>& done) const {
+  parallel_for(n, threads_, body, done);
+}
+
+}  // namespace flatland::sim

@@ -364,6 +364,13 @@ std::vector<SolveReport> locus(const SimulationSpec& spec, double from, double t
 
 SurfaceResult surface(const SimulationSpec& spec, double k_lo, double k_hi, int nk, double p_lo,
                       double p_hi, int np, int threads, const Progress& progress) {
+  if (threads < 0) throw std::invalid_argument("surface: threads must be >= 0");
+  return surface(spec, k_lo, k_hi, nk, p_lo, p_hi, np, ThreadSweep(static_cast<unsigned>(threads)),
+                 progress);
+}
+
+SurfaceResult surface(const SimulationSpec& spec, double k_lo, double k_hi, int nk, double p_lo,
+                      double p_hi, int np, const SweepEngine& engine, const Progress& progress) {
   if (nk < 2 || np < 2) throw std::invalid_argument("surface: nk and np must be at least 2");
   if (!(k_hi > k_lo) || !std::isfinite(k_lo) || !std::isfinite(k_hi))
     throw std::invalid_argument("k-to: must be larger than k-from");
@@ -380,26 +387,39 @@ SurfaceResult surface(const SimulationSpec& spec, double k_lo, double k_hi, int 
   for (int j = 0; j < np; ++j) res.period.push_back(p_lo + (p_hi - p_lo) * j / (np - 1));
   res.s_T.assign(static_cast<std::size_t>(nk) * np, kNaN);
   const long total = static_cast<long>(nk) * np;
-  std::atomic<long> rhs{0};
+  std::vector<long> evals(static_cast<std::size_t>(total), 0);
   std::vector<std::string> failures(static_cast<std::size_t>(total));
+  sim::ItemCodec codec;
+  codec.pack = [&](long idx, ByteWriter& w) {
+    const auto u = static_cast<std::size_t>(idx);
+    w.put(res.s_T[u]);
+    w.put(evals[u]);
+    w.put(failures[u]);
+  };
+  codec.unpack = [&](long idx, ByteReader& in) {
+    const auto u = static_cast<std::size_t>(idx);
+    in.get(res.s_T[u]);
+    in.get(evals[u]);
+    in.get(failures[u]);
+  };
   try {
-    parallel_for(
-        total, threads > 0 ? static_cast<unsigned>(threads) : 0u,
+    engine.run(
+        total,
         [&](long idx) {
           const int i = static_cast<int>(idx / np), j = static_cast<int>(idx % np);
-          long evals = 0;
+          const auto u = static_cast<std::size_t>(idx);
           // A point whose run fails numerically stays NaN and is reported; the grid goes on.
-          res.s_T[idx] = s_at_half_period(base, s, res.period[j], res.k[i], &evals,
-                                          &failures[static_cast<std::size_t>(idx)], true);
-          rhs += evals;
+          res.s_T[u] =
+              s_at_half_period(base, s, res.period[j], res.k[i], &evals[u], &failures[u], true);
         },
+        codec,
         [&](long finished) {
           if (progress) progress(finished, total);
         });
   } catch (const std::exception& e) {
     throw std::runtime_error(std::string("surface: ") + e.what());
   }
-  res.rhs_evals = rhs;
+  for (long e : evals) res.rhs_evals += e;
   for (long idx = 0; idx < total; ++idx)
     if (!failures[static_cast<std::size_t>(idx)].empty())
       res.numerical_failures.push_back({static_cast<int>(idx / np), static_cast<int>(idx % np),

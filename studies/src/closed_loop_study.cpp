@@ -9,7 +9,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <ctime>
 #include <functional>
+#include <memory>
 #include <stdexcept>
 #include <thread>
 
@@ -111,59 +113,102 @@ std::vector<double> with_value(std::vector<double> v, double extra) {
   return v;
 }
 
-/// Run the cell's `n` worlds on `threads` threads (each experiment owns its renderer and GL
-/// context). Run i's world is perturb(assumed, p, kSeed, i) in every cell. An exception in any
-/// run stops the others and is rethrown (a failed experiment is a result, not an exception).
-CellResult run_cell(const Scene& nominal, const Cell& cell, int n, unsigned threads,
-                    const std::function<void()>& tick) {
-  CellResult out;
-  out.cell = cell;
-  const Scene camera = camera_scene(nominal, cell);
-  const Scene assumed = cell_scene(nominal, cell);
-  drivers::Perturbations p;
-  p.latency = cell.latency;
-  p.latency_jitter = cell.jitter;
-  const drivers::LoopSetup setup(model::compile(assumed));
-  out.runs.resize(static_cast<std::size_t>(n));
+/// Thread CPU time (s) of the calling thread: what one experiment cost, whichever thread or
+/// rank ran it.
+double thread_cpu_now() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
 
+/// What a cell's worlds share: the scene its worlds are perturbed from, the loop it runs.
+struct CellPlan {
+  Scene camera;
+  drivers::Perturbations perturbations;
+  std::unique_ptr<const drivers::LoopSetup> setup;
+};
+
+CellPlan plan_cell(const Scene& nominal, const Cell& cell) {
+  CellPlan plan;
+  plan.camera = camera_scene(nominal, cell);
+  plan.perturbations.latency = cell.latency;
+  plan.perturbations.latency_jitter = cell.jitter;
+  plan.setup =
+      std::make_unique<const drivers::LoopSetup>(model::compile(cell_scene(nominal, cell)));
+  return plan;
+}
+
+/// Run `run` of a cell: its world is perturb(camera, p, kSeed, run) in every cell. A failed
+/// experiment is a result, not an exception.
+RunSummary run_world(const CellPlan& plan, int run) {
+  RunSummary s;
   const auto wall0 = std::chrono::steady_clock::now();
-  const double cpu0 = cpu_now();
-  sim::parallel_for(
-      n, std::max(1u, threads),
-      [&](long index) {
-        const int run = static_cast<int>(index);
-        RunSummary s;
-        drivers::SyntheticResult r;
-        try {
-          r = drivers::run_synthetic(setup,
-                                     drivers::compile_world(camera, p, kSeed, run, &s.drawn));
-        } catch (const drivers::InvalidWorld&) {
-          // A draw that cannot exist is no world: recorded, not counted, and the study goes on.
-          s.outcome = drivers::Outcome::kInvalidWorld;
-          out.runs[static_cast<std::size_t>(run)] = std::move(s);
-          return;
-        } catch (const std::runtime_error&) {
-          // A world whose simulation fails is recorded and the study goes on (counted apart).
-          s.outcome = drivers::Outcome::kNumericalFailure;
-          out.runs[static_cast<std::size_t>(run)] = std::move(s);
-          return;
-        }
-        s.success = r.success;
-        s.outcome = r.outcome;
-        if (r.loop.stop_reason) s.stop_cause = r.loop.stop_reason->cause;
-        s.fn_min = r.fn_min_ratio;
-        s.duration = r.success ? r.loop.duration_s : NAN;
-        const ServoStats servo = servo_stats(r.loop);
-        s.est_rms = servo.err_rms;
-        s.nees = servo.nees;
-        s.frames = r.loop.frames;
-        s.frames_lost = r.loop.frames_lost;
-        out.runs[static_cast<std::size_t>(run)] = std::move(s);
-      },
-      [&](long) { tick(); });
-  out.cpu = cpu_now() - cpu0;
-  out.wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
+  const double cpu0 = thread_cpu_now();
+  const auto finish = [&] {
+    s.cpu = thread_cpu_now() - cpu0;
+    s.wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
+  };
+  drivers::SyntheticResult r;
+  try {
+    r = drivers::run_synthetic(
+        *plan.setup, drivers::compile_world(plan.camera, plan.perturbations, kSeed, run, &s.drawn));
+  } catch (const drivers::InvalidWorld&) {
+    // A draw that cannot exist is no world: recorded, not counted, and the study goes on.
+    s.outcome = drivers::Outcome::kInvalidWorld;
+    finish();
+    return s;
+  } catch (const std::runtime_error&) {
+    // A world whose simulation fails is recorded and the study goes on (counted apart).
+    s.outcome = drivers::Outcome::kNumericalFailure;
+    finish();
+    return s;
+  }
+  s.success = r.success;
+  s.outcome = r.outcome;
+  if (r.loop.stop_reason) s.stop_cause = r.loop.stop_reason->cause;
+  s.fn_min = r.fn_min_ratio;
+  s.duration = r.success ? r.loop.duration_s : NAN;
+  const ServoStats servo = servo_stats(r.loop);
+  s.est_rms = servo.err_rms;
+  s.nees = servo.nees;
+  s.frames = r.loop.frames;
+  s.frames_lost = r.loop.frames_lost;
+  finish();
+  return s;
+}
 
+/// Each run of `cells` (cell i's run j is item i * n + j) as bytes and back, exactly.
+sim::ItemCodec runs_codec(std::vector<CellResult>& cells, int n) {
+  const auto slot = [&cells, n](long item) -> RunSummary& {
+    return cells[static_cast<std::size_t>(item / n)].runs[static_cast<std::size_t>(item % n)];
+  };
+  sim::ItemCodec codec;
+  codec.pack = [slot](long item, sim::ByteWriter& w) {
+    const RunSummary& r = slot(item);
+    w.put(r.success);
+    w.put(r.outcome);
+    w.put(r.stop_cause);
+    for (double v : {r.fn_min, r.duration, r.est_rms, r.nees, r.wall, r.cpu}) w.put(v);
+    w.put(r.frames);
+    w.put(r.frames_lost);
+    w.put(r.drawn);
+  };
+  codec.unpack = [slot](long item, sim::ByteReader& in) {
+    RunSummary& r = slot(item);
+    in.get(r.success);
+    in.get(r.outcome);
+    in.get(r.stop_cause);
+    for (double* v : {&r.fn_min, &r.duration, &r.est_rms, &r.nees, &r.wall, &r.cpu}) in.get(*v);
+    in.get(r.frames);
+    in.get(r.frames_lost);
+    in.get(r.drawn);
+  };
+  return codec;
+}
+
+/// A cell's tallies from its runs.
+void summarize_cell(CellResult& out) {
+  const int n = static_cast<int>(out.runs.size());
   long frames = 0, lost = 0;
   for (const RunSummary& r : out.runs) {
     if (r.success)
@@ -176,6 +221,8 @@ CellResult run_cell(const Scene& nominal, const Cell& cell, int n, unsigned thre
       ++out.failures[failure_class(r)];
     frames += r.frames;
     lost += r.frames_lost;
+    out.wall += r.wall;
+    out.cpu += r.cpu;
     if (r.success && std::isfinite(r.fn_min))
       out.fn_min_min = std::isnan(out.fn_min_min) ? r.fn_min : std::min(out.fn_min_min, r.fn_min);
   }
@@ -186,7 +233,6 @@ CellResult run_cell(const Scene& nominal, const Cell& cell, int n, unsigned thre
   out.est_rms = mean_finite(out.runs, &RunSummary::est_rms);
   out.nees = mean_finite(out.runs, &RunSummary::nees);
   out.frames_lost_fraction = frames ? static_cast<double>(lost) / static_cast<double>(frames) : NAN;
-  return out;
 }
 
 std::string csv_header() {
@@ -289,22 +335,46 @@ ClosedLoopGrid closed_loop_grid(const model::Model& nominal, bool quick,
 
 ClosedLoopStudyResult run_closed_loop_study(const model::Model& nominal, const ClosedLoopGrid& grid,
                                             const ClosedLoopStudyOptions& options) {
+  const sim::ThreadSweep threads(options.threads);
+  return run_closed_loop_study(nominal, grid, options.engine ? *options.engine : threads,
+                               options.progress);
+}
+
+ClosedLoopStudyResult run_closed_loop_study(const model::Model& nominal, const ClosedLoopGrid& grid,
+                                            const sim::SweepEngine& engine,
+                                            const sim::Progress& progress) {
   ClosedLoopStudyResult out;
   out.grid = grid;
-  out.threads =
-      options.threads ? options.threads : std::max(1u, std::thread::hardware_concurrency());
+  out.threads = engine.threads();
+  out.processes = engine.processes();
   const int n = out.grid.runs_per_cell;
   const long total = static_cast<long>(out.grid.cells.size()) * n;
+  std::vector<CellPlan> plans;
+  for (const Cell& c : out.grid.cells) {
+    plans.push_back(plan_cell(nominal.spec, c));
+    CellResult cell;
+    cell.cell = c;
+    cell.runs.resize(static_cast<std::size_t>(n));
+    out.cells.push_back(std::move(cell));
+  }
   const auto wall0 = std::chrono::steady_clock::now();
   const double cpu0 = cpu_now();
-  long done = 0;
-  for (const Cell& c : out.grid.cells)
-    out.cells.push_back(run_cell(nominal.spec, c, n, out.threads, [&] {
-      ++done;
-      if (options.progress) options.progress(done, total);
-    }));
+  // One sweep over every cell's worlds (item i * n + j is cell i's run j), so that the threads
+  // and ranks stay busy across cells instead of waiting for each cell's slowest world.
+  engine.run(
+      total,
+      [&](long item) {
+        const auto cell = static_cast<std::size_t>(item / n);
+        out.cells[cell].runs[static_cast<std::size_t>(item % n)] =
+            run_world(plans[cell], static_cast<int>(item % n));
+      },
+      runs_codec(out.cells, n),
+      [&](long finished) {
+        if (progress) progress(finished, total);
+      });
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
   out.cpu_seconds = cpu_now() - cpu0;
+  for (CellResult& c : out.cells) summarize_cell(c);
   return out;
 }
 

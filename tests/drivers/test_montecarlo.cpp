@@ -353,3 +353,70 @@ TEST(MonteCarloPerturb, ARingKeepsItsProportionsAndTheRailsTheirGap) {
     EXPECT_EQ(*b.sim.object.rail_gap, 0.08);
   }
 }
+
+namespace {
+
+// A record travels from the rank that ran it to rank 0 as bytes (docs/CLUSTER.md): every field
+// must come back exactly, or the outputs of an MPI run would differ from one process's.
+TEST(MonteCarloRecords, EveryFieldComesBackFromItsBytes) {
+  using flatland::drivers::RunRecord;
+  std::vector<RunRecord> sent(2);
+  RunRecord& r = sent[1];
+  r.run = 17;
+  r.seed = 0xfedcba9876543210ULL;
+  r.controller = "feedback";
+  r.success = true;
+  r.outcome = flatland::drivers::Outcome::kSafeStop;
+  r.failure = "lost the disk\nat 1.2 s";
+  r.slide_s = 0.125;
+  r.flight_s = 1.0 / 3.0;
+  r.impacts = 4;
+  r.duration_s = 4.2378;
+  r.s_end = 0.9123456789;
+  r.fn_min_ratio = -0.0;
+  r.mu_max = NAN;
+  r.safe_stop = true;
+  r.frames = 123456789012L;
+  r.frames_lost = 7;
+  r.drawn = {0.01, 5.1, 0.0254, 1.05, 99, 0.97, 1.2};
+  r.stop_cause = flatland::control::StopCause::kTracking;
+  r.mu = 0.4;
+  std::string bytes;
+  flatland::sim::ByteWriter w(bytes);
+  flatland::drivers::records_codec(sent).pack(1, w);
+
+  std::vector<RunRecord> got(2);
+  flatland::sim::ByteReader in(bytes);
+  flatland::drivers::records_codec(got).unpack(1, in);
+  EXPECT_TRUE(in.at_end());
+  const RunRecord& g = got[1];
+  EXPECT_EQ(g.run, r.run);
+  EXPECT_EQ(g.seed, r.seed);
+  EXPECT_EQ(g.controller, r.controller);
+  EXPECT_EQ(g.success, r.success);
+  EXPECT_EQ(g.outcome, r.outcome);
+  EXPECT_EQ(g.failure, r.failure);
+  EXPECT_EQ(g.slide_s, r.slide_s);
+  EXPECT_EQ(g.flight_s, r.flight_s);
+  EXPECT_EQ(g.impacts, r.impacts);
+  EXPECT_EQ(g.duration_s, r.duration_s);
+  EXPECT_EQ(g.s_end, r.s_end);
+  EXPECT_TRUE(std::signbit(g.fn_min_ratio));
+  EXPECT_TRUE(std::isnan(g.mu_max));
+  EXPECT_EQ(g.safe_stop, r.safe_stop);
+  EXPECT_EQ(g.frames, r.frames);
+  EXPECT_EQ(g.frames_lost, r.frames_lost);
+  EXPECT_EQ(g.drawn.s_h0, r.drawn.s_h0);
+  EXPECT_EQ(g.drawn.tilt_deg, r.drawn.tilt_deg);
+  EXPECT_EQ(g.drawn.radius, r.drawn.radius);
+  EXPECT_EQ(g.drawn.friction_scale, r.drawn.friction_scale);
+  EXPECT_EQ(g.drawn.effects_seed, r.drawn.effects_seed);
+  EXPECT_EQ(g.drawn.mu_scale, r.drawn.mu_scale);
+  EXPECT_EQ(g.drawn.loss_scale, r.drawn.loss_scale);
+  EXPECT_EQ(g.stop_cause, r.stop_cause);
+  EXPECT_EQ(g.mu, r.mu);
+  // Slot 0 was not sent: untouched.
+  EXPECT_EQ(got[0].controller, "");
+}
+
+}  // namespace

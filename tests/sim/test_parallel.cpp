@@ -6,8 +6,13 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <optional>
 #include <set>
 #include <stdexcept>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -80,6 +85,82 @@ TEST(ParallelFor, NoItemsMeansNoCalls) {
       0, 4, [&](long) { called = true; }, [&](long) { called = true; });
   parallel_for(-3, 4, [&](long) { called = true; });
   EXPECT_FALSE(called);
+}
+
+}  // namespace
+
+namespace {
+
+using flatland::sim::ByteReader;
+using flatland::sim::ByteWriter;
+
+TEST(ItemBytes, ValuesComeBackBitForBit) {
+  // A NaN with a payload, -0, the extremes: what a result slot holds must survive the trip.
+  double payload_nan = 0;
+  const std::uint64_t bits = 0x7ff8000000abcdefULL;
+  std::memcpy(&payload_nan, &bits, sizeof bits);
+  const std::vector<double> doubles = {payload_nan,
+                                       -0.0,
+                                       std::numeric_limits<double>::infinity(),
+                                       std::numeric_limits<double>::denorm_min(),
+                                       1.0 / 3.0,
+                                       -std::numeric_limits<double>::max()};
+  const std::string text("a\0b\nc", 5);
+  const std::optional<int> some = -7, none;
+  std::string bytes;
+  ByteWriter w(bytes);
+  for (double d : doubles) w.put(d);
+  w.put(text);
+  w.put(some);
+  w.put(none);
+  w.put(std::int64_t{-1234567890123});
+
+  ByteReader r(bytes);
+  for (double d : doubles) {
+    double back = 1;
+    r.get(back);
+    EXPECT_EQ(std::memcmp(&back, &d, sizeof d), 0);
+  }
+  std::string text_back;
+  r.get(text_back);
+  EXPECT_EQ(text_back, text);
+  std::optional<int> some_back, none_back = 3;
+  r.get(some_back);
+  r.get(none_back);
+  EXPECT_EQ(some_back, some);
+  EXPECT_FALSE(none_back.has_value());
+  std::int64_t big = 0;
+  r.get(big);
+  EXPECT_EQ(big, -1234567890123);
+  EXPECT_TRUE(r.at_end());
+}
+
+TEST(ItemBytes, AShortSlotIsAnErrorNotGarbage) {
+  std::string bytes;
+  ByteWriter w(bytes);
+  w.put(std::string(10, 'x'));
+  bytes.resize(bytes.size() - 1);  // a slot cut short
+  ByteReader r(bytes);
+  std::string s;
+  EXPECT_THROW(r.get(s), std::runtime_error);
+  ByteReader empty("");
+  double d = 0;
+  EXPECT_THROW(empty.get(d), std::runtime_error);
+}
+
+TEST(ThreadSweep, IsParallelForWithItsThreadCount) {
+  const flatland::sim::ThreadSweep two(2), all(0);
+  EXPECT_EQ(two.threads(), 2u);
+  EXPECT_GE(all.threads(), 1u);
+  EXPECT_EQ(two.processes(), 1);
+  std::vector<long> out(500, -1);
+  std::vector<long> finished;
+  two.run(
+      500, [&](long i) { out[static_cast<std::size_t>(i)] = i * i; }, {},
+      [&](long f) { finished.push_back(f); });
+  for (long i = 0; i < 500; ++i) EXPECT_EQ(out[static_cast<std::size_t>(i)], i * i);
+  ASSERT_EQ(finished.size(), 500u);
+  for (long i = 0; i < 500; ++i) EXPECT_EQ(finished[static_cast<std::size_t>(i)], i + 1);
 }
 
 }  // namespace

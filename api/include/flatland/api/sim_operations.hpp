@@ -148,7 +148,9 @@ struct SurfaceRequest {
   int threads = 0;                            ///< 0: all cores
 };
 sim::SimulationSpec prepare_surface(Scene scene, const SurfaceRequest& request, Spelling spelling);
+/// On `engine` if given (an MPI job's ranks), else on request.threads of this process.
 sim::SurfaceResult surface(const sim::SimulationSpec& spec, const SurfaceRequest& request,
-                           const sim::Progress& progress = {});
+                           const sim::Progress& progress = {},
+                           const sim::SweepEngine* engine = nullptr);
 
 }  // namespace flatland::api

@@ -6,6 +6,8 @@
 // (compare_controllers: each one's outcomes and margins, and paired tests).
 #pragma once
 
+#include "flatland/sim/parallel.hpp"
+
 #include "flatland/drivers/experiment.hpp"
 #include "flatland/drivers/synthetic.hpp"
 
@@ -171,6 +173,16 @@ MonteCarloResult run_montecarlo(const model::Model& nominal_model, const Perturb
                                 const std::vector<MonteCarloController>& controllers,
                                 unsigned threads = 0, const MonteCarloProgress& progress = {},
                                 const WorldEdit& edit = {});
+/// The same on a sweep engine: this process's threads, or the ranks of an MPI job
+/// (cluster::MpiSweep), whose records come back to rank 0 bit for bit (records_codec).
+MonteCarloResult run_montecarlo(const model::Model& nominal_model, const Perturbations& p, int n,
+                                std::uint64_t seed,
+                                const std::vector<MonteCarloController>& controllers,
+                                const sim::SweepEngine& engine,
+                                const MonteCarloProgress& progress = {},
+                                const WorldEdit& edit = {});
+/// Each record of `records` as bytes and back, exactly (sim::ItemCodec).
+sim::ItemCodec records_codec(std::vector<RunRecord>& records);
 /// Controllers by name only.
 std::vector<MonteCarloController> controllers_by_name(const std::vector<std::string>& names);
 

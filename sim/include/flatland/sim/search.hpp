@@ -7,6 +7,8 @@
 // s_h(T) and the minimum normal force are continuous in the parameters.
 #pragma once
 
+#include "flatland/sim/parallel.hpp"
+
 #include "flatland/sim/spec.hpp"
 
 #include <functional>
@@ -38,9 +40,9 @@ struct SolveReport {
   /// With the spec's contact.mu: min (mu f_n - |f_t|) / (m g sin tilt) over [0, T], the friction
   /// to spare (< 0: the motion needs more than mu somewhere); NaN without mu.
   double friction_margin = std::numeric_limits<double>::quiet_NaN();
-  int simulations = 0;       ///< runs the search made
-  long rhs_evals = 0;        ///< right-hand-side evaluations over all of them
-  RunResult run;             ///< the full recorded run of the solution
+  int simulations = 0;  ///< runs the search made
+  long rhs_evals = 0;   ///< right-hand-side evaluations over all of them
+  RunResult run;        ///< the full recorded run of the solution
   /// A locus point whose runs failed numerically (NumericalFailure): why; its numbers are NaN.
   std::string failure;
 };
@@ -78,6 +80,10 @@ struct SurfaceResult {
 /// s_h(T) on a k x 2T grid (paper Fig. 6), in parallel over `threads` (0 = all cores).
 SurfaceResult surface(const SimulationSpec& spec, double k_lo, double k_hi, int nk, double p_lo,
                       double p_hi, int np, int threads = 0, const Progress& progress = {});
+/// The same on a sweep engine (this process's threads, or an MPI job's ranks).
+SurfaceResult surface(const SimulationSpec& spec, double k_lo, double k_hi, int nk, double p_lo,
+                      double p_hi, int np, const SweepEngine& engine,
+                      const Progress& progress = {});
 
 /// What limits the fastest motion.
 enum class SpeedLimit {

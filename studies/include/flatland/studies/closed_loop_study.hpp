@@ -8,6 +8,8 @@
 // (docs/ACCURACY.md).
 #pragma once
 
+#include "flatland/sim/parallel.hpp"
+
 #include "flatland/drivers/montecarlo.hpp"
 #include "flatland/model/model.hpp"
 #include "flatland/sim/search.hpp"
@@ -51,6 +53,8 @@ struct ClosedLoopRun {
   std::optional<control::StopCause> stop_cause;  ///< why it stopped safely (outcome kSafeStop)
   double fn_min = NAN, duration = NAN, est_rms = NAN, nees = NAN;
   long frames = 0, frames_lost = 0;
+  /// s: the experiment's wall time and its thread's CPU time, on whichever thread or rank ran it.
+  double wall = 0, cpu = 0;
   /// The world it ran in: perturb(nominal with the cell's camera, kClosedLoopSeed, run), the same
   /// for every controller of a camera.
   drivers::DrawnPerturbation drawn;
@@ -75,20 +79,25 @@ struct ClosedLoopCellResult {
   /// over every run that servoed: the estimate's RMS error and mean NEES in the servo stage.
   double fn_min_mean = NAN, fn_min_min = NAN, duration_mean = NAN, est_rms = NAN, nees = NAN;
   double frames_lost_fraction = NAN;
-  double wall = 0, cpu = 0;  ///< s, the whole cell (all its runs, on all threads)
+  /// s, the cell's runs' wall and CPU times added (each run's on the thread that ran it).
+  double wall = 0, cpu = 0;
 };
 
 struct ClosedLoopStudyOptions {
   unsigned threads = 0;    ///< 0: std::thread::hardware_concurrency()
   sim::Progress progress;  ///< (experiments done, experiments)
+  /// Where the experiments run instead of `threads` (an MPI job's ranks); not owned.
+  const sim::SweepEngine* engine = nullptr;
 };
 
 struct ClosedLoopStudyResult {
   ClosedLoopGrid grid;
   drivers::Perturbations perturbations;  ///< the worlds' (the defaults; each cell sets the latency)
   std::vector<ClosedLoopCellResult> cells;  ///< in grid order
-  unsigned threads = 0;
-  double seconds = 0, cpu_seconds = 0;  ///< wall and process CPU time of the whole study
+  unsigned threads = 0;                     ///< per process
+  int processes = 1;                        ///< the MPI job's ranks (1 without MPI)
+  /// Wall and CPU time of the whole study, in this process (rank 0's alone under MPI).
+  double seconds = 0, cpu_seconds = 0;
 };
 
 /// The grid of a compiled scene over `controllers` (names drivers::scene_for_controller accepts,
@@ -105,6 +114,10 @@ ClosedLoopGrid closed_loop_grid(const model::Model& nominal, bool quick,
 /// experiment is a result, not an exception).
 ClosedLoopStudyResult run_closed_loop_study(const model::Model& nominal, const ClosedLoopGrid& grid,
                                             const ClosedLoopStudyOptions& options = {});
+/// The same on a sweep engine: every cell's worlds in one sweep.
+ClosedLoopStudyResult run_closed_loop_study(const model::Model& nominal, const ClosedLoopGrid& grid,
+                                            const sim::SweepEngine& engine,
+                                            const sim::Progress& progress = {});
 
 /// closed_loop.csv: one row per cell (rate, latency, jitter, controller, runs, successes, rate
 /// with its interval, failures in five columns, the force, duration, estimate and cost columns).
