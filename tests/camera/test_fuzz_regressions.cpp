@@ -1,19 +1,25 @@
 // The fuzzers' contracts (fuzz/*.cpp) in the normal build: every seed of the fuzz corpora
 // (tests/fuzz/<target>/) and every input a fuzzer once crashed on
 // (tests/fuzz/regressions/<target>/) either parses or is rejected with the one-line error of its
-// reader; no other exception.
+// reader; no other exception. And the fuzz targets themselves (fuzz/*.cpp, their entry points
+// renamed by tests/CMakeLists.txt) over the same inputs: a target aborts on a broken contract.
 #include "flatland/camera/camera_file.hpp"
 #include "flatland/scene/scene.hpp"
 
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstddef>
+#include <cstdint>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <sstream>
 #include <string>
 #include <vector>
+
+extern "C" int flatland_fuzz_scene(const std::uint8_t* data, std::size_t size);
+extern "C" int flatland_fuzz_camera_file(const std::uint8_t* data, std::size_t size);
 
 namespace {
 
@@ -72,4 +78,20 @@ TEST(FuzzRegressions, CameraFileInputsParseOrThrowInvalidArgument) {
     (void)flatland::camera::parse_camera_file(s, "fuzz.yaml");
   });
   EXPECT_GE(parsed, 2);  // the minimal ROS file and the full flatland one
+}
+
+TEST(FuzzTargets, EachTargetRunsOverItsSeedsAndReproducers) {
+  const struct {
+    const char* target;
+    int (*entry)(const std::uint8_t*, std::size_t);
+  } targets[] = {{"scene", flatland_fuzz_scene}, {"camera_file", flatland_fuzz_camera_file}};
+  for (const auto& t : targets) {
+    const std::vector<fs::path> files = inputs(t.target);
+    EXPECT_FALSE(files.empty()) << t.target;
+    for (const fs::path& f : files) {
+      SCOPED_TRACE(f.string());
+      const std::string bytes = bytes_of(f);
+      EXPECT_EQ(t.entry(reinterpret_cast<const std::uint8_t*>(bytes.data()), bytes.size()), 0);
+    }
+  }
 }
