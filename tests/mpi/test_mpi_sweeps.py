@@ -130,6 +130,15 @@ def rank_pids(marker):
     return ranks
 
 
+def running(pid):
+    """True if process `pid` exists and is not a zombie (a rank mpirun left to init to reap)."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat[stat.rindex(")") + 2] != "Z"
+
+
 def test_a_killed_rank_ends_the_job_with_one_line_naming_it(tmp_path):
     marker = "--seed 424242"  # finds this job's processes
     cmd = MPIRUN + ["-np", "3", str(CLI), "montecarlo", "--n", "40", "--seed", "424242",
@@ -156,6 +165,32 @@ def test_a_killed_rank_ends_the_job_with_one_line_naming_it(tmp_path):
     assert "nothing written" in errors[0], errors[0]
     assert out == ""
     assert not (tmp_path / "out").exists()
+
+
+def test_ctrl_c_on_mpirun_stops_every_rank_and_writes_nothing(tmp_path):
+    marker = "--seed 434343"
+    cmd = MPIRUN + ["-np", "2", str(CLI), "montecarlo", "--n", "40", "--seed", "434343",
+                    "--out", "out"]
+    job = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                           text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while len(rank_pids(marker)) < 2 and time.monotonic() < deadline and job.poll() is None:
+            time.sleep(0.2)
+        ranks = rank_pids(marker)
+        assert len(ranks) == 2, ranks
+        time.sleep(2)
+        job.send_signal(signal.SIGINT)  # what Ctrl-C sends mpirun
+        _, err = job.communicate(timeout=120)
+    finally:
+        if job.poll() is None:
+            job.kill()
+    assert job.returncode != 0
+    errors = [line for line in err.splitlines() if line.startswith("flatland: error:")]
+    assert len(errors) == 1 and "nothing written" in errors[0], err
+    assert not (tmp_path / "out").exists()
+    time.sleep(1)
+    assert not [pid for pid in ranks.values() if running(pid)], "a rank survived"
 
 
 @pytest.mark.parametrize(
