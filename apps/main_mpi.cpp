@@ -3,7 +3,7 @@
 // parses and checks the same command line; the sweep's runs are spread over the ranks
 // (cluster::MpiSweep); rank 0 alone prints, shows progress and writes the outputs, which are the
 // same bit for bit as one process's (docs/CLUSTER.md).
-#include "commands.hpp"
+#include "command_sets.hpp"
 #include "common.hpp"
 #include "flatland/cluster/mpi_session.hpp"
 #include "flatland/cluster/mpi_sweep.hpp"
@@ -12,6 +12,7 @@
 
 #include <cstdio>
 #include <cstring>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <stdexcept>
@@ -94,20 +95,9 @@ int main(int argc, char** argv) {
   });
   // Before any thread exists, so that every thread inherits the dispositions.
   install_interrupt_handler();
-  const int code = run_cli(argc, argv,
-                           {{"simulate", add_simulate_command},
-                            {"solve", add_solve_command},
-                            {"locus", add_locus_command},
-                            {"surface", add_surface_command},
-                            {"time-optimal", add_time_optimal_command},
-                            {"render", add_render_command},
-                            {"render-calibration", add_render_calibration_command},
-                            {"calibrate", add_calibrate_command},
-                            {"track", add_track_command},
-                            {"experiment", add_experiment_command},
-                            {"montecarlo", add_montecarlo_command},
-                            {"identify", add_identify_command},
-                            {"study", add_study_command}});
+  std::map<std::string, AddCommand> commands = simulator_commands();
+  commands.merge(camera_commands());
+  const int code = run_cli(argc, argv, commands);
   bool swept = false;
   {
     std::lock_guard lock(engine_mutex);

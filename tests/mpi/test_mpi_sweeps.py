@@ -139,58 +139,58 @@ def running(pid):
     return stat[stat.rindex(")") + 2] != "Z"
 
 
-def test_a_killed_rank_ends_the_job_with_one_line_naming_it(tmp_path):
-    marker = "--seed 424242"  # finds this job's processes
-    cmd = MPIRUN + ["-np", "3", str(CLI), "montecarlo", "--n", "40", "--seed", "424242",
+def start_sweep(tmp_path, ranks, seed):
+    """A Monte Carlo job of `ranks` ranks (its seed marks its processes), once every rank runs
+    and is 2 s into the sweep: (the mpirun process, {rank: pid})."""
+    marker = f"--seed {seed}"
+    cmd = MPIRUN + ["-np", str(ranks), str(CLI), "montecarlo", "--n", "40", "--seed", str(seed),
                     "--out", "out", "--json"]
     job = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                            text=True)
+    deadline = time.monotonic() + 60
+    pids = {}
+    while len(pids) < ranks and time.monotonic() < deadline and job.poll() is None:
+        time.sleep(0.2)
+        pids = rank_pids(marker)
+    if len(pids) < ranks:
+        job.kill()
+        pytest.fail(f"the {ranks} ranks did not start: {pids}")
+    time.sleep(2)  # into the sweep: every rank holds worlds now
+    return job, pids
+
+
+def finish(job):
+    """(stdout, the error lines of stderr) once the job has ended."""
     try:
-        deadline = time.monotonic() + 60
-        ranks = {}
-        while len(ranks) < 3 and time.monotonic() < deadline and job.poll() is None:
-            time.sleep(0.2)
-            ranks = rank_pids(marker)
-        assert len(ranks) == 3, f"the 3 ranks did not start: {ranks}"
-        time.sleep(2)  # into the sweep: rank 1 holds worlds now
-        os.kill(ranks[1], signal.SIGKILL)
         out, err = job.communicate(timeout=120)
     finally:
         if job.poll() is None:
             job.kill()
+    return out, [line for line in err.splitlines() if line.startswith("flatland: error:")]
+
+
+def test_a_killed_rank_ends_the_job_with_one_line_naming_it(tmp_path):
+    job, pids = start_sweep(tmp_path, 3, 424242)
+    os.kill(pids[1], signal.SIGKILL)
+    out, errors = finish(job)
     assert job.returncode != 0
-    errors = [line for line in err.splitlines() if line.startswith("flatland: error:")]
-    assert len(errors) == 1, err
-    assert f"rank 1 (pid {ranks[1]}) ended abnormally" in errors[0], errors[0]
+    assert len(errors) == 1, errors
+    assert f"rank 1 (pid {pids[1]}) ended abnormally" in errors[0], errors[0]
     assert "nothing written" in errors[0], errors[0]
     assert out == ""
     assert not (tmp_path / "out").exists()
 
 
 def test_ctrl_c_on_mpirun_stops_every_rank_and_writes_nothing(tmp_path):
-    marker = "--seed 434343"
-    cmd = MPIRUN + ["-np", "2", str(CLI), "montecarlo", "--n", "40", "--seed", "434343",
-                    "--out", "out"]
-    job = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                           text=True)
-    try:
-        deadline = time.monotonic() + 60
-        while len(rank_pids(marker)) < 2 and time.monotonic() < deadline and job.poll() is None:
-            time.sleep(0.2)
-        ranks = rank_pids(marker)
-        assert len(ranks) == 2, ranks
-        time.sleep(2)
-        job.send_signal(signal.SIGINT)  # what Ctrl-C sends mpirun
-        _, err = job.communicate(timeout=120)
-    finally:
-        if job.poll() is None:
-            job.kill()
+    job, pids = start_sweep(tmp_path, 2, 434343)
+    job.send_signal(signal.SIGINT)  # what Ctrl-C sends mpirun
+    out, errors = finish(job)
     assert job.returncode != 0
-    errors = [line for line in err.splitlines() if line.startswith("flatland: error:")]
-    assert len(errors) == 1 and "nothing written" in errors[0], err
+    assert len(errors) == 1 and "nothing written" in errors[0], errors
+    assert out == ""
     assert not (tmp_path / "out").exists()
     time.sleep(1)
-    assert not [pid for pid in ranks.values() if running(pid)], "a rank survived"
+    assert not [pid for pid in pids.values() if running(pid)], "a rank survived"
 
 
 @pytest.mark.parametrize(

@@ -229,13 +229,7 @@ TEST(Studies, ClosedLoopControllerAxisMeetsIdenticalWorlds) {
     for (const auto* c : {&paper, &open}) {
       const flatland::drivers::DrawnPerturbation& a = feedback.runs[w].drawn;
       const flatland::drivers::DrawnPerturbation& b = c->runs[w].drawn;
-      EXPECT_EQ(a.s_h0, b.s_h0);
-      EXPECT_EQ(a.tilt_deg, b.tilt_deg);
-      EXPECT_EQ(a.radius, b.radius);
-      EXPECT_EQ(a.friction_scale, b.friction_scale);
-      EXPECT_EQ(a.effects_seed, b.effects_seed);
-      EXPECT_EQ(a.mu_scale, b.mu_scale);
-      EXPECT_EQ(a.loss_scale, b.loss_scale);
+      EXPECT_TRUE(a == b);
     }
     // The same controller under two names: the same experiment.
     EXPECT_EQ(feedback.runs[w].outcome, paper.runs[w].outcome);

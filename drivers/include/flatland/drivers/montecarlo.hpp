@@ -52,6 +52,7 @@ struct DrawnPerturbation {
   std::uint64_t effects_seed = 0;
   double mu_scale = 1;    ///< factor on contact.mu and contact.mu_kinetic
   double loss_scale = 1;  ///< factor on contact.rolling_resistance, drag, drag_angular
+  bool operator==(const DrawnPerturbation&) const = default;
 };
 
 /// The truth scene of run `run`: uniform draws from a std::mt19937_64 seeded from (seed, run)
