@@ -229,7 +229,9 @@ void check_output_directory(const std::string& option, const fs::path& path, boo
 // ---- ProgressBar ------------------------------------------------------------------------------
 
 ProgressBar::ProgressBar(std::string label)
-    : label_(std::move(label)), enabled_(::isatty(STDERR_FILENO) == 1) {}
+    : label_(std::move(label)),
+      enabled_(::isatty(STDERR_FILENO) == 1 || sweeps_on_mpi()),
+      lines_(::isatty(STDERR_FILENO) != 1) {}
 
 ProgressBar::~ProgressBar() {
   if (drawn_) std::cerr << '\n' << std::flush;
@@ -241,6 +243,14 @@ void ProgressBar::update(long done, long total) {
   const int percent =
       static_cast<int>(100.0 * static_cast<double>(done) / static_cast<double>(total));
   if (percent == last_percent_) return;  // redraw only when something visible changes
+  if (lines_) {
+    if (percent / 10 == last_percent_ / 10 && last_percent_ >= 0) return;
+    last_percent_ = percent;
+    std::fprintf(stderr, "flatland: %s: %d%% (%ld/%ld)\n", label_.c_str(), percent / 10 * 10, done,
+                 total);
+    std::fflush(stderr);
+    return;
+  }
   last_percent_ = percent;
   constexpr int width = 40;
   const int filled = percent * width / 100;

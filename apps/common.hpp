@@ -144,7 +144,9 @@ void rasterise_on_workers(const sim::SweepEngine& engine);
 /// "2 threads", or "3 ranks x 2 threads" (for the command's first line on stderr).
 std::string where_it_runs(const sim::SweepEngine& engine);
 
-/// A progress bar on stderr, drawn only when stderr is a terminal. Safe to call from threads.
+/// A progress bar on stderr, drawn only when stderr is a terminal. Under MPI (flatland-mpi) rank
+/// 0's stderr is a pipe to the launcher, whatever the user's terminal: there it prints a line at
+/// every tenth of the work instead (which a batch job's log keeps too). Safe to call from threads.
 class ProgressBar {
  public:
   explicit ProgressBar(std::string label);
@@ -158,6 +160,7 @@ class ProgressBar {
  private:
   std::string label_;
   bool enabled_;
+  bool lines_;  ///< a line per tenth (MPI) instead of a redrawn bar
   int last_percent_ = -1;
   bool drawn_ = false;
   std::mutex mutex_;

@@ -10,6 +10,7 @@ import csv
 import io
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -102,6 +103,8 @@ def test_ranks_and_threads_write_the_same_outputs(sweep, tmp_path):
         assert p.returncode == 0, f"{' '.join(cmd)} exited {p.returncode}: {p.stderr}"
         if ranks and sweep != "locus":
             assert f"{ranks} ranks x" in p.stderr, p.stderr  # it did run on the ranks
+        if ranks:  # progress on rank 0, as lines (its stderr is the launcher's pipe)
+            assert re.search(r"^flatland: [a-z -]+: 100% \((\d+)/\1\)$", p.stderr, re.M), p.stderr
         digests[(ranks, threads)] = digest_outputs(cwd, p.stdout)
     reference = digests[LAUNCHES[sweep][0]]
     assert len(reference) > 1, f"{sweep} wrote no files"
