@@ -161,12 +161,15 @@ std::shared_ptr<const sim::SweepEngine> make_sweep_engine(unsigned threads, bool
   return std::make_shared<const sim::ThreadSweep>(threads);
 }
 
-void rasterise_on_workers(const sim::SweepEngine& engine) {
-  if (std::getenv("LP_NUM_THREADS")) return;  // the user's choice
+int cores_available() {
   cpu_set_t set;
   CPU_ZERO(&set);
-  const int cores = ::sched_getaffinity(0, sizeof set, &set) == 0 ? CPU_COUNT(&set) : 1;
-  if (engine.processes() > 1 || static_cast<int>(engine.threads()) >= cores)
+  return ::sched_getaffinity(0, sizeof set, &set) == 0 ? CPU_COUNT(&set) : 1;
+}
+
+void rasterise_on_workers(const sim::SweepEngine& engine) {
+  if (std::getenv("LP_NUM_THREADS")) return;  // the user's choice
+  if (engine.processes() > 1 || static_cast<int>(engine.threads()) >= cores_available())
     ::setenv("LP_NUM_THREADS", "0", 0);  // read by Mesa when it creates a context
 }
 

@@ -140,6 +140,8 @@ bool sweeps_on_mpi();
 /// help one experiment use an idle core, but beside other workers they only contend: Monte
 /// Carlo of 40 worlds on 2 threads took 17.0 s with them and 12.7 s without (2 ranks: 12.8 s).
 void rasterise_on_workers(const sim::SweepEngine& engine);
+/// The cores this process may run on (its affinity mask; 1 if the mask cannot be read).
+int cores_available();
 
 /// "2 threads", or "3 ranks x 2 threads" (for the command's first line on stderr).
 std::string where_it_runs(const sim::SweepEngine& engine);

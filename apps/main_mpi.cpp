@@ -8,8 +8,6 @@
 #include "flatland/cluster/mpi_session.hpp"
 #include "flatland/cluster/mpi_sweep.hpp"
 
-#include <sched.h>
-
 #include <cstdio>
 #include <cstring>
 #include <map>
@@ -32,10 +30,7 @@ void silence_this_rank() {
 /// Open MPI binds each rank to one core when there are at most two ranks (to a socket beyond),
 /// so a rank's second thread would share its first's core: say so, with the launch that fixes it.
 void warn_if_bound_to_fewer_cores(unsigned threads) {
-  cpu_set_t set;
-  CPU_ZERO(&set);
-  if (::sched_getaffinity(0, sizeof set, &set) != 0) return;
-  const int cores = CPU_COUNT(&set);
+  const int cores = flatland::app::cores_available();
   if (cores >= static_cast<int>(threads)) return;
   std::fprintf(stderr,
                "flatland: warning: this rank may run on %d core%s but has --threads %u: launch "

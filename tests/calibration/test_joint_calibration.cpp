@@ -30,13 +30,7 @@ Scene joint_scene(std::array<double, 3> position = {0.02, -0.03, 1.0},
                   std::array<double, 3> look_at = {0, 0, 0},
                   std::array<double, 5> distortion = {}) {
   Scene s;
-  CameraSpec cam;
-  cam.width = 640;
-  cam.height = 480;
-  cam.fx = cam.fy = 900;
-  cam.cx = 319.5;
-  cam.cy = 239.5;
-  cam.position = position;
+  CameraSpec cam = flatland_test::overhead_camera(position);
   cam.look_at = look_at;
   cam.distortion = distortion;
   s.camera = cam;
