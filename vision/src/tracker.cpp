@@ -189,10 +189,46 @@ Levels disk_levels(const cv::Mat& g, cv::Point2d c, double re, int rays) {
 
 struct CircleFit {
   cv::Point2d c;
-  double r = 0, sigma_r = 0, sigma_c = 0;
+  double r = 0, sigma_r = 0;
+  /// Each centre coordinate's sigma: the larger of the residuals' scatter propagated through the
+  /// fit (sigma_noise) and the misfit the residuals' odd harmonics show (sigma_misfit).
+  double sigma_c = 0, sigma_noise = 0, sigma_misfit = 0;
   int inliers = 0;
   bool ok = false;
 };
+
+// What the circle model misses, as an error of its centre. An error pattern e(theta) along the
+// rim moves the fitted centre by its first harmonic (a1 cos + b1 sin), which the fit absorbs and
+// the residuals therefore never show. Patterns that are symmetric about the centre (an ellipse
+// from an oblique view, the stadium of a smear) hold even harmonics only and move nothing. A
+// one-sided pattern (a lamp's highlight on the band, a shadow, the hand) holds the odd harmonics
+// alike, so those the residuals do show, 3, 5 and 7, measure the first one's size: the mean of
+// their six squared coefficients estimates each centre coordinate's squared error. Under white
+// noise alone each coefficient has the variance of a centre coordinate too (2 s^2 / n for n
+// points of scatter s), so the estimate is also right, if noisier (6 degrees of freedom), there.
+double odd_harmonic_misfit(const std::vector<cv::Point2d>& p, cv::Point2d c, double r,
+                           double scale) {
+  constexpr std::array<int, 3> kOrders{3, 5, 7};
+  std::array<double, 6> proj{};
+  double sw = 0;
+  for (const cv::Point2d& q : p) {
+    const double dx = q.x - c.x, dy = q.y - c.y, d = std::hypot(dx, dy);
+    if (d <= 0) continue;
+    const double e = d - r, u = e / std::min(scale, 1e6);
+    const double w = std::abs(u) < 1 ? (1 - u * u) * (1 - u * u) : 0.0;
+    if (w <= 0) continue;
+    const double th = std::atan2(dy, dx);
+    for (std::size_t k = 0; k < kOrders.size(); ++k) {
+      proj[2 * k] += w * e * std::cos(kOrders[k] * th);
+      proj[2 * k + 1] += w * e * std::sin(kOrders[k] * th);
+    }
+    sw += w;
+  }
+  if (sw <= 0) return 0;
+  double ss = 0;
+  for (const double v : proj) ss += (2 * v / sw) * (2 * v / sw);
+  return std::sqrt(ss / static_cast<double>(proj.size()));
+}
 
 // Geometric circle fit by iteratively reweighted Gauss-Newton (Tukey biweight). The robust scale
 // has a floor (0.5 px in the image): exposure blur turns the edge into a stadium whose systematic
@@ -256,7 +292,9 @@ CircleFit fit_circle(const std::vector<cv::Point2d>& p, cv::Point2d c0, double r
   out.inliers = inl;
   out.sigma_r = std::sqrt(swe2 / std::max(1.0, sw - 3.0));
   const cv::Matx33d cov = A.inv(cv::DECOMP_CHOLESKY) * (out.sigma_r * out.sigma_r);
-  out.sigma_c = std::sqrt(std::max(0.0, 0.5 * (cov(0, 0) + cov(1, 1))));
+  out.sigma_noise = std::sqrt(std::max(0.0, 0.5 * (cov(0, 0) + cov(1, 1))));
+  out.sigma_misfit = odd_harmonic_misfit(p, {cx, cy}, r, scale);
+  out.sigma_c = std::max(out.sigma_noise, out.sigma_misfit);
   out.ok = std::isfinite(cx) && std::isfinite(cy) && std::isfinite(r) && r > 0;
   return out;
 }
@@ -392,6 +430,86 @@ TrackResult refine_edge(const cv::Mat& g, cv::Point2d guess, double re, const Tr
   return res;
 }
 
+namespace {
+
+// The image's pixels within `half` of c along each axis (inclusive bounds).
+struct PixelBox {
+  int x0, x1, y0, y1;
+};
+PixelBox box_about(const cv::Mat& g, cv::Point2d c, double half) {
+  return {std::max(0, static_cast<int>(std::floor(c.x - half))),
+          std::min(g.cols - 1, static_cast<int>(std::ceil(c.x + half))),
+          std::max(0, static_cast<int>(std::floor(c.y - half))),
+          std::min(g.rows - 1, static_cast<int>(std::ceil(c.y + half)))};
+}
+
+// The read noise of a grey window (DN), from the disk's face between 0.72 and 0.86 of the edge
+// radius (outside the marker, inside the edge): the median absolute difference of horizontal
+// neighbours, which a lamp's smooth shading hardly moves, as a normal sigma (1.4826 MAD / sqrt 2).
+// Rounding to 8 bits alone leaves 1/sqrt(12) DN, the floor.
+double face_noise_dn(const cv::Mat& g, cv::Point2d c, double re) {
+  std::vector<double> d;
+  const double lo = 0.72 * re, hi = 0.86 * re;
+  const int y0 = std::max(0, static_cast<int>(std::floor(c.y - hi)));
+  const int y1 = std::min(g.rows - 1, static_cast<int>(std::ceil(c.y + hi)));
+  for (int y = y0; y <= y1; ++y) {
+    const float* row = g.ptr<float>(y);
+    const double dy = y - c.y;
+    const int x0 = std::max(0, static_cast<int>(std::floor(c.x - hi)));
+    const int x1 = std::min(g.cols - 2, static_cast<int>(std::ceil(c.x + hi)));
+    for (int x = x0; x <= x1; ++x) {
+      const double r0 = std::hypot(x - c.x, dy), r1 = std::hypot(x + 1 - c.x, dy);
+      if (r0 < lo || r0 > hi || r1 < lo || r1 > hi) continue;
+      d.push_back(std::abs(static_cast<double>(row[x + 1]) - row[x]));
+    }
+  }
+  const double floor_dn = 1 / std::sqrt(12.0);
+  if (d.size() < 16) return floor_dn;
+  return std::max(floor_dn, 1.4826 * median(std::move(d)) / std::sqrt(2.0));
+}
+
+// The moments' sigma, the larger of two (as the edge fit's): the image's noise carried through
+// the moments (each band pixel's coverage moves a centre coordinate by its lever arm over the
+// total weight), and the misfit of a disk that the band's coverage shows. For the latter each
+// sector's coverage, less that of a sharp disk of radius r about c (which takes out the pixel
+// lattice), becomes that sector's shift of the rim; a one-sided error (a highlight on the band, a
+// shadow) moves the centre by the shifts' first harmonic and shows in their odd ones.
+double moments_sigma(const cv::Mat& g, cv::Point2d c, double r, double inner, double outer,
+                     const Levels& lv) {
+  constexpr int kSectors = 48;
+  std::array<double, kSectors> excess{};
+  const double inv = 1.0 / (lv.face - lv.dark);
+  double lever2 = 0, sw = kPi * r * r;
+  const PixelBox b = box_about(g, c, outer);
+  for (int y = b.y0; y <= b.y1; ++y) {
+    const float* row = g.ptr<float>(y);
+    const double dy = y - c.y;
+    for (int x = b.x0; x <= b.x1; ++x) {
+      const double dx = x - c.x, d2 = dx * dx + dy * dy;
+      if (d2 > outer * outer || d2 <= inner * inner) continue;
+      const double d = std::sqrt(d2);
+      const double w = std::clamp((row[x] - lv.dark) * inv, 0.0, 1.0);
+      const double sharp = std::clamp(r + 0.5 - d, 0.0, 1.0);
+      const int k = std::clamp(static_cast<int>((std::atan2(dy, dx) + kPi) / (2 * kPi) * kSectors),
+                               0, kSectors - 1);
+      excess[k] += w - sharp;
+      lever2 += 0.5 * d2;  // a coordinate's lever arm squared, on average over directions
+    }
+  }
+  const double sigma_noise = face_noise_dn(g, c, r) * inv * std::sqrt(lever2) / sw;
+  std::vector<cv::Point2d> rim;
+  rim.reserve(kSectors);
+  const double sector = 2 * kPi / kSectors;
+  for (int k = 0; k < kSectors; ++k) {
+    const double a = -kPi + (k + 0.5) * sector;
+    const double rk = r + excess[k] / (r * sector);
+    rim.emplace_back(c.x + rk * std::cos(a), c.y + rk * std::sin(a));
+  }
+  return std::max(sigma_noise, odd_harmonic_misfit(rim, c, r, 1e9));
+}
+
+}  // namespace
+
 TrackResult refine_moments(const cv::Mat& g, cv::Point2d guess, double re,
                            const TrackerConfig& cfg) {
   TrackResult res;
@@ -404,25 +522,20 @@ TrackResult refine_moments(const cv::Mat& g, cv::Point2d guess, double re,
   // coverage (I - ring) / (face - ring). The band stops inside the ring so that neither the table
   // nor the hand beyond it contributes. A few fixed-point iterations re-centre the window.
   const double inner = 0.8 * re, outer = re + 0.043 * re + 0.5;
-  double sw = 0, n_band = 0;
+  double sw = 0;
   for (int it = 0; it < 4; ++it) {
     double sx = 0, sy = 0;
     sw = 0;
-    n_band = 0;
-    const int x0 = std::max(0, static_cast<int>(std::floor(c.x - outer)));
-    const int x1 = std::min(g.cols - 1, static_cast<int>(std::ceil(c.x + outer)));
-    const int y0 = std::max(0, static_cast<int>(std::floor(c.y - outer)));
-    const int y1 = std::min(g.rows - 1, static_cast<int>(std::ceil(c.y + outer)));
-    for (int y = y0; y <= y1; ++y) {
+    const PixelBox b = box_about(g, c, outer);
+    for (int y = b.y0; y <= b.y1; ++y) {
       const float* row = g.ptr<float>(y);
       const double dy = y - c.y;
-      for (int x = x0; x <= x1; ++x) {
+      for (int x = b.x0; x <= b.x1; ++x) {
         const double dx = x - c.x, d2 = dx * dx + dy * dy;
         if (d2 > outer * outer) continue;
         double w = 1.0;
         if (d2 > inner * inner) {
           w = std::clamp((row[x] - lv.dark) * inv, 0.0, 1.0);
-          n_band += 1;
         }
         sx += w * x;
         sy += w * y;
@@ -435,10 +548,7 @@ TrackResult refine_moments(const cv::Mat& g, cv::Point2d guess, double re,
   res.state = TrackState::kTracking;
   res.center = c;
   res.radius_px = std::sqrt(sw / kPi);
-  // Noise propagation: each band pixel's coverage carries the image noise (estimated from the
-  // face's spread is not available here; 2 DN assumed) times its lever arm ~ re.
-  const double noise_dn = 2.0;
-  res.sigma_px = noise_dn * inv * re * std::sqrt(std::max(1.0, n_band) / 2.0) / sw;
+  res.sigma_px = moments_sigma(g, c, res.radius_px, inner, outer, lv);
   res.quality = std::clamp(sw / (kPi * re * re), 0.0, 1.0);
   return res;
 }
@@ -463,8 +573,15 @@ TrackResult refine_hough(const cv::Mat& g, cv::Point2d guess, double re, const T
   res.state = TrackState::kTracking;
   res.center = {circles[0][0] + roi.x, circles[0][1] + roi.y};
   res.radius_px = circles[0][2];
-  res.sigma_px = 0.5;  // HoughCircles reports no uncertainty; its accumulator has 1 px cells
   res.quality = 0.5;
+  // HoughCircles reports no uncertainty. Its error is what sets it apart from the sub-pixel edge
+  // fit from its circle (an order of magnitude more accurate, and right about its own sigma), so
+  // that distance, per coordinate, is its sigma. Where the edge fit finds no disk there, the
+  // accumulator's 1 px cells are all that is known.
+  const TrackResult edge = refine_edge(g, res.center, re, TrackerConfig{});
+  res.sigma_px =
+      edge.ok() ? std::hypot(cv::norm(res.center - edge.center) / std::sqrt(2.0), edge.sigma_px)
+                : 0.5;
   return res;
 }
 

@@ -1,0 +1,160 @@
+// Is the edge tracker right about its own error? Over 240 frames of the FLATLAND run per
+// condition (a lamp with highlights and shadows or the plain light; sharp, interlaced or rolling;
+// 0-8 DN of read noise) the error of each centre against the
+// renderer's exact truth, divided by the sigma the tracker reports for that frame, must look like
+// what a right sigma gives. sigma is per coordinate, so for a right sigma |error| / sigma is
+// Rayleigh distributed: median sqrt(2 ln 2) = 1.18, exp(-4.5) = 1.1 % beyond 3. Accepted (issue
+// 27): the median within [0.5, 1.5], at most 2 % beyond 3 sigma, and RMS <= 0.05 px on the lit
+// frames without blur.
+//
+// Not yet met, so not asserted (docs/ACCURACY.md, "Is each frame's sigma right?"): smeared
+// frames, lit or not (5-13 % beyond 3 sigma: the tracker finds the smear's centre, which on the
+// curved path over the tip lies off the mid-exposure centre, and no sigma holds that shift), and
+// lit rolling-shutter frames (2.9 %).
+#include "flatland/render/effects.hpp"
+#include "flatland/render/renderer.hpp"
+#include "flatland/sim/spec.hpp"
+#include "flatland/vision/tracker.hpp"
+#include "render_support.hpp"
+#include "scene_support.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+using namespace flatland;
+
+namespace {
+
+constexpr int kFrames = 240;
+
+enum class Readout { kSharp, kInterlaced, kRolling };
+
+const char* name_of(Readout r) {
+  switch (r) {
+    case Readout::kSharp:
+      return "sharp";
+    case Readout::kInterlaced:
+      return "interlaced";
+    case Readout::kRolling:
+      return "rolling";
+  }
+  return "?";
+}
+
+struct Run {
+  sim::RunResult run;
+  Scene scene;
+};
+
+const Run& butterfly_run() {
+  static const Run r = [] {
+    Run out;
+    out.scene = flatland_test::air_table_experiment(0.0, false, 7);
+    sim::SimulationSpec spec = out.scene.sim;
+    spec.run.record = true;
+    out.run = sim::run_spec(spec);
+    return out;
+  }();
+  return r;
+}
+
+// 240 float frames of the run, evenly over it, at the readout's settings.
+std::vector<render::Frame> frames_of(bool lit, Readout readout) {
+  const Run& r = butterfly_run();
+  Scene s = r.scene;
+  s.effects.quantize = false;
+  if (lit) s.lighting = LightingSpec{};
+  CameraSpec& cam = *s.camera;
+  switch (readout) {
+    case Readout::kSharp:
+      break;
+    case Readout::kInterlaced:
+      cam.readout.mode = "interlaced";
+      break;
+    case Readout::kRolling:
+      cam.readout.mode = "rolling";
+      cam.readout.time = 0.8 / cam.fps;
+      cam.readout.band_rows = 8;
+      break;
+  }
+  render::Renderer renderer(flatland_test::render_setup(s));
+  const sim::Trajectory& tr = r.run.trajectory;
+  std::vector<render::Frame> frames;
+  // The readouts' later rows are rendered after t: keep them within the run.
+  const double span = tr.t_end() - tr.t_begin() - 1.0 / cam.fps;
+  for (int k = 0; k < kFrames; ++k)
+    frames.push_back(renderer.capture(tr, tr.t_begin() + (k + 0.5) * span / kFrames));
+  return frames;
+}
+
+struct Honesty {
+  double median_z = 0, beyond_3 = 0, rms_px = 0, median_sigma = 0;
+  int tracked = 0;
+};
+
+Honesty honesty(const std::vector<render::Frame>& frames, double noise_dn, std::uint64_t seed) {
+  vision::Tracker tracker;
+  render::EffectsRng rng(seed);
+  std::vector<double> z, sigma;
+  double sum2 = 0;
+  Honesty h;
+  for (const render::Frame& f : frames) {
+    cv::Mat noisy = f.image.clone();
+    render::apply_noise(noisy, noise_dn, 0, rng);
+    const vision::TrackResult r = tracker.track(render::quantize(noisy));
+    if (!r.ok()) continue;
+    const double e = cv::norm(r.center - f.truth.disk_center_px);
+    z.push_back(e / r.sigma_px);
+    sigma.push_back(r.sigma_px);
+    sum2 += e * e;
+  }
+  h.tracked = static_cast<int>(z.size());
+  if (z.empty()) return h;
+  h.rms_px = std::sqrt(sum2 / static_cast<double>(z.size()));
+  h.beyond_3 =
+      static_cast<double>(std::count_if(z.begin(), z.end(), [](double v) { return v > 3; })) /
+      static_cast<double>(z.size());
+  std::nth_element(z.begin(), z.begin() + z.size() / 2, z.end());
+  h.median_z = z[z.size() / 2];
+  std::nth_element(sigma.begin(), sigma.begin() + sigma.size() / 2, sigma.end());
+  h.median_sigma = sigma[sigma.size() / 2];
+  return h;
+}
+
+void expect_honest(bool lit, Readout readout, const std::vector<double>& noises) {
+  const std::vector<render::Frame> frames = frames_of(lit, readout);
+  for (const double noise : noises) {
+    const Honesty h = honesty(frames, noise, 11);
+    std::printf(
+        "[ sigma    ] %-5s %-10s %2.0f DN: rms %.4f px, sigma median %.4f px, |e|/sigma median "
+        "%.2f, beyond 3 sigma %.1f %%\n",
+        lit ? "lit" : "plain", name_of(readout), noise, h.rms_px, h.median_sigma, h.median_z,
+        100 * h.beyond_3);
+    SCOPED_TRACE(std::string(lit ? "lit " : "plain ") + name_of(readout) + ", " +
+                 std::to_string(noise) + " DN");
+    EXPECT_EQ(h.tracked, kFrames);
+    EXPECT_GE(h.median_z, 0.5);
+    EXPECT_LE(h.median_z, 1.5);
+    EXPECT_LE(h.beyond_3, 0.02);
+    if (readout == Readout::kSharp) {
+      EXPECT_LE(h.rms_px, 0.05);
+    }
+  }
+}
+
+}  // namespace
+
+TEST(TrackerSigma, IsRightOnLitSharpFrames) { expect_honest(true, Readout::kSharp, {0, 2, 8}); }
+TEST(TrackerSigma, IsRightOnLitInterlacedFrames) { expect_honest(true, Readout::kInterlaced, {2}); }
+TEST(TrackerSigma, IsRightOnPlainSharpFrames) { expect_honest(false, Readout::kSharp, {0, 2, 8}); }
+TEST(TrackerSigma, IsRightOnPlainInterlacedFrames) {
+  expect_honest(false, Readout::kInterlaced, {2});
+}
+TEST(TrackerSigma, IsRightOnPlainRollingShutterFrames) {
+  expect_honest(false, Readout::kRolling, {2});
+}
