@@ -127,6 +127,11 @@ void compile_vision(Model& m) {
   // The tracked edge is the disk's top face.
   m.tracker.camera = *m.camera;
   m.tracker.plane_z = scene.render.disk_thickness;
+  // The frame's time stamp is mid-exposure; what the image shows is the mean over the exposure
+  // (and an interlaced frame's two fields): the tracker takes the difference off.
+  const CameraSpec& cam = *scene.camera;
+  m.tracker.image_time_variance_frames2 = vision::image_time_variance_frames2(
+      cam.exposure, 1.0 / cam.fps, cam.readout.mode == "interlaced", 1.0 / cam.fps);
   if (!tracking_problem(scene.sim.object)) m.mapping = hand_mapping(m, *m.camera);
 }
 

@@ -6,6 +6,7 @@
 #include "flatland/sim/trajectory_csv.hpp"
 #include "flatland/studies/timing.hpp"
 #include "flatland/vision/mapping.hpp"
+#include "flatland/vision/tracker.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -173,6 +174,8 @@ TrackerStudyResult run_tracker_study(const model::Model& model,
           vision::TrackerConfig cfg;  // the library's defaults (reported in the JSON)
           cfg.method = methods[mi].method;
           if (methods[mi].one_pass) cfg.second_pass_shift_px = 1.0;
+          cfg.image_time_variance_frames2 = vision::image_time_variance_frames2(
+              b.exposure, stride / fps, scene.camera->readout.mode == "interlaced", 1 / fps);
           if (methods[mi].table_plane) {
             cfg.camera = renderer.camera();
             cfg.plane_z = z;

@@ -1,16 +1,17 @@
 // Is the edge tracker right about its own error? Over 240 frames of the FLATLAND run per
-// condition (a lamp with highlights and shadows or the plain light; sharp, interlaced or rolling;
-// 0-8 DN of read noise) the error of each centre against the
+// condition (a lamp with highlights and shadows or the plain light; sharp, smeared by 1.5 px of
+// exposure, interlaced or rolling; 0-8 DN of read noise) the error of each centre against the
 // renderer's exact truth, divided by the sigma the tracker reports for that frame, must look like
 // what a right sigma gives. sigma is per coordinate, so for a right sigma |error| / sigma is
 // Rayleigh distributed: median sqrt(2 ln 2) = 1.18, exp(-4.5) = 1.1 % beyond 3. Accepted (issue
 // 27): the median within [0.5, 1.5], at most 2 % beyond 3 sigma, and RMS <= 0.05 px on the lit
-// frames without blur.
+// frames without blur. The smeared and interlaced frames' tracker knows the variance of the times
+// its images average (TrackerConfig::image_time_variance_frames2), as the scene's camera gives it.
 //
-// Not yet met, so not asserted (docs/ACCURACY.md, "Is each frame's sigma right?"): smeared
-// frames, lit or not (5-13 % beyond 3 sigma: the tracker finds the smear's centre, which on the
-// curved path over the tip lies off the mid-exposure centre, and no sigma holds that shift), and
-// lit rolling-shutter frames (2.9 %).
+// Not yet met, so not asserted (docs/ACCURACY.md, "Is each frame's sigma right?"): the lamp's
+// smeared frames (4.6 % beyond 3 sigma) and rolling-shutter frames (2.9 %). The area refinement
+// of the edge points counts the lit O-ring's shading beside the edge as the face's, unevenly round
+// the rim, which moves the centre by about 0.018 px without a sign in the residuals.
 #include "flatland/render/effects.hpp"
 #include "flatland/render/renderer.hpp"
 #include "flatland/sim/spec.hpp"
@@ -33,12 +34,14 @@ namespace {
 
 constexpr int kFrames = 240;
 
-enum class Readout { kSharp, kInterlaced, kRolling };
+enum class Readout { kSharp, kSmear, kInterlaced, kRolling };
 
 const char* name_of(Readout r) {
   switch (r) {
     case Readout::kSharp:
       return "sharp";
+    case Readout::kSmear:
+      return "smeared";
     case Readout::kInterlaced:
       return "interlaced";
     case Readout::kRolling:
@@ -64,18 +67,57 @@ const Run& butterfly_run() {
   return r;
 }
 
+// The exposure that smears the disk's centre by `px` at the run's median speed (from the truth:
+// the camera's projection of the centre 1 ms either side of each frame's time).
+double exposure_for_smear(const camera::CameraModel& cam, const sim::Trajectory& tr, double z,
+                          double px) {
+  std::vector<double> speed;  // px/s
+  const double dt = 1e-3;
+  for (int k = 0; k < kFrames; ++k) {
+    const double t = tr.t_begin() + (k + 0.5) * (tr.t_end() - tr.t_begin()) / kFrames;
+    const double a = std::max(tr.t_begin(), t - dt), b = std::min(tr.t_end(), t + dt);
+    const auto ca = tr.sample(a).object_position, cb = tr.sample(b).object_position;
+    const cv::Point2d pa = cam.project(cv::Point3d(ca.x(), ca.y(), z));
+    const cv::Point2d pb = cam.project(cv::Point3d(cb.x(), cb.y(), z));
+    speed.push_back(cv::norm(pb - pa) / (b - a));
+  }
+  std::nth_element(speed.begin(), speed.begin() + kFrames / 2, speed.end());
+  return px / speed[kFrames / 2];
+}
+
+struct Frames {
+  std::vector<render::Frame> frames;
+  /// The variance of the times each image averages, in the frames' intervals squared (what
+  /// TrackerConfig::image_time_variance_frames2 takes).
+  double time_variance = 0;
+};
+
 // 240 float frames of the run, evenly over it, at the readout's settings.
-std::vector<render::Frame> frames_of(bool lit, Readout readout) {
+Frames frames_of(bool lit, Readout readout) {
   const Run& r = butterfly_run();
+  const sim::Trajectory& tr = r.run.trajectory;
   Scene s = r.scene;
   s.effects.quantize = false;
   if (lit) s.lighting = LightingSpec{};
   CameraSpec& cam = *s.camera;
+  // The readouts' later rows are rendered after t: keep them within the run.
+  const double span = tr.t_end() - tr.t_begin() - 1.0 / cam.fps;
+  const double interval = span / kFrames;
+  Frames out;
   switch (readout) {
     case Readout::kSharp:
       break;
+    case Readout::kSmear: {
+      const camera::CameraModel model = render::Renderer(flatland_test::render_setup(s)).camera();
+      cam.exposure =
+          std::min(1.0 / cam.fps, exposure_for_smear(model, tr, s.render.disk_thickness, 1.5));
+      s.effects.blur_subframes = 4;
+      out.time_variance = std::pow(cam.exposure / interval, 2) / 12;
+      break;
+    }
     case Readout::kInterlaced:
       cam.readout.mode = "interlaced";
+      out.time_variance = std::pow(0.25 / cam.fps / interval, 2);
       break;
     case Readout::kRolling:
       cam.readout.mode = "rolling";
@@ -84,13 +126,9 @@ std::vector<render::Frame> frames_of(bool lit, Readout readout) {
       break;
   }
   render::Renderer renderer(flatland_test::render_setup(s));
-  const sim::Trajectory& tr = r.run.trajectory;
-  std::vector<render::Frame> frames;
-  // The readouts' later rows are rendered after t: keep them within the run.
-  const double span = tr.t_end() - tr.t_begin() - 1.0 / cam.fps;
   for (int k = 0; k < kFrames; ++k)
-    frames.push_back(renderer.capture(tr, tr.t_begin() + (k + 0.5) * span / kFrames));
-  return frames;
+    out.frames.push_back(renderer.capture(tr, tr.t_begin() + (k + 0.5) * interval));
+  return out;
 }
 
 struct Honesty {
@@ -98,13 +136,15 @@ struct Honesty {
   int tracked = 0;
 };
 
-Honesty honesty(const std::vector<render::Frame>& frames, double noise_dn, std::uint64_t seed) {
-  vision::Tracker tracker;
+Honesty honesty(const Frames& frames, double noise_dn, std::uint64_t seed) {
+  vision::TrackerConfig config;
+  config.image_time_variance_frames2 = frames.time_variance;
+  vision::Tracker tracker(config);
   render::EffectsRng rng(seed);
   std::vector<double> z, sigma;
   double sum2 = 0;
   Honesty h;
-  for (const render::Frame& f : frames) {
+  for (const render::Frame& f : frames.frames) {
     cv::Mat noisy = f.image.clone();
     render::apply_noise(noisy, noise_dn, 0, rng);
     const vision::TrackResult r = tracker.track(render::quantize(noisy));
@@ -132,7 +172,7 @@ void expect_honest(bool lit, Readout readout, const std::vector<double>& noises)
   // of every condition.
   if (flatland::test::short_tests() && !(lit && readout == Readout::kSharp))
     GTEST_SKIP() << "the statistics of every condition: Release only";
-  const std::vector<render::Frame> frames = frames_of(lit, readout);
+  const Frames frames = frames_of(lit, readout);
   for (const double noise : noises) {
     const Honesty h = honesty(frames, noise, 11);
     std::printf(
@@ -157,6 +197,7 @@ void expect_honest(bool lit, Readout readout, const std::vector<double>& noises)
 TEST(TrackerSigma, IsRightOnLitSharpFrames) { expect_honest(true, Readout::kSharp, {0, 2, 8}); }
 TEST(TrackerSigma, IsRightOnLitInterlacedFrames) { expect_honest(true, Readout::kInterlaced, {2}); }
 TEST(TrackerSigma, IsRightOnPlainSharpFrames) { expect_honest(false, Readout::kSharp, {0, 2, 8}); }
+TEST(TrackerSigma, IsRightOnPlainSmearedFrames) { expect_honest(false, Readout::kSmear, {2}); }
 TEST(TrackerSigma, IsRightOnPlainInterlacedFrames) {
   expect_honest(false, Readout::kInterlaced, {2});
 }

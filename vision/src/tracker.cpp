@@ -743,15 +743,28 @@ TrackResult acquire(const cv::Mat& frame, double expected_re) {
   return {};
 }
 
+double image_time_variance_frames2(double exposure_s, double frame_interval_s, bool interlaced,
+                                   double camera_frame_interval_s) {
+  if (!(frame_interval_s > 0))
+    throw std::invalid_argument("tracker: the interval between frames must be > 0");
+  const double e = exposure_s / frame_interval_s;
+  const double field = interlaced ? 0.25 * camera_frame_interval_s / frame_interval_s : 0.0;
+  return e * e / 12 + field * field;
+}
+
 Tracker::Tracker(TrackerConfig config) : config_(config) {
   if (config_.rays < 16) throw std::invalid_argument("tracker: rays must be at least 16");
   if (!(config_.ray_step_px > 0)) throw std::invalid_argument("tracker: ray_step_px must be > 0");
   if (!(config_.second_pass_shift_px >= 0))
     throw std::invalid_argument("tracker: second_pass_shift_px must be >= 0");
+  if (!(config_.image_time_variance_frames2 >= 0) ||
+      !std::isfinite(config_.image_time_variance_frames2))
+    throw std::invalid_argument("tracker: image_time_variance_frames2 must be finite and >= 0");
 }
 
 void Tracker::reset() {
   have_track_ = false;
+  have_acceleration_ = false;
   history_ = 0;
   velocity_ = {0, 0};
 }
@@ -827,17 +840,25 @@ TrackResult Tracker::track(const cv::Mat& frame) {
     TrackResult r =
         locate(frame, window_about(p, half, frame.size()), p, radius_, TrackState::kTracking);
     if (r.ok()) {
-      velocity_ = r.center - last_;
+      const cv::Point2d velocity = r.center - last_;
+      if (history_ >= 2) {
+        acceleration_change_ =
+            have_acceleration_ ? velocity - velocity_ - acceleration_ : cv::Point2d(0, 0);
+        acceleration_ = velocity - velocity_;
+        have_acceleration_ = true;
+      }
+      velocity_ = velocity;
       last_ = r.center;
       ++history_;
       radius_ = 0.8 * radius_ + 0.2 * r.radius_px;
-      return r;
+      return at_time_stamp(r);
     }
   }
   // The window failed (or there is no track): search the same frame whole.
   const TrackResult r = reacquire(frame);
   if (r.ok()) {
     velocity_ = {0, 0};
+    have_acceleration_ = false;
     last_ = r.center;
     history_ = 1;
     radius_ = r.radius_px;
@@ -846,6 +867,19 @@ TrackResult Tracker::track(const cv::Mat& frame) {
   }
   reset();
   return {};
+}
+
+// The image shows the disk where it was on average over the times the frame averages; its
+// position at the time stamp differs from that mean by acceleration x variance / 2 (a path that
+// curves, as over the hand's tip, or speeds up). The track's last three centres give the
+// acceleration (per frame interval squared); how much that changed from the frame before is
+// what is not known of it here, and goes into sigma.
+TrackResult Tracker::at_time_stamp(TrackResult r) const {
+  const double v = config_.image_time_variance_frames2;
+  if (!(v > 0) || !have_acceleration_) return r;
+  r.center -= 0.5 * v * acceleration_;
+  r.sigma_px = std::hypot(r.sigma_px, 0.5 * v * cv::norm(acceleration_change_) / std::sqrt(2.0));
+  return r;
 }
 
 }  // namespace flatland::vision

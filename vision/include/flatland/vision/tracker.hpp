@@ -67,6 +67,14 @@ struct TrackerConfig {
   /// depend on plane_z (planes parallel to the table map onto each other by a homothety).
   std::optional<camera::CameraModel> camera;
   double plane_z = 0;  ///< m
+  /// The variance of the times a frame's image averages about its time stamp, in frame
+  /// intervals squared (the intervals between the frames given to track()): exposure^2 / 12 for
+  /// an exposure of that many intervals, plus (1/4)^2 for an interlaced frame's two fields. The
+  /// image shows the disk's mean position over those times, which on a curved or accelerating
+  /// path lies acceleration x variance / 2 off its position at the stamp: the tracker takes that
+  /// off with the acceleration of its last three centres, and adds how much that acceleration
+  /// changed since the frame before to sigma. 0 (an instantaneous global shutter): nothing.
+  double image_time_variance_frames2 = 0;
 };
 
 struct TrackResult {
@@ -95,12 +103,21 @@ class Tracker {
   TrackResult locate(const cv::Mat& frame, const cv::Rect& roi, cv::Point2d guess, double radius,
                      TrackState state);
   TrackResult reacquire(const cv::Mat& frame);
+  TrackResult at_time_stamp(TrackResult r) const;
   TrackerConfig config_;
-  bool have_track_ = false;
+  bool have_track_ = false, have_acceleration_ = false;
   int history_ = 0;
-  cv::Point2d last_{0, 0}, velocity_{0, 0};
+  /// The last centre as the image shows it (before at_time_stamp), and its differences.
+  cv::Point2d last_{0, 0}, velocity_{0, 0}, acceleration_{0, 0}, acceleration_change_{0, 0};
   double radius_ = 0;
 };
+
+/// TrackerConfig::image_time_variance_frames2 of a camera whose frames are given to the tracker
+/// `frame_interval_s` apart: exposure^2 / 12 of a box exposure, plus the two fields' +-1/4 of a
+/// camera frame about the time stamp when `interlaced` (`camera_frame_interval_s` = 1/fps), in
+/// those intervals squared.
+double image_time_variance_frames2(double exposure_s, double frame_interval_s, bool interlaced,
+                                   double camera_frame_interval_s);
 
 /// Building blocks, public for tests and benchmarks.
 
