@@ -432,15 +432,23 @@ TrackResult refine_edge(const cv::Mat& g, cv::Point2d guess, double re, const Tr
 
 namespace {
 
-// The image's pixels within `half` of c along each axis (inclusive bounds).
-struct PixelBox {
-  int x0, x1, y0, y1;
-};
-PixelBox box_about(const cv::Mat& g, cv::Point2d c, double half) {
-  return {std::max(0, static_cast<int>(std::floor(c.x - half))),
-          std::min(g.cols - 1, static_cast<int>(std::ceil(c.x + half))),
-          std::max(0, static_cast<int>(std::floor(c.y - half))),
-          std::min(g.rows - 1, static_cast<int>(std::ceil(c.y + half)))};
+// Calls f(x, y, dx, dy, d2, value) for each pixel of the float image g within `radius` of c
+// (dx, dy the pixel's offset from c, d2 its square distance).
+template <typename F>
+void for_each_pixel_within(const cv::Mat& g, cv::Point2d c, double radius, F&& f) {
+  const int x0 = std::max(0, static_cast<int>(std::floor(c.x - radius)));
+  const int x1 = std::min(g.cols - 1, static_cast<int>(std::ceil(c.x + radius)));
+  const int y0 = std::max(0, static_cast<int>(std::floor(c.y - radius)));
+  const int y1 = std::min(g.rows - 1, static_cast<int>(std::ceil(c.y + radius)));
+  for (int y = y0; y <= y1; ++y) {
+    const float* row = g.ptr<float>(y);
+    const double dy = y - c.y;
+    for (int x = x0; x <= x1; ++x) {
+      const double dx = x - c.x, d2 = dx * dx + dy * dy;
+      if (d2 > radius * radius) continue;
+      f(x, y, dx, dy, d2, row[x]);
+    }
+  }
 }
 
 // The read noise of a grey window (DN), from the disk's face between 0.72 and 0.86 of the edge
@@ -480,22 +488,15 @@ double moments_sigma(const cv::Mat& g, cv::Point2d c, double r, double inner, do
   std::array<double, kSectors> excess{};
   const double inv = 1.0 / (lv.face - lv.dark);
   double lever2 = 0, sw = kPi * r * r;
-  const PixelBox b = box_about(g, c, outer);
-  for (int y = b.y0; y <= b.y1; ++y) {
-    const float* row = g.ptr<float>(y);
-    const double dy = y - c.y;
-    for (int x = b.x0; x <= b.x1; ++x) {
-      const double dx = x - c.x, d2 = dx * dx + dy * dy;
-      if (d2 > outer * outer || d2 <= inner * inner) continue;
-      const double d = std::sqrt(d2);
-      const double w = std::clamp((row[x] - lv.dark) * inv, 0.0, 1.0);
-      const double sharp = std::clamp(r + 0.5 - d, 0.0, 1.0);
-      const int k = std::clamp(static_cast<int>((std::atan2(dy, dx) + kPi) / (2 * kPi) * kSectors),
-                               0, kSectors - 1);
-      excess[k] += w - sharp;
-      lever2 += 0.5 * d2;  // a coordinate's lever arm squared, on average over directions
-    }
-  }
+  for_each_pixel_within(g, c, outer, [&](int, int, double dx, double dy, double d2, float v) {
+    if (d2 <= inner * inner) return;
+    const double w = std::clamp((v - lv.dark) * inv, 0.0, 1.0);
+    const double sharp = std::clamp(r + 0.5 - std::sqrt(d2), 0.0, 1.0);
+    const int k = std::clamp(static_cast<int>((std::atan2(dy, dx) + kPi) / (2 * kPi) * kSectors), 0,
+                             kSectors - 1);
+    excess[k] += w - sharp;
+    lever2 += 0.5 * d2;  // a coordinate's lever arm squared, on average over directions
+  });
   const double sigma_noise = face_noise_dn(g, c, r) * inv * std::sqrt(lever2) / sw;
   std::vector<cv::Point2d> rim;
   rim.reserve(kSectors);
@@ -526,22 +527,13 @@ TrackResult refine_moments(const cv::Mat& g, cv::Point2d guess, double re,
   for (int it = 0; it < 4; ++it) {
     double sx = 0, sy = 0;
     sw = 0;
-    const PixelBox b = box_about(g, c, outer);
-    for (int y = b.y0; y <= b.y1; ++y) {
-      const float* row = g.ptr<float>(y);
-      const double dy = y - c.y;
-      for (int x = b.x0; x <= b.x1; ++x) {
-        const double dx = x - c.x, d2 = dx * dx + dy * dy;
-        if (d2 > outer * outer) continue;
-        double w = 1.0;
-        if (d2 > inner * inner) {
-          w = std::clamp((row[x] - lv.dark) * inv, 0.0, 1.0);
-        }
-        sx += w * x;
-        sy += w * y;
-        sw += w;
-      }
-    }
+    for_each_pixel_within(g, c, outer, [&](int x, int y, double, double, double d2, float v) {
+      // Inside 0.8 of the edge radius the face counts as fully covered (the marker filled in).
+      const double w = d2 > inner * inner ? std::clamp((v - lv.dark) * inv, 0.0, 1.0) : 1.0;
+      sx += w * x;
+      sy += w * y;
+      sw += w;
+    });
     if (sw <= 0) return res;
     c = {sx / sw, sy / sw};
   }
