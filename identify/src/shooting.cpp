@@ -83,8 +83,8 @@ std::vector<Unknown> make_unknowns(const sim::SimulationSpec& world, const Ident
     out.push_back(u);
   }
   for (const auto& [name, b] : o.bounds) {
-    const auto it =
-        std::find_if(out.begin(), out.end(), [&](const Unknown& u) { return u.name == name; });
+    const auto it = std::find_if(out.begin(), out.end(),
+                                 [&name = name](const Unknown& u) { return u.name == name; });
     if (it == out.end()) throw std::invalid_argument("bounds." + name + ": not among the unknowns");
     const Bounds limits = default_bounds(name);
     if (!(b.lower < b.upper) || !std::isfinite(b.lower) || !std::isfinite(b.upper) ||

@@ -18,7 +18,8 @@ namespace {
 
 void add_triangle(Mesh& m, const cv::Vec3d& a, const cv::Vec3d& b, const cv::Vec3d& c,
                   const cv::Vec3d& normal, const cv::Vec3f& color,
-                  std::array<cv::Vec2f, 3> uv = {}) {
+                  std::array<cv::Vec2f, 3> uv = {cv::Vec2f(0, 0), cv::Vec2f(0, 0),
+                                                cv::Vec2f(0, 0)}) {
   // Wind every triangle counter-clockwise seen from its outward normal, so that back faces can
   // be culled (walls facing away from the camera cost nothing).
   const bool flip = (b - a).cross(c - a).dot(normal) < 0;
