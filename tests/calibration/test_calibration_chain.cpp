@@ -4,6 +4,7 @@
 // file. The truth comes from the scene (camera::CameraModel::from_spec, the hand pivoting at the
 // table origin with its encoder reading the true angle), never from the code under test.
 #include "cli_support.hpp"
+#include "test_scale.hpp"
 #include "flatland/model/compile.hpp"
 
 #include "flatland/calibration/session.hpp"
@@ -413,9 +414,12 @@ TEST_F(CalibrationChain, TableAndJointStreamTheirImages) {
                 " --table sess/table.csv --out camera.yaml")
                 .code,
             0);
-  // Each 640 x 480 image held would cost 0.9 MB: 380 more rows would add 350 MB.
+  // Each 640 x 480 image held would cost 0.9 MB: 380 more rows would add 350 MB. The sanitizer
+  // stage streams 100 (80 more would add 72 MB) and 64 joint rows (48 more: 43 MB).
+  const bool short_run = flatland::test::short_tests();
+  const int table_rows = short_run ? 100 : 400, joint_rows = short_run ? 64 : 200;
   repeat_rows(dir_ / "sess" / "table.csv", dir_ / "sess" / "t20.csv", 20);
-  repeat_rows(dir_ / "sess" / "table.csv", dir_ / "sess" / "t400.csv", 400);
+  repeat_rows(dir_ / "sess" / "table.csv", dir_ / "sess" / "t400.csv", table_rows);
   int code = -1;
   const long small = peak_rss_kb(dir_,
                                  "calibrate --camera camera.yaml --table sess/t20.csv "
@@ -429,7 +433,8 @@ TEST_F(CalibrationChain, TableAndJointStreamTheirImages) {
                                      board_ + " --out t400.yaml",
                                  code);
   ASSERT_EQ(code, 0) << flatland_test::read_text(dir_ / "stderr.txt");
-  std::printf("calibrate --table peak RSS: %ld kB at 20 rows, %ld kB at 400 rows\n", small, large);
+  std::printf("calibrate --table peak RSS: %ld kB at 20 rows, %ld kB at %d rows\n", small, large,
+              table_rows);
   EXPECT_LT(large - small, 20 * 1024);
   if (!kAddressSanitizer) {
     EXPECT_LT(large, 300 * 1024);
@@ -437,15 +442,15 @@ TEST_F(CalibrationChain, TableAndJointStreamTheirImages) {
 
   const std::string scene = " --scene " + flatland_test::quote(camera_scene());
   repeat_rows(dir_ / "sess" / "joint.csv", dir_ / "sess" / "j16.csv", 16);
-  repeat_rows(dir_ / "sess" / "joint.csv", dir_ / "sess" / "j200.csv", 200);
+  repeat_rows(dir_ / "sess" / "joint.csv", dir_ / "sess" / "j200.csv", joint_rows);
   const long joint_small = peak_rss_kb(
       dir_, "calibrate --camera camera.yaml --joint sess/j16.csv --out j16.yaml" + scene, code);
   ASSERT_EQ(code, 0) << flatland_test::read_text(dir_ / "stderr.txt");
   const long joint_large = peak_rss_kb(
       dir_, "calibrate --camera camera.yaml --joint sess/j200.csv --out j200.yaml" + scene, code);
   ASSERT_EQ(code, 0) << flatland_test::read_text(dir_ / "stderr.txt");
-  std::printf("calibrate --joint peak RSS: %ld kB at 16 rows, %ld kB at 200 rows\n", joint_small,
-              joint_large);
+  std::printf("calibrate --joint peak RSS: %ld kB at 16 rows, %ld kB at %d rows\n", joint_small,
+              joint_large, joint_rows);
   EXPECT_LT(joint_large - joint_small, 20 * 1024);
 }
 
