@@ -34,6 +34,8 @@ struct TrackOptions {
   bool json = false;
   double fps = 0;
   double min_quality = 0.5;
+  double exposure = 0;  // s
+  bool interlaced = false;
   CLI::Option* fps_opt = nullptr;
 };
 
@@ -161,6 +163,8 @@ void run_track(const TrackOptions& o) {
   if (o.fps_opt->count()) require_positive("--fps", o.fps, "frames per s");
   if (!(o.min_quality >= 0 && o.min_quality <= 1))
     throw UsageError("--min-quality: must be in [0, 1], got " + format_number(o.min_quality));
+  if (!(o.exposure >= 0) || !std::isfinite(o.exposure))
+    throw UsageError("--exposure: must be a finite time >= 0 s, got " + format_number(o.exposure));
 
   CommonOptions common;
   common.scene = o.scene;
@@ -210,6 +214,15 @@ void run_track(const TrackOptions& o) {
     if (vfps > 0 && std::isfinite(vfps)) fps = vfps;
   }
   if (o.fps_opt->count()) fps = o.fps;
+  if (o.exposure > 1.0 / fps)
+    throw UsageError("--exposure: " + format_number(o.exposure) +
+                     " s is longer than the interval between frames (1/" + format_number(fps) +
+                     " fps = " + format_number(1.0 / fps) + " s)");
+  // The image shows the disk's mean position over the exposure (and an interlaced frame's two
+  // fields), the time stamp is mid-exposure: the tracker takes the difference off on a curved
+  // path (docs/VISION.md, "The centre at the time stamp").
+  cfg.image_time_variance_frames2 =
+      vision::image_time_variance_frames2(o.exposure, 1.0 / fps, o.interlaced, 1.0 / fps);
 
   // ---- track
   vision::Tracker tracker(cfg);
@@ -245,6 +258,7 @@ void run_track(const TrackOptions& o) {
         // No measurement from a frame that brings no new, trustworthy picture.
         n.count(frame.integrity, i, o.video);
         if (frame.integrity == vision::FrameIntegrity::kUnreadable) s_guess = NAN;
+        tracker.skip();
         csv += head + ",,,," + vision::to_string(frame.integrity) + ",\n";
         continue;
       }
@@ -301,6 +315,8 @@ void run_track(const TrackOptions& o) {
     j["damaged"] = n.damaged;
     j["low_quality"] = n.low_quality;
     j["min_quality"] = o.min_quality;
+    j["exposure_s"] = o.exposure;
+    j["interlaced"] = o.interlaced;
     j["rms_sigma_px"] = number(rms_sigma);
     j["method"] = vision::to_string(method);
     j["fit"] = cfg.camera && method == vision::TrackMethod::kEdge ? "table-plane" : "pixel";
@@ -317,6 +333,13 @@ void run_track(const TrackOptions& o) {
      << "  frames             " << frames << " (" << found << " with the disk, " << lost
      << " lost, " << n.low_quality << " below quality " << format_number(o.min_quality) << ")"
      << " at " << format_number(fps) << " fps\n"
+     << "  image time         "
+     << (o.exposure > 0 || o.interlaced
+             ? "exposure " + format_number(o.exposure) + " s" +
+                   (o.interlaced ? ", interlaced" : "") +
+                   ": centres taken to the frames' mid-exposure time"
+             : std::string("instant (no --exposure)"))
+     << "\n"
      << "  not measured       " << n.unreadable << " unreadable, " << n.repeated << " repeated, "
      << n.damaged << " damaged\n"
      << "  rms sigma          " << format_number(rms_sigma) << " px\n"
@@ -349,12 +372,21 @@ Command add_track_command(CLI::App& app) {
   cmd->add_flag(
       "--json", o->json,
       "Print exactly one JSON object on stdout ({frames, found, lost, skipped, unreadable, "
-      "repeated, damaged, low_quality, min_quality, fit, rms_sigma_px, method, "
-      "output}); logs go to stderr. Default: off");
+      "repeated, damaged, low_quality, min_quality, exposure_s, interlaced, fit, rms_sigma_px, "
+      "method, output}); logs go to stderr. Default: off");
   o->fps_opt =
       cmd->add_option("--fps", o->fps,
                       "Frame rate for the time column, frames per s (> 0); t = frame "
                       "index / fps. Default: the video's, else the camera file's, else 30");
+  cmd->add_option("--exposure", o->exposure,
+                  "The camera's exposure time, s (in [0, 1/fps]). The image shows the disk's mean "
+                  "position over it; the tracker takes each centre to the frame's time stamp "
+                  "(mid-exposure) on a curved path. Default: 0 (an instant)")
+      ->type_name("SECONDS");
+  cmd->add_flag("--interlaced", o->interlaced,
+                "Each frame is two interlaced fields half a frame apart (a 30 Hz analogue "
+                "camera): the centre is taken to the frame's time stamp as for --exposure. "
+                "Default: off");
   cmd->add_option("--min-quality", o->min_quality,
                   "Quality below which a found disk is not a measurement: its row keeps u, v, "
                   "sigma_px and quality but says low_quality and gets no s_h. In [0, 1]; "

@@ -548,6 +548,23 @@ TEST_F(CliBadInput, UnboundedInputsAreRefused) {
                    "--encoder", "out", env);
 }
 
+// track's --exposure: a time in [0, 1/fps] (a longer one cannot be a video camera's), reported
+// back with --interlaced in the JSON.
+TEST_F(CliBadInput, TrackExposure) {
+  const std::string scene = std::string(FLATLAND_ASSET_DIR) + "/scenes/butterfly-camera.yaml";
+  ASSERT_EQ(run("render --scene " + quote(scene) + " --duration 0.05 --out frames").code, 0);
+  const std::string track = "track --images 'frames/frame_*.png' --camera frames/camera.yaml ";
+  for (const char* e : {"-0.001", "nan", "inf"})
+    expect_bad_input(track + "--exposure " + e + " --out out/t.csv", "--exposure", "out");
+  expect_bad_input(track + "--fps 30 --exposure 0.05 --out out/t.csv", "--exposure", "out");
+  const Result r = run(track + "--fps 30 --exposure 0.02 --interlaced --out out/t.csv --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["exposure_s"].get<double>(), 0.02);
+  EXPECT_TRUE(j["interlaced"].get<bool>());
+  EXPECT_GT(j["found"].get<int>(), 0);
+}
+
 TEST_F(CliBadInput, UnknownCommandAndOption) {
   expect_bad_input("frobnicate", "frobnicate", "out");
   expect_bad_input("solve --frobnicate", "--frobnicate", "out");

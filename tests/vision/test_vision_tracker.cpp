@@ -190,6 +190,52 @@ TEST(VisionTracker, LostAndReacquired) {
   EXPECT_THROW(t2.track(cv::Mat()), std::invalid_argument);
 }
 
+// The time-stamp correction over a frame that never reached the tracker: skip() steps the
+// prediction over it (the next frame is still tracked in its window) and restarts the
+// acceleration, so the two frames after the gap are left as the image shows them and the third
+// is corrected by the second difference of the three centres after the gap (computed here from
+// an uncorrected tracker's centres on the same frames), not by one that spans the gap.
+TEST(VisionTracker, SkippedFrameRestartsTheTimeStampCorrection) {
+  const Scene scene = experiment_scene(0.0, false);
+  sim::SimulationSpec spec = scene.sim;
+  spec.run.record = true;
+  const sim::RunResult run = sim::run_spec(spec);
+  render::Renderer renderer(flatland_test::render_setup(scene));
+  vision::TrackerConfig with_variance;
+  with_variance.image_time_variance_frames2 = 0.1;
+  vision::Tracker plain, corrected(with_variance);
+  std::map<int, vision::TrackResult> p, c;
+  for (int k = 55; k <= 63; ++k) {
+    if (k == 59) {  // the dropped frame
+      plain.skip();
+      corrected.skip();
+      continue;
+    }
+    const cv::Mat image = renderer.capture(run.trajectory, k / 30.0).image;
+    p[k] = plain.track(image);
+    c[k] = corrected.track(image);
+    ASSERT_TRUE(p[k].ok() && c[k].ok()) << k;
+  }
+  const auto expect_correction = [&](int k, int k1, int k2) {
+    const cv::Point2d a = p[k].center - 2 * p[k1].center + p[k2].center;
+    const cv::Point2d d = c[k].center - p[k].center;
+    EXPECT_NEAR(d.x, -0.05 * a.x, 1e-9) << k;
+    EXPECT_NEAR(d.y, -0.05 * a.y, 1e-9) << k;
+  };
+  expect_correction(57, 56, 55);  // before the gap: the last three centres
+  expect_correction(58, 57, 56);
+  EXPECT_EQ(p[60].state, vision::TrackState::kTracking);  // the prediction stepped over frame 59
+  for (int k : {60, 61}) {
+    EXPECT_EQ(c[k].center, p[k].center) << k;
+    EXPECT_EQ(c[k].sigma_px, p[k].sigma_px) << k;
+  }
+  expect_correction(62, 61, 60);
+  EXPECT_EQ(c[62].sigma_px, p[62].sigma_px);  // no acceleration before it to have changed from
+  expect_correction(63, 62, 61);
+  // A curve is there to correct: the second differences are not zero.
+  EXPECT_GT(cv::norm(p[62].center - 2 * p[61].center + p[60].center), 1e-3);
+}
+
 TEST(VisionTracker, MethodNames) {
   EXPECT_EQ(vision::parse_track_method("edge"), vision::TrackMethod::kEdge);
   EXPECT_EQ(vision::parse_track_method("moments"), vision::TrackMethod::kMoments);

@@ -761,6 +761,13 @@ void Tracker::reset() {
   velocity_ = {0, 0};
 }
 
+void Tracker::skip() {
+  if (!have_track_) return;
+  last_ += velocity_;  // where the skipped frame would have shown it
+  have_acceleration_ = false;
+  history_ = 0;  // the next centre's velocity spans the predicted step: not a measurement
+}
+
 namespace {
 
 // The window of half-size `half` about `centre`, clipped to the frame.

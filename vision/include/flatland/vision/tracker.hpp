@@ -97,6 +97,10 @@ class Tracker {
   /// Forget the track (the next frame is searched whole); a learnt edge radius is kept to
   /// validate re-acquisition.
   void reset();
+  /// A frame passed without an image for track() (unreadable, a repeat of the one before,
+  /// dropped): the prediction steps over it, and the acceleration the time-stamp correction
+  /// needs is measured afresh from the next three centres (three evenly spaced ones).
+  void skip();
   const TrackerConfig& config() const { return config_; }
 
  private:
