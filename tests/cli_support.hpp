@@ -39,6 +39,19 @@ inline std::string quote(const std::string& s) {
   return q + "'";
 }
 
+/// Whether `name` is a program on the PATH.
+inline bool have_tool(const std::string& name) {
+  return std::system(("command -v " + name + " > /dev/null 2>&1").c_str()) == 0;
+}
+
+/// The cells of one CSV line (no quoted cells).
+inline std::vector<std::string> cells_of(const std::string& line) {
+  std::vector<std::string> out;
+  std::stringstream ss(line);
+  for (std::string cell; std::getline(ss, cell, ',');) out.push_back(cell);
+  return out;
+}
+
 inline std::vector<std::string> lines_of(const std::string& s) {
   std::vector<std::string> out;
   std::stringstream ss(s);

@@ -4,8 +4,9 @@
 // file. The truth comes from the scene (camera::CameraModel::from_spec, the hand pivoting at the
 // table origin with its encoder reading the true angle), never from the code under test.
 #include "cli_support.hpp"
-#include "test_scale.hpp"
 #include "flatland/model/compile.hpp"
+#include "test_scale.hpp"
+#include "units.hpp"
 
 #include "flatland/calibration/session.hpp"
 #include "flatland/camera/camera_file.hpp"
@@ -34,7 +35,7 @@ using namespace flatland;
 
 namespace {
 
-constexpr double kDeg = std::numbers::pi / 180;
+using flatland_test::kDeg;
 
 std::string camera_scene() {
   return (fs::path(FLATLAND_ASSET_DIR) / "scenes" / "butterfly-camera.yaml").string();
@@ -74,7 +75,9 @@ double rotation_angle(const cv::Matx33d& a, const cv::Matx33d& b) {
   return std::acos(std::clamp((cv::trace(d) - 1) / 2, -1.0, 1.0));
 }
 
-bool one_line(const std::string& s) { return !s.empty() && s.find('\n') == s.size() - 1; }
+bool one_line_ending_in_newline(const std::string& s) {
+  return !s.empty() && s.find('\n') == s.size() - 1;
+}
 
 class CalibrationChain : public flatland_test::CliTestBase {
  protected:
@@ -192,7 +195,7 @@ TEST_F(CalibrationChain, CameraFileGrowsOneSectionAtATime) {
   // The joint needs the table pose first.
   r = run("calibrate --camera camera.yaml --joint sess/joint.csv" + scene);
   EXPECT_EQ(r.code, 2);
-  EXPECT_TRUE(one_line(r.err)) << r.err;
+  EXPECT_TRUE(one_line_ending_in_newline(r.err)) << r.err;
   EXPECT_NE(r.err.find("--joint: needs the table pose"), std::string::npos) << r.err;
 
   r = run("calibrate --camera camera.yaml --table sess/table.csv --table-board " + board_);
@@ -225,7 +228,7 @@ TEST_F(CalibrationChain, BadSessionInputExitsTwoWithOneLine) {
   const auto expect_refused = [&](const std::string& args, const std::string& needle) {
     const Result r = run("calibrate " + args);
     EXPECT_EQ(r.code, 2) << args << "\n" << r.err;
-    EXPECT_TRUE(one_line(r.err)) << r.err;
+    EXPECT_TRUE(one_line_ending_in_newline(r.err)) << r.err;
     EXPECT_NE(r.err.find(needle), std::string::npos) << r.err;
     EXPECT_FALSE(fs::exists(dir_ / "out.yaml")) << args;
   };
@@ -272,7 +275,7 @@ TEST_F(CalibrationChain, BadSessionInputExitsTwoWithOneLine) {
   const Result sym = run("render-calibration --scene " + flatland_test::quote(camera_scene()) +
                          " --out s3 --board chessboard:8x6:0.02");
   EXPECT_EQ(sym.code, 2);
-  EXPECT_TRUE(one_line(sym.err)) << sym.err;
+  EXPECT_TRUE(one_line_ending_in_newline(sym.err)) << sym.err;
   EXPECT_NE(sym.err.find("add to an odd number"), std::string::npos) << sym.err;
   EXPECT_FALSE(fs::exists(dir_ / "s3"));
 }
@@ -307,7 +310,7 @@ TEST_F(CalibrationChain, HeldParametersAndReportPictures) {
   Result bad = run("calibrate --images 'sess/intrinsics/*.png' --board " + board_ +
                    " --fix k4 --out other.yaml");
   EXPECT_EQ(bad.code, 2);
-  EXPECT_TRUE(one_line(bad.err)) << bad.err;
+  EXPECT_TRUE(one_line_ending_in_newline(bad.err)) << bad.err;
   EXPECT_NE(bad.err.find("--fix: unknown parameter 'k4'"), std::string::npos) << bad.err;
   bad = run("calibrate --camera camera.yaml --table sess/table.csv --report rep2 --out other.yaml");
   EXPECT_EQ(bad.code, 2);
@@ -489,7 +492,7 @@ TEST_F(CalibrationChain, JointRefusesDegenerateOrInconsistentData) {
     Result r = run("calibrate --camera camera.yaml --joint sess/" + name + ".csv --out " + name +
                    ".yaml" + scene);
     EXPECT_EQ(r.code, 1) << name << ": " << r.err;
-    EXPECT_TRUE(one_line(r.err)) << r.err;
+    EXPECT_TRUE(one_line_ending_in_newline(r.err)) << r.err;
     EXPECT_NE(r.err.find(needle), std::string::npos) << r.err;
     EXPECT_FALSE(fs::exists(dir_ / (name + ".yaml")));
     r = run("calibrate --camera camera.yaml --joint sess/" + name + ".csv" + scene);
@@ -553,7 +556,7 @@ TEST_F(CalibrationChain, JointRefusesDegenerateOrInconsistentData) {
   const Result m = run("calibrate --camera camera.yaml --table sess/moved.csv --table-board " +
                        board_ + " --out moved.yaml");
   EXPECT_EQ(m.code, 1) << m.err;
-  EXPECT_TRUE(one_line(m.err)) << m.err;
+  EXPECT_TRUE(one_line_ending_in_newline(m.err)) << m.err;
   EXPECT_NE(m.err.find("do not agree on one table pose"), std::string::npos) << m.err;
   EXPECT_NE(m.err.find("board_01.png is farthest"), std::string::npos) << m.err;
   EXPECT_FALSE(fs::exists(dir_ / "moved.yaml"));

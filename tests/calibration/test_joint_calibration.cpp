@@ -7,6 +7,7 @@
 #include "flatland/render/renderer.hpp"
 #include "flatland/vision/hand_pose.hpp"
 #include "render_support.hpp"
+#include "units.hpp"
 
 #include <gtest/gtest.h>
 
@@ -22,7 +23,7 @@ using namespace flatland::render;
 
 namespace {
 
-constexpr double kDeg = std::numbers::pi / 180;
+using flatland_test::kDeg;
 
 // The brief's camera: 640 x 480, f = 900 px, 1 m above the table, a little off the pivot, so the
 // pivot is not at the principal point and the view is slightly oblique.

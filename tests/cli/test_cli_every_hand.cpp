@@ -38,8 +38,6 @@ using flatland_test::Result;
 using flatland_test::write_text;
 using nlohmann::json;
 
-constexpr double kPi = std::numbers::pi;
-
 // The paper's hand (section 4.1): x(u) = a + c u^2 + e u^4, y(u) = b u + d u^3 + f u^5 over
 // u in [-1, 1] is the right half, from the palm's middle (u = -1) over the tip to the back's.
 constexpr double kA = 0.18, kB = -0.18, kC = -0.252, kD = 0.216;
@@ -62,9 +60,9 @@ std::string paper_points_csv(int n) {
 /// r(phi) of the paper's outline: on the right half (|phi| <= pi/2) the u with atan2(y, x) = phi
 /// by bisection (phi(u) falls monotonically from pi/2 to -pi/2), else its mirror image.
 double paper_radius_at(double phi) {
-  phi = std::remainder(phi, 2 * kPi);
-  if (phi > kPi / 2) phi = kPi - phi;
-  if (phi < -kPi / 2) phi = -kPi - phi;
+  phi = std::remainder(phi, 2 * std::numbers::pi);
+  if (phi > std::numbers::pi / 2) phi = std::numbers::pi - phi;
+  if (phi < -std::numbers::pi / 2) phi = -std::numbers::pi - phi;
   double lo = -1, hi = 1;  // phi(lo) >= phi >= phi(hi)
   for (int i = 0; i < 200 && hi - lo > 1e-16; ++i) {
     const double mid = 0.5 * (lo + hi);
@@ -78,13 +76,14 @@ double paper_radius_at(double phi) {
 /// r(-phi) = r(phi)), trapezoid rule on `samples` angles. As a YAML flow list.
 std::string paper_polar_cos(int terms, int samples) {
   std::vector<double> r(static_cast<std::size_t>(samples));
-  for (int j = 0; j < samples; ++j) r[j] = paper_radius_at(2 * kPi * j / samples);
+  for (int j = 0; j < samples; ++j) r[j] = paper_radius_at(2 * std::numbers::pi * j / samples);
   std::ostringstream out;
   out.precision(17);
   out << "[";
   for (int k = 0; k < terms; ++k) {
     double sum = 0;
-    for (int j = 0; j < samples; ++j) sum += r[j] * std::cos(k * 2 * kPi * j / samples);
+    for (int j = 0; j < samples; ++j)
+      sum += r[j] * std::cos(k * 2 * std::numbers::pi * j / samples);
     out << (k ? ", " : "") << (k == 0 ? 1.0 : 2.0) * sum / samples;
   }
   return out.str() + "]";

@@ -22,23 +22,14 @@
 namespace {
 
 namespace fs = std::filesystem;
+using flatland_test::cells_of;
+using flatland_test::have_tool;
 using flatland_test::lines_of;
 using flatland_test::quote;
 using flatland_test::read_text;
 using flatland_test::Result;
 using flatland_test::write_text;
 using nlohmann::json;
-
-bool have_tool(const std::string& name) {
-  return std::system(("command -v " + name + " > /dev/null 2>&1").c_str()) == 0;
-}
-
-std::vector<std::string> cells_of(const std::string& line) {
-  std::vector<std::string> out;
-  std::stringstream ss(line);
-  for (std::string cell; std::getline(ss, cell, ',');) out.push_back(cell);
-  return out;
-}
 
 /// A CSV file as a header and rows of cells.
 struct Csv {

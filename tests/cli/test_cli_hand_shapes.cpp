@@ -28,8 +28,6 @@ using flatland_test::read_text;
 using flatland_test::Result;
 using flatland_test::write_text;
 
-constexpr double kPi = std::numbers::pi;
-
 class CliHandShapes : public flatland_test::CliTestBase {
  protected:
   /// A planar scene without a camera: `hand` and `motion` as YAML blocks.
@@ -111,9 +109,10 @@ std::vector<double> downward_zero_crossings(const std::vector<double>& t,
 // period is 2 pi sqrt(L / g) for small amplitudes and 4 sqrt(L / g) K(sin(A / 2)) exactly.
 TEST_F(CliHandShapes, ADiskInACircularWellSwingsWithThePendulumsPeriod) {
   const double R = 0.2, r = 0.051, tilt_deg = 30, amplitude = 0.01;
-  const double g = 9.8 * std::sin(tilt_deg * kPi / 180);
+  const double g = 9.8 * std::sin(tilt_deg * std::numbers::pi / 180);
   const double length = 1.5 * (R - r);
-  const double small = 2 * kPi * std::sqrt(length / g);  // 2 pi sqrt(3 (R - r) / (2 g))
+  // 2 pi sqrt(3 (R - r) / (2 g))
+  const double small = 2 * std::numbers::pi * std::sqrt(length / g);
   const double exact = 4 * std::sqrt(length / g) * std::comp_ellint_1(std::sin(amplitude / 2));
   const auto c = simulate(scene("well", tilt_deg, "{shape: circle, radius: 0.2}",
                                 "{type: fixed, angle_deg: 0}", "{s_h: 0.01, sdot_h: 0}", 6.0));
@@ -138,8 +137,8 @@ TEST_F(CliHandShapes, ADiskInACircularWellSwingsWithThePendulumsPeriod) {
 // derivative, negative (the line rises towards +s_h). The same incline made by the hand's angle
 // instead of the line's gives the same motion.
 TEST_F(CliHandShapes, ADiskOnAnInclineAcceleratesAtTwoThirdsGSinAlpha) {
-  const double tilt_deg = 30, alpha = 12 * kPi / 180;
-  const double g = 9.8 * std::sin(tilt_deg * kPi / 180);
+  const double tilt_deg = 30, alpha = 12 * std::numbers::pi / 180;
+  const double g = 9.8 * std::sin(tilt_deg * std::numbers::pi / 180);
   const double expected = -2.0 / 3.0 * g * std::sin(alpha);
   for (const auto& [hand, motion] :
        {std::pair<std::string, std::string>{"{shape: line, angle_deg: 12}",
@@ -254,7 +253,7 @@ TEST_F(CliHandShapesRender, ALinesPlateLiesBelowTheLine) {
   ASSERT_EQ(r.code, 0) << r.err;
   const auto truth = read_columns(dir_ / "frames" / "truth.csv");
   ASSERT_EQ(truth.at("t").size(), 7u);
-  const double slope = std::tan(10 * kPi / 180);
+  const double slope = std::tan(10 * std::numbers::pi / 180);
   for (std::size_t i = 0; i < truth.at("t").size(); ++i) {
     char name[32];
     std::snprintf(name, sizeof name, "frame_%06zu.png", i);
@@ -288,7 +287,7 @@ TEST_F(CliHandShapesRender, ACircularWellIsARingAroundTheDisk) {
     const cv::Mat img = cv::imread((dir_ / "frames" / name).string(), cv::IMREAD_COLOR);
     ASSERT_FALSE(img.empty()) << name;
     for (int k = 0; k < 24; ++k) {
-      const double a = 2 * kPi * k / 24;
+      const double a = 2 * std::numbers::pi * k / 24;
       // The ring: R to 1.25 R (the middle, 1.125 R, 11 px from either edge).
       const cv::Point2d ring = pixel(1.125 * R * std::cos(a), cy + 1.125 * R * std::sin(a));
       if (ring.y > 3 && ring.y < 476) {

@@ -29,8 +29,6 @@ using flatland_test::Result;
 using flatland_test::write_text;
 using nlohmann::json;
 
-constexpr double kPi = std::numbers::pi;
-
 /// A CSV with a header, each column by name; cells that are not numbers are kept as text too.
 struct Table {
   std::map<std::string, std::vector<double>> numbers;
@@ -177,7 +175,7 @@ TEST_F(CliObjects, SimulateReportsTheRollingRadiusAndInertiaOfEachObject) {
 TEST_F(CliObjects, ABallOnRailsInACircularWellSwingsWithItsPendulumsPeriodUnderTheHybridModel) {
   const double R = 0.06, w = 0.1, Rw = 0.2, amplitude = 0.01, tilt_deg = 30;
   const double r = std::sqrt(R * R - w * w / 4), J_ratio = 0.4 * R * R / (r * r);
-  const double g = 9.8 * std::sin(tilt_deg * kPi / 180);
+  const double g = 9.8 * std::sin(tilt_deg * std::numbers::pi / 180);
   const double L = (1 + J_ratio) * (Rw - r);
   const double exact = 4 * std::sqrt(L / g) * std::comp_ellint_1(std::sin(amplitude / 2));
   const fs::path p = dir_ / "well.yaml";

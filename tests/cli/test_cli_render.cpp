@@ -27,6 +27,7 @@
 namespace {
 
 namespace fs = std::filesystem;
+using flatland_test::have_tool;
 using flatland_test::lines_of;
 using flatland_test::quote;
 using flatland_test::read_text;
@@ -43,10 +44,6 @@ std::vector<double> fields_of(const std::string& line) {
   std::stringstream ss(line);
   for (std::string cell; std::getline(ss, cell, ',');) out.push_back(std::stod(cell));
   return out;
-}
-
-bool have_tool(const std::string& name) {
-  return std::system(("command -v " + name + " > /dev/null 2>&1").c_str()) == 0;
 }
 
 /// Width and height from a PNG's IHDR chunk; {0, 0} if `p` is not a PNG.

@@ -20,6 +20,8 @@
 namespace {
 
 namespace fs = std::filesystem;
+using flatland_test::cells_of;
+using flatland_test::have_tool;
 using flatland_test::lines_of;
 using flatland_test::quote;
 using flatland_test::read_text;
@@ -30,17 +32,6 @@ using nlohmann::json;
 // The bundled closed-loop scene's camera (assets/scenes/airtable-feedback.yaml): the study's
 // default scene, whose cell must be in every grid.
 constexpr double kSceneRate = 30, kSceneLatency = 0.033;
-
-bool have_tool(const std::string& name) {
-  return std::system(("command -v " + name + " > /dev/null 2>&1").c_str()) == 0;
-}
-
-std::vector<std::string> cells_of(const std::string& line) {
-  std::vector<std::string> out;
-  std::stringstream ss(line);
-  for (std::string cell; std::getline(ss, cell, ',');) out.push_back(cell);
-  return out;
-}
 
 bool near(double a, double b) { return std::abs(a - b) < 1e-9; }
 

@@ -20,6 +20,7 @@
 namespace {
 
 namespace fs = std::filesystem;
+using flatland_test::cells_of;
 using flatland_test::lines_of;
 using flatland_test::quote;
 using flatland_test::read_text;
@@ -27,15 +28,8 @@ using flatland_test::Result;
 using flatland_test::write_text;
 using nlohmann::json;
 
-std::vector<std::string> cells_of(const std::string& line) {
-  std::vector<std::string> out;
-  std::stringstream ss(line);
-  for (std::string cell; std::getline(ss, cell, ',');) out.push_back(cell);
-  return out;
-}
-
 /// A CSV as one map column -> text per row; the header separately.
-struct Csv {
+struct CsvByName {
   std::vector<std::string> header;
   std::vector<std::map<std::string, std::string>> rows;
   double num(std::size_t row, const std::string& col) const {
@@ -43,8 +37,8 @@ struct Csv {
   }
 };
 
-Csv read_csv(const fs::path& p) {
-  Csv csv;
+CsvByName read_csv_by_name(const fs::path& p) {
+  CsvByName csv;
   const auto lines = lines_of(read_text(p));
   if (lines.empty()) return csv;
   csv.header = cells_of(lines[0]);
@@ -110,7 +104,7 @@ TEST_F(StudyVision, RenderQuick) {
   EXPECT_FALSE(fs::exists(dir_ / "r" / "render_error.png")) << "--no-plot draws nothing";
   EXPECT_EQ(json::parse(read_text(dir_ / "r" / "render.json"))["rows"].size(), j["rows"].size());
 
-  const Csv csv = read_csv(dir_ / "r" / "render.csv");
+  const CsvByName csv = read_csv_by_name(dir_ / "r" / "render.csv");
   EXPECT_EQ(csv.header,
             (std::vector<std::string>{
                 "supersample", "width_px", "height_px", "fx_px", "disk_radius_px", "positions",
@@ -160,7 +154,7 @@ TEST_F(StudyVision, TrackerQuick) {
   EXPECT_TRUE(fs::exists(dir_ / "t" / "tracker.json"));
   EXPECT_FALSE(fs::exists(dir_ / "t" / "tracker_error.png"));
 
-  const Csv csv = read_csv(dir_ / "t" / "tracker.csv");
+  const CsvByName csv = read_csv_by_name(dir_ / "t" / "tracker.csv");
   EXPECT_EQ(csv.header, (std::vector<std::string>{"method",
                                                   "fit",
                                                   "blur_level",
@@ -310,7 +304,7 @@ TEST_F(StudyVision, TrackerQuickOnAnInterlacedCamera) {
   const double fps = j["camera"]["fps"].get<double>();
   ASSERT_GE(j["exposures"].size(), 2u);
   EXPECT_NEAR(j["exposures"].back()["exposure_s"].get<double>(), 0.5 / fps, 1e-12);
-  const Csv csv = read_csv(dir_ / "t" / "tracker.csv");
+  const CsvByName csv = read_csv_by_name(dir_ / "t" / "tracker.csv");
   int edge_rows = 0;
   for (std::size_t i = 0; i < csv.rows.size(); ++i) {
     if (csv.rows[i].at("method") != "edge") continue;

@@ -224,7 +224,7 @@ struct CsvTable {
   }
 };
 
-CsvTable read_csv(const fs::path& p) {
+CsvTable read_csv_table(const fs::path& p) {
   CsvTable t;
   const auto lines = lines_of(read_text(p));
   for (std::size_t i = 0; i < lines.size(); ++i) {
@@ -251,7 +251,7 @@ TEST_F(ReplayIntegrity, RecordedVideoIsFlaggedAsTrackFlagsIt) {
   ASSERT_EQ(r.code, 0) << r.err;
 
   // The recording's frames as an MP4 with the recording's timestamps.
-  const CsvTable recorded = read_csv(dir_ / "rec" / "frames.csv");
+  const CsvTable recorded = read_csv_table(dir_ / "rec" / "frames.csv");
   ASSERT_GT(recorded.rows.size(), 100u);
   {
     flatland::render::Mp4Writer writer;
@@ -271,7 +271,7 @@ TEST_F(ReplayIntegrity, RecordedVideoIsFlaggedAsTrackFlagsIt) {
   }
   r = run("track --video rec.mp4 --camera cam.camera.yaml --out intact.csv");
   ASSERT_EQ(r.code, 0) << r.err;
-  const CsvTable intact = read_csv(dir_ / "intact.csv");
+  const CsvTable intact = read_csv_table(dir_ / "intact.csv");
 
   const std::string data = read_text(dir_ / "rec.mp4");
   const int seeds = flatland::test::short_tests() ? 1 : 3;
@@ -282,12 +282,12 @@ TEST_F(ReplayIntegrity, RecordedVideoIsFlaggedAsTrackFlagsIt) {
     fs::copy_file(dir_ / "rec.mp4.timestamps.csv", dir_ / (name + ".mp4.timestamps.csv"));
     r = run("track --video " + name + ".mp4 --camera cam.camera.yaml --out " + name + ".csv");
     ASSERT_EQ(r.code, 0) << r.err;
-    const CsvTable tracked = read_csv(dir_ / (name + ".csv"));
+    const CsvTable tracked = read_csv_table(dir_ / (name + ".csv"));
     r = run("experiment" + sc + " --camera video:" + name + ".mp4 --joint log:rec --out " + name +
             " --no-plot --json");
     ASSERT_EQ(r.code, 0) << r.err;
     const nlohmann::json j = nlohmann::json::parse(r.out);
-    const CsvTable loop = read_csv(dir_ / name / "frames.csv");
+    const CsvTable loop = read_csv_table(dir_ / name / "frames.csv");
     ASSERT_EQ(static_cast<long>(loop.rows.size()), j["frames"].get<long>());
 
     const std::size_t state = tracked.column("state"), integrity = loop.column("integrity");

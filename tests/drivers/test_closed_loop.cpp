@@ -1,6 +1,7 @@
 // The closed loop through the whole synthetic pipeline: simulate -> render -> track -> estimate
 // -> control -> joint (paper section 5), its replay from a recording, the estimator's consistency
 // in the loop, and the safe stop on faults.
+#include "drivers/loop_support.hpp"
 #include "flatland/drivers/experiment.hpp"
 #include "flatland/drivers/recorded.hpp"
 #include "flatland/scene/scene.hpp"
@@ -21,7 +22,8 @@ namespace fs = std::filesystem;
 
 namespace {
 
-Scene feedback_scene() { return load_scene(FLATLAND_ASSET_DIR "/scenes/airtable-feedback.yaml"); }
+using flatland_test::feedback_scene;
+using flatland_test::mean_chi2_bounds;
 
 /// Linear interpolation of a logged quantity at time t.
 template <typename Field>
@@ -32,17 +34,6 @@ double at(const std::vector<drivers::TickLog>& log, double t, Field field) {
       return field(log[i]) + w * (field(log[i + 1]) - field(log[i]));
     }
   return std::numeric_limits<double>::quiet_NaN();
-}
-
-/// Two-sided 95 % bounds of the mean of n chi-square(dof) samples (Wilson-Hilferty).
-std::pair<double, double> mean_chi2_bounds(long n, int dof) {
-  const double k = static_cast<double>(n) * dof;
-  const auto quantile = [&](double z) {
-    const double c = 2.0 / (9.0 * k);
-    return k * std::pow(1.0 - c + z * std::sqrt(c), 3.0);
-  };
-  return {quantile(-1.959964) / static_cast<double>(n),
-          quantile(1.959964) / static_cast<double>(n)};
 }
 
 struct TempDir {

@@ -1,6 +1,7 @@
 // Recorded and live drivers: the Recorder's directory format round-trips frames and joint ticks
 // exactly, the players reject bad input with one-line errors naming the file, and the live
 // drivers fail cleanly on a machine without a camera.
+#include "cli_support.hpp"
 #include "flatland/drivers/live.hpp"
 #include "flatland/drivers/recorded.hpp"
 
@@ -36,20 +37,10 @@ using flatland::drivers::RecordedCamera;
 using flatland::drivers::Recorder;
 using flatland::drivers::RecordingMetadata;
 using flatland::drivers::SteadyClock;
+using flatland_test::read_text;
+using flatland_test::write_text;
 
 std::uint64_t bits(double v) { return std::bit_cast<std::uint64_t>(v); }
-
-std::string read_text(const fs::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
-
-void write_text(const fs::path& p, const std::string& s) {
-  std::ofstream f(p, std::ios::binary);
-  f << s;
-}
 
 /// A reproducible noisy image: every pixel value matters for the lossless round trip.
 cv::Mat noise_image(int seed, int type, int width = 40, int height = 30) {

@@ -1,6 +1,7 @@
 // The loop runs any controller and estimator behind control/interfaces.hpp: a wrapped paper
 // controller or EKF gives the very run the scene's own choice gives; a controller's stop request,
 // exception or non-finite command is handled by the loop as documented.
+#include "drivers/loop_support.hpp"
 #include "flatland/drivers/experiment.hpp"
 #include "flatland/model/model.hpp"
 #include "flatland/scene/scene.hpp"
@@ -17,7 +18,7 @@ using namespace flatland;
 
 namespace {
 
-Scene feedback_scene() { return load_scene(FLATLAND_ASSET_DIR "/scenes/airtable-feedback.yaml"); }
+using flatland_test::feedback_scene;
 
 /// What a wrapper saw of the loop.
 struct Seen {

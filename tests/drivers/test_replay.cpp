@@ -3,6 +3,7 @@
 // or replayed against a changed controller, runs to the end instead of ending in a false safe
 // stop, and the log shows where the commands part. Also the estimator inside the loop when the
 // joint lags its command.
+#include "drivers/loop_support.hpp"
 #include "flatland/drivers/experiment.hpp"
 #include "flatland/drivers/recorded.hpp"
 #include "flatland/render/video_writer.hpp"
@@ -26,7 +27,8 @@ namespace fs = std::filesystem;
 
 namespace {
 
-Scene feedback_scene() { return load_scene(FLATLAND_ASSET_DIR "/scenes/airtable-feedback.yaml"); }
+using flatland_test::feedback_scene;
+using flatland_test::mean_chi2_bounds;
 
 /// The world's s_h at time t, linear between the logged ticks (the disk moves ~1e-3 per tick, so
 /// the interpolation's error is ~|s''| h^2 / 8 ~ 1e-7).
@@ -37,17 +39,6 @@ double truth_at(const std::vector<drivers::TickLog>& log, double t) {
       return log[i].s_true + w * (log[i + 1].s_true - log[i].s_true);
     }
   return std::numeric_limits<double>::quiet_NaN();
-}
-
-/// Two-sided 95 % bounds of the mean of n chi-square(dof) samples (Wilson-Hilferty).
-std::pair<double, double> mean_chi2_bounds(long n, int dof) {
-  const double k = static_cast<double>(n) * dof;
-  const auto quantile = [&](double z) {
-    const double c = 2.0 / (9.0 * k);
-    return k * std::pow(1.0 - c + z * std::sqrt(c), 3.0);
-  };
-  return {quantile(-1.959964) / static_cast<double>(n),
-          quantile(1.959964) / static_cast<double>(n)};
 }
 
 /// Replay a recording (frames from `camera_path`, joint from `rec`) through the loop of `setup`.

@@ -20,6 +20,12 @@ namespace flatland_test {
 /// 2 DN, exposure blur; docs/VISION.md, "Mapping pixel -> s_h": RMS 4e-5). A recording's sigma.
 constexpr double kTrackerSigmaSh = 4e-5;
 
+/// The truth of the synthetic world of identify's tests besides the scene's friction (mu = 0.8):
+/// the scene's kinetic friction, a restitution that bounces, and losses large enough that 4 s of
+/// rocking show them (the scene's own, drag 0.015 N s/m and 5e-5 m, damp the rocking over
+/// minutes).
+constexpr double kMuKinetic = 0.6, kRestitution = 0.4, kRollingResistance = 2e-4, kDrag = 0.1;
+
 /// The air-table world of assets/scenes/airtable-5deg.yaml with the given losses (hybrid model).
 inline flatland::sim::SimulationSpec air_table_world(double mu, double mu_kinetic,
                                                      double restitution, double rolling_resistance,

@@ -48,7 +48,10 @@ using namespace flatland;
 
 namespace {
 
-constexpr double kMuKinetic = 0.6, kRestitution = 0.4, kRollingResistance = 2e-4, kDrag = 0.1;
+using flatland_test::kDrag;
+using flatland_test::kMuKinetic;
+using flatland_test::kRestitution;
+using flatland_test::kRollingResistance;
 constexpr double kRockingEnd = 4.0, kThrowEnd = 2.5, kThrowPeriod = 3.2, kThrowDip = -1.155794;
 constexpr double kFrameRate = 30.0;
 
@@ -180,7 +183,7 @@ std::vector<identify::Recording> session_recordings(int seed, TrackedError& erro
                             d.throw_s0, kThrowEnd, d.throw_phase, error)};
 }
 
-double truth_of(const std::string& name) {
+double truth_of_parameter(const std::string& name) {
   if (name == "mu_kinetic") return kMuKinetic;
   if (name == "restitution") return kRestitution;
   if (name == "rolling_resistance") return kRollingResistance;
@@ -305,7 +308,7 @@ TEST_F(IdentifyRenderedSeeds, TruthWithinTwoSigmaInNineOfTenSessionsAndSigmaMatc
       values[j].push_back(p.value);
       sigmas[j].push_back(*p.sigma);
       std::printf("[ identify ]   %-18s %.6g +- %.3g (%+.2f sigma)\n", p.name.c_str(), p.value,
-                  *p.sigma, (p.value - truth_of(p.name)) / *p.sigma);
+                  *p.sigma, (p.value - truth_of_parameter(p.name)) / *p.sigma);
     }
   }
   const double rms = std::sqrt(tracked.sum2 / tracked.count);
@@ -315,7 +318,7 @@ TEST_F(IdentifyRenderedSeeds, TruthWithinTwoSigmaInNineOfTenSessionsAndSigmaMatc
       "mean chi^2/dof %.2f, sigma scaled in %d/%d seeds\n",
       rms, mean_given, rms / mean_given, mean_ratio, scaled, seeds);
   for (std::size_t j = 0; j < K; ++j) {
-    const double truth = truth_of(opt.unknowns[j]);
+    const double truth = truth_of_parameter(opt.unknowns[j]);
     int within = 0;
     double mean = 0, spread = 0, error2 = 0;
     for (int i = 0; i < seeds; ++i) {
@@ -375,12 +378,12 @@ TEST_F(IdentifyRenderedSeeds, SigmaGivenTooSmallIsScaledToCoverTheError) {
     }));
     for (const identify::ParameterEstimate& p : r.parameters) {
       ASSERT_TRUE(p.sigma && p.sigma_unscaled) << p.name << ": " << p.not_determined;
-      const double off = p.value - truth_of(p.name);
+      const double off = p.value - truth_of_parameter(p.name);
       std::printf(
           "[ identify ]   %-18s %.6g +- %.2g (unscaled %.2g), truth %.6g: %+.2f sigma "
           "(unscaled %+.2f)\n",
-          p.name.c_str(), p.value, *p.sigma, *p.sigma_unscaled, truth_of(p.name), off / *p.sigma,
-          off / *p.sigma_unscaled);
+          p.name.c_str(), p.value, *p.sigma, *p.sigma_unscaled, truth_of_parameter(p.name),
+          off / *p.sigma, off / *p.sigma_unscaled);
       EXPECT_LE(std::abs(off), 3 * *p.sigma) << p.name;
     }
   }

@@ -2,6 +2,7 @@
 // control's registry), and the unscented filter's subsection `estimator.ukf` is strict: known
 // keys only, numbers in range, one-line errors naming the field's path.
 #include "flatland/scene/scene.hpp"
+#include "scene/minimal_scene.hpp"
 
 #include <gtest/gtest.h>
 
@@ -13,32 +14,9 @@ using flatland::parse_scene;
 using flatland::Scene;
 using flatland::SceneError;
 
-// The minimum a scene must say, and an estimator section to append to it.
-const std::string kMinimal = R"(gravity:
-  g: 9.8
-hand:
-  shape: polynomial
-  a: 0.18
-  b: -0.18
-  c: -0.252
-  d: 0.216
-object:
-  type: disk
-  radius: 0.051
-motion:
-  type: butterfly
-  period: 1.181
-  k: -1.1393
-)";
-
-std::string error_of(const std::string& estimator_section) {
-  try {
-    parse_scene(kMinimal + estimator_section, "t.yaml");
-  } catch (const SceneError& e) {
-    return e.what();
-  }
-  return "NO ERROR";
-}
+// The minimum a scene must say, and the error of an estimator section appended to it.
+using flatland_test::error_with_section;
+using flatland_test::kMinimal;
 
 TEST(SceneEstimatorSection, DefaultsAreTheEkfAndTheUnscentedTransformsJulierPoints) {
   const Scene s = parse_scene(kMinimal, "t.yaml");
@@ -62,29 +40,29 @@ TEST(SceneEstimatorSection, TypeAndSigmaPointsAreRead) {
 }
 
 TEST(SceneEstimatorSection, BadSigmaPointsAreOneLineErrorsNamingTheField) {
-  EXPECT_EQ(error_of("estimator:\n  ukf:\n    alpha: 0\n"),
+  EXPECT_EQ(error_with_section("estimator:\n  ukf:\n    alpha: 0\n"),
             "t.yaml: estimator.ukf.alpha: must be in [1e-04, 1], got 0");
-  EXPECT_EQ(error_of("estimator:\n  ukf:\n    alpha: 1.5\n"),
+  EXPECT_EQ(error_with_section("estimator:\n  ukf:\n    alpha: 1.5\n"),
             "t.yaml: estimator.ukf.alpha: must be in [1e-04, 1], got 1.5");
-  EXPECT_EQ(error_of("estimator:\n  ukf:\n    beta: -1\n"),
+  EXPECT_EQ(error_with_section("estimator:\n  ukf:\n    beta: -1\n"),
             "t.yaml: estimator.ukf.beta: must be >= 0, got -1");
-  EXPECT_EQ(error_of("estimator:\n  ukf:\n    kappa: .nan\n"),
+  EXPECT_EQ(error_with_section("estimator:\n  ukf:\n    kappa: .nan\n"),
             "t.yaml: estimator.ukf.kappa: must be a finite number, got .nan");
-  EXPECT_EQ(error_of("estimator:\n  ukf:\n    kappa: \"3\"\n"),
+  EXPECT_EQ(error_with_section("estimator:\n  ukf:\n    kappa: \"3\"\n"),
             "t.yaml: estimator.ukf.kappa: expected a number, got the string '3' (remove the "
             "quotes)");
-  EXPECT_EQ(error_of("estimator:\n  ukf:\n    lambda: 1\n"),
+  EXPECT_EQ(error_with_section("estimator:\n  ukf:\n    lambda: 1\n"),
             "t.yaml: estimator.ukf.lambda: unknown key (allowed: alpha, beta, kappa)");
-  EXPECT_EQ(error_of("estimator:\n  ukf: 3\n"),
+  EXPECT_EQ(error_with_section("estimator:\n  ukf: 3\n"),
             "t.yaml: estimator.ukf: expected a mapping of keys, got '3'");
-  EXPECT_EQ(error_of("estimator:\n  type: [ukf]\n")
+  EXPECT_EQ(error_with_section("estimator:\n  type: [ukf]\n")
                 .rfind("t.yaml: estimator.type: expected a "
                        "string",
                        0),
             0u);
-  EXPECT_EQ(
-      error_of("estimator:\n  filter: ukf\n").rfind("t.yaml: estimator.filter: unknown key", 0),
-      0u);
+  EXPECT_EQ(error_with_section("estimator:\n  filter: ukf\n")
+                .rfind("t.yaml: estimator.filter: unknown key", 0),
+            0u);
 }
 
 }  // namespace

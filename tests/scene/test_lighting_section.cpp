@@ -2,6 +2,7 @@
 // only, numbers in range, the lamp above the hand and the disk, one-line errors naming the field's
 // path.
 #include "flatland/scene/scene.hpp"
+#include "scene/minimal_scene.hpp"
 
 #include <gtest/gtest.h>
 
@@ -13,32 +14,9 @@ using flatland::parse_scene;
 using flatland::Scene;
 using flatland::SceneError;
 
-// The minimum a scene must say, and a lighting section to append to it.
-const std::string kMinimal = R"(gravity:
-  g: 9.8
-hand:
-  shape: polynomial
-  a: 0.18
-  b: -0.18
-  c: -0.252
-  d: 0.216
-object:
-  type: disk
-  radius: 0.051
-motion:
-  type: butterfly
-  period: 1.181
-  k: -1.1393
-)";
-
-std::string error_of(const std::string& lighting_section) {
-  try {
-    parse_scene(kMinimal + lighting_section, "t.yaml");
-  } catch (const SceneError& e) {
-    return e.what();
-  }
-  return "NO ERROR";
-}
+// The minimum a scene must say, and the error of a lighting section appended to it.
+using flatland_test::error_with_section;
+using flatland_test::kMinimal;
 
 }  // namespace
 
@@ -65,30 +43,31 @@ TEST(SceneLightingSection, AbsentIsOffAndPresentTakesTheDefaultsItDoesNotSet) {
 }
 
 TEST(SceneLightingSection, BadValuesAreRefusedNamingTheField) {
-  EXPECT_EQ(error_of("lighting:\n  position: [0, 0, 0.01]\n"),
+  EXPECT_EQ(error_with_section("lighting:\n  position: [0, 0, 0.01]\n"),
             "t.yaml: lighting.position: the lamp must be above the hand and the disk (z > 0.012 "
             "m, their top), got z = 0.01");
-  EXPECT_EQ(error_of("lighting:\n  color: [1, 1.5, 1]\n"),
+  EXPECT_EQ(error_with_section("lighting:\n  color: [1, 1.5, 1]\n"),
             "t.yaml: lighting.color[1]: must be in [0, 1], got 1.5");
-  EXPECT_EQ(error_of("lighting:\n  ambient: -0.1\n"),
+  EXPECT_EQ(error_with_section("lighting:\n  ambient: -0.1\n"),
             "t.yaml: lighting.ambient: must be in [0, 1], got -0.1");
-  EXPECT_EQ(error_of("lighting:\n  intensity: -1\n"),
+  EXPECT_EQ(error_with_section("lighting:\n  intensity: -1\n"),
             "t.yaml: lighting.intensity: must be finite and >= 0, got -1");
-  EXPECT_EQ(error_of("lighting:\n  materials:\n    band:\n      shininess: 0.5\n"),
+  EXPECT_EQ(error_with_section("lighting:\n  materials:\n    band:\n      shininess: 0.5\n"),
             "t.yaml: lighting.materials.band.shininess: must be in [1, 10000], got 0.5");
-  EXPECT_EQ(error_of("lighting:\n  materials:\n    hand:\n      specular: 2\n"),
+  EXPECT_EQ(error_with_section("lighting:\n  materials:\n    hand:\n      specular: 2\n"),
             "t.yaml: lighting.materials.hand.specular: must be in [0, 1], got 2");
-  EXPECT_NE(error_of("lighting:\n  lamp: 1\n").find("t.yaml: lighting.lamp: unknown key"),
+  EXPECT_NE(error_with_section("lighting:\n  lamp: 1\n").find("t.yaml: lighting.lamp: unknown key"),
             std::string::npos);
-  EXPECT_NE(error_of("lighting:\n  materials:\n    board: {}\n")
+  EXPECT_NE(error_with_section("lighting:\n  materials:\n    board: {}\n")
                 .find("t.yaml: lighting.materials.board: unknown key"),
             std::string::npos);
-  EXPECT_NE(error_of("lighting:\n  shadows: 3\n").find("t.yaml: lighting.shadows:"),
+  EXPECT_NE(error_with_section("lighting:\n  shadows: 3\n").find("t.yaml: lighting.shadows:"),
             std::string::npos);
 }
 
 TEST(SceneLightingSection, TheLampMustClearATallerHand) {
-  EXPECT_EQ(error_of("render:\n  hand_thickness: 0.5\nlighting:\n  position: [0, 0, 0.4]\n"),
-            "t.yaml: lighting.position: the lamp must be above the hand and the disk (z > 0.5 m, "
-            "their top), got z = 0.4");
+  EXPECT_EQ(
+      error_with_section("render:\n  hand_thickness: 0.5\nlighting:\n  position: [0, 0, 0.4]\n"),
+      "t.yaml: lighting.position: the lamp must be above the hand and the disk (z > 0.5 m, "
+      "their top), got z = 0.4");
 }

@@ -3,6 +3,7 @@
 #include "flatland/scene/scene.hpp"
 #include "flatland/sim/curve.hpp"
 #include "flatland/sim/spec.hpp"
+#include "scene/minimal_scene.hpp"
 
 #include <gtest/gtest.h>
 
@@ -64,23 +65,7 @@ contact:
 const std::string kHandSection =
     "hand:\n  shape: polynomial\n  a: 0.18\n  b: -0.18\n  c: -0.252\n  d: 0.216\n";
 
-// The minimum a scene must say.
-const std::string kMinimal = R"(gravity:
-  g: 9.8
-hand:
-  shape: polynomial
-  a: 0.18
-  b: -0.18
-  c: -0.252
-  d: 0.216
-object:
-  type: disk
-  radius: 0.051
-motion:
-  type: butterfly
-  period: 1.181
-  k: -1.1393
-)";
+using flatland_test::kMinimal;  // the minimum a scene must say
 
 /// `text` with the first occurrence of `from` replaced; fails the test if `from` is absent, so a
 /// perturbation can never silently become a no-op.

@@ -3,6 +3,7 @@
 #include "flatland/scene/scene.hpp"
 #include "flatland/sim/search.hpp"
 #include "flatland/sim/simulate.hpp"
+#include "sim/rolling_support.hpp"
 
 #include <gtest/gtest.h>
 
@@ -12,15 +13,6 @@ using namespace flatland;
 using namespace flatland::sim;
 
 namespace {
-
-std::shared_ptr<RollingProblem> butterfly(double period = 1.181, double k = -1.1393) {
-  auto pb = std::make_shared<RollingProblem>();
-  pb->hand = std::make_shared<PolynomialHand>(0.18, -0.18, -0.252, 0.216);
-  pb->object = make_uniform_disk(0.051);
-  pb->motion = std::make_shared<ButterflyMotion>(period, k);
-  pb->gravity = 9.8;
-  return pb;
-}
 
 RunOptions options(Method m, double t_end, double rtol, Formulation f = Formulation::kReduced) {
   RunOptions o;
@@ -48,7 +40,7 @@ RunOptions fixed_dop853(double t_end, double h) {
 // piece, no junctions and strongly nonlinear, so every term of the error expansion is present.
 constexpr double kSmoothEnd = 1.0;
 
-std::shared_ptr<RollingProblem> palm_well() {
+std::shared_ptr<RollingProblem> circular_well() {
   auto pb = butterfly();
   pb->hand = std::make_shared<CircleCurve>(Vec2(0, 0.2), 0.2, CircleCurve::Side::kConcaveWell);
   pb->motion = std::make_shared<FixedHand>(0.0);
@@ -69,7 +61,7 @@ InitialContact released() {
 // to h^8 at these h is a few per cent per halving) but excludes orders 7 (128 is on the border
 // only asymptotically; measured ratios for a 7th-order method would sit near 128) and 9 (512).
 TEST(Dop853, FixedStepConvergesWithOrderEight) {
-  auto pb = palm_well();
+  auto pb = circular_well();
   const double ref =
       simulate(pb, released(), options(Method::kDormandPrince54, kSmoothEnd, 1e-13)).final.s_h;
   std::vector<double> err;
@@ -95,7 +87,7 @@ TEST(Dop853, FixedStepConvergesWithOrderEight) {
 // 7th-order interpolant is O(h^8)), checked at off-grid times against separate tight runs that
 // end exactly there (no dense output involved in the reference).
 TEST(Dop853, DenseOutputConvergesWithOrderEight) {
-  auto pb = palm_well();
+  auto pb = circular_well();
   const std::vector<double> times = {0.1234, 0.3111, 0.5555, 0.7071, 0.9377};
   std::vector<double> ref;
   for (double t : times)

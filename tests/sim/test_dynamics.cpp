@@ -2,6 +2,8 @@
 // events and drift control.
 #include "flatland/sim/roots.hpp"
 #include "flatland/sim/simulate.hpp"
+#include "sim/rolling_support.hpp"
+#include "units.hpp"
 
 #include <gtest/gtest.h>
 
@@ -12,17 +14,7 @@ using namespace flatland::sim;
 
 namespace {
 
-constexpr double kG = 9.8;
-
-std::shared_ptr<RollingProblem> problem(CurvePtr hand, RigidObject object,
-                                        std::shared_ptr<const HandMotion> motion, double g = kG) {
-  auto pb = std::make_shared<RollingProblem>();
-  pb->hand = std::move(hand);
-  pb->object = std::move(object);
-  pb->motion = std::move(motion);
-  pb->gravity = g;
-  return pb;
-}
+using flatland_test::kG;
 
 std::shared_ptr<RollingProblem> paper_butterfly(double period = 1.181, double k = -1.1393) {
   return problem(std::make_shared<PolynomialHand>(0.18, -0.18, -0.252, 0.216),
@@ -37,12 +29,6 @@ RunOptions tight(double t_end, Formulation f) {
   o.integrator.atol = 1e-14;
   o.events.stop_on_contact_loss = false;
   return o;
-}
-
-double energy(const Sample& s, const RigidObject& o, double g) {
-  return 0.5 * o.mass * s.object_velocity.squaredNorm() +
-         0.5 * o.inertia * s.object_angular_velocity * s.object_angular_velocity +
-         o.mass * g * s.object_position.y();
 }
 
 class BothFormulations : public ::testing::TestWithParam<Formulation> {};

@@ -7,6 +7,7 @@
 #include "flatland/sim/search.hpp"
 #include "flatland/sim/simulate.hpp"
 #include "flatland/sim/spec.hpp"
+#include "units.hpp"
 
 #include <gtest/gtest.h>
 
@@ -17,8 +18,8 @@ using namespace flatland::sim;
 
 namespace {
 
-constexpr double kG = 9.8;
-constexpr double kDeg = std::numbers::pi / 180.0;
+using flatland_test::kDeg;
+using flatland_test::kG;
 
 std::shared_ptr<RollingProblem> paper_problem(std::shared_ptr<const HandMotion> motion,
                                               double g = kG) {

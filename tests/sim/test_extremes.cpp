@@ -5,7 +5,9 @@
 // output; each test says where its bound comes from.
 #include "flatland/sim/search.hpp"
 #include "flatland/sim/simulate.hpp"
+#include "sim/rolling_support.hpp"
 #include "test_scale.hpp"
+#include "units.hpp"
 
 #include <gtest/gtest.h>
 
@@ -18,30 +20,15 @@ using namespace flatland::sim;
 
 namespace {
 
-constexpr double kG = 9.8;
+using flatland_test::kG;
 constexpr double kPeriod = 1.181;
 
-std::shared_ptr<RollingProblem> problem(CurvePtr hand, RigidObject object,
-                                        std::shared_ptr<const HandMotion> motion, double g = kG) {
-  auto pb = std::make_shared<RollingProblem>();
-  pb->hand = std::move(hand);
-  pb->object = std::move(object);
-  pb->motion = std::move(motion);
-  pb->gravity = g;
-  return pb;
-}
-
-std::shared_ptr<PolynomialHand> paper_hand() {
+std::shared_ptr<PolynomialHand> shared_paper_hand() {
   return std::make_shared<PolynomialHand>(0.18, -0.18, -0.252, 0.216);
 }
 
-std::shared_ptr<RollingProblem> butterfly(double period = kPeriod, double k = -1.1393) {
-  return problem(paper_hand(), make_uniform_disk(0.051),
-                 std::make_shared<ButterflyMotion>(period, k));
-}
-
 std::shared_ptr<RollingProblem> palm_well(double radius = 0.051) {
-  return problem(paper_hand(), make_uniform_disk(radius), std::make_shared<FixedHand>(0.0));
+  return problem(shared_paper_hand(), make_uniform_disk(radius), std::make_shared<FixedHand>(0.0));
 }
 
 RunOptions adaptive(Method m, double t_end, double rtol, Formulation f = Formulation::kReduced) {
@@ -64,12 +51,6 @@ RunOptions rk4(double t_end, double h, Formulation f = Formulation::kReduced) {
   // the energy audit's bound (1e-6 relative for RK4) would stop the coarsest runs first.
   o.integrator.energy_tolerance = 1.0;
   return o;
-}
-
-double energy(const Sample& s, const RigidObject& o, double g) {
-  return 0.5 * o.mass * s.object_velocity.squaredNorm() +
-         0.5 * o.inertia * s.object_angular_velocity * s.object_angular_velocity +
-         o.mass * g * s.object_position.y();
 }
 
 // Least-squares slope of log(y) against log(x).
@@ -308,7 +289,7 @@ TEST(Extremes, ContactLossAtAndBeyondTheTimeOptimalSolution) {
 // mirror image: x(s) = (1 - s^2)(a (1 + s^2) + c s^2) > 0 on (-1, 1), i.e. 2a + c > 0.
 TEST(Extremes, ShapesNearTheirLimitsAreAcceptedOrRejectedClearly) {
   Stopwatch sw;
-  const auto hand = paper_hand();
+  const auto hand = shared_paper_hand();
   // R_min from a fine scan of the right half (the left is its mirror).
   double r_min = INFINITY;
   for (int i = 0; i <= 20000; ++i) {
@@ -394,7 +375,7 @@ TEST(Extremes, DisksFromOneMillimetreToTwentyCentimetres) {
     }
   }
   // And on the paper's hand: every radius below R_min is accepted, every one above rejected.
-  const auto hand = paper_hand();
+  const auto hand = shared_paper_hand();
   double r_min = INFINITY;
   for (int i = 0; i <= 20000; ++i) {
     const CurveGeometry g = hand->geometry(-1.0 + 2.0 * i / 20000, 0);

@@ -3,6 +3,7 @@
 #include "flatland/sim/curve.hpp"
 #include "flatland/sim/motion.hpp"
 #include "flatland/sim/object.hpp"
+#include "sim/rolling_support.hpp"
 
 #include <gtest/gtest.h>
 
@@ -15,8 +16,6 @@
 using namespace flatland::sim;
 
 namespace {
-
-PolynomialHand paper_hand() { return PolynomialHand(0.18, -0.18, -0.252, 0.216); }
 
 // Central differences of the geometry along one piece.
 void expect_consistent_derivatives(const Curve& curve, double s, int piece) {

@@ -8,6 +8,7 @@
 #include "flatland/sim/roots.hpp"
 #include "flatland/sim/search.hpp"
 #include "flatland/sim/simulate.hpp"
+#include "sim/rolling_support.hpp"
 
 #include <gtest/gtest.h>
 
@@ -24,10 +25,6 @@
 using namespace flatland::sim;
 
 namespace {
-
-constexpr double kPi = std::numbers::pi;
-
-PolynomialHand paper_hand() { return PolynomialHand(0.18, -0.18, -0.252, 0.216); }
 
 /// The paper's right half sampled evenly in its own parameter, palm to back.
 std::vector<Vec2> paper_points(int n) {
@@ -251,7 +248,7 @@ TEST(PolarHand, TableInterpolatesTheFourierSeries) {
   PolarHandSpec table = series;
   table.form = PolarHandSpec::Form::kTable;
   for (int i = 0; i < 72; ++i) {
-    table.phi.push_back(2 * kPi * i / 72);
+    table.phi.push_back(2 * std::numbers::pi * i / 72);
     table.r.push_back(a - b * std::cos(2 * table.phi.back()));
   }
   const auto from_series = make_polar_hand(series), from_table = make_polar_hand(table);
@@ -288,7 +285,7 @@ TEST(PolarHand, BallOnRailsOscillatesInTheDipWithTheClosedFormPeriod) {
   pb->motion = std::make_shared<FixedHand>(0.0);
   pb->gravity = g;
   const double rho = (a - b) * (a - b) / (5 * b - a);
-  const double expected = 2 * kPi * std::sqrt((1 + J / (m * r * r)) * (rho - r) / g);
+  const double expected = 2 * std::numbers::pi * std::sqrt((1 + J / (m * r * r)) * (rho - r) / g);
 
   auto period_at = [&](double amplitude) {
     InitialContact init;

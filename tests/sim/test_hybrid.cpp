@@ -7,6 +7,7 @@
 #include "flatland/sim/spec.hpp"
 
 #include "test_scale.hpp"
+#include "units.hpp"
 
 #include <gtest/gtest.h>
 
@@ -18,7 +19,7 @@ using namespace flatland::sim;
 
 namespace {
 
-constexpr double kG = 9.8;
+using flatland_test::kG;
 constexpr double kR = 0.05;
 
 std::shared_ptr<RollingProblem> problem(CurvePtr hand, std::shared_ptr<const HandMotion> motion,

@@ -9,6 +9,7 @@
 #include "flatland/sim/spec.hpp"
 
 #include "test_scale.hpp"
+#include "units.hpp"
 
 #include <gtest/gtest.h>
 
@@ -25,7 +26,7 @@ using namespace flatland::sim;
 
 namespace {
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+using flatland_test::kDeg;
 
 /// The i-th random world: even i the hand held still, odd i the butterfly.
 SimulationSpec random_world(int i, std::mt19937_64& rng) {

@@ -6,6 +6,7 @@
 #include "flatland/sim/hybrid.hpp"
 #include "flatland/sim/roots.hpp"
 #include "flatland/sim/spec.hpp"
+#include "units.hpp"
 
 #include <gtest/gtest.h>
 
@@ -17,7 +18,7 @@ using namespace flatland::sim;
 
 namespace {
 
-constexpr double kG = 9.8;
+using flatland_test::kG;
 
 std::string error_of(const ObjectSpec& o) {
   try {

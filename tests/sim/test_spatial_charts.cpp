@@ -6,6 +6,7 @@
 #include "flatland/sim/spatial_run.hpp"
 
 #include "test_scale.hpp"
+#include "units.hpp"
 
 #include <gtest/gtest.h>
 
@@ -17,8 +18,7 @@
 namespace flatland::sim {
 namespace {
 
-constexpr double kPi = std::numbers::pi;
-constexpr double kG = 9.8;
+using flatland_test::kG;
 
 /// Weltner (Am. J. Phys. 47, 984, 1979): a uniform ball rolling on a plate that spins at Omega
 /// about its normal n obeys dv/dt = (2/7) Omega n x v + (5/7) g_t, g_t gravity's part along the
@@ -79,8 +79,8 @@ Drift tilted_turntable(double theta, double azimuth, double omega, const Vec3& v
 constexpr double kTilt = 0.09998367;  // asin(0.978367483138916 / 9.8)
 double inclined_turntable_end() { return test::short_tests() ? 3.0 : 20.0; }
 Drift inclined_turntable(const IntegratorSettings& integrator) {
-  return tilted_turntable(kTilt, -kPi / 2, 10.0, Vec3::Zero(), inclined_turntable_end(),
-                          integrator);
+  return tilted_turntable(kTilt, -std::numbers::pi / 2, 10.0, Vec3::Zero(),
+                          inclined_turntable_end(), integrator);
 }
 
 /// The scene's tolerances.
@@ -161,7 +161,7 @@ void expect_kept_energy_over_a_minute(const SpatialRollingProblem& pb, double de
                                       double amplitude, double speed, double spin) {
   const FixedHand3 dish;
   ContactPlacement at;
-  at.s_h = SurfaceParam(0.0, -kPi / 2 + amplitude);
+  at.s_h = SurfaceParam(0.0, -std::numbers::pi / 2 + amplitude);
   at.velocity = Vec3(0, speed, 0);
   at.spin = spin;
   const SpatialState initial = place_in_contact(pb, dish.at(0), at);

@@ -12,6 +12,7 @@
 #include "flatland/sim/spec.hpp"
 
 #include "sim/spatial_support.hpp"
+#include "units.hpp"
 
 #include <gtest/gtest.h>
 
@@ -21,8 +22,7 @@
 namespace flatland::sim {
 namespace {
 
-constexpr double kPi = std::numbers::pi;
-constexpr double kG = 9.8;
+using flatland_test::kG;
 
 /// A ball of radius r on top of a fixed dome (a sphere of radius R, its chart's (0, 0) point on
 /// top, the contact running along the chart's equator), moving at v0 along world x.
@@ -112,7 +112,7 @@ TEST(SpatialEvents, ABallLeavingTheDishsPatchStopsOnItsEdge) {
   o.t_end = 5;
   const SpatialRunResult run = simulate_spatial(pb, hand, initial, 0.0, o);
   ASSERT_EQ(run.stop, SpatialStop::kLeftPatch);
-  EXPECT_NEAR(run.final.state.s_h.y(), kPi / 2 - margin, 1e-9);
+  EXPECT_NEAR(run.final.state.s_h.y(), std::numbers::pi / 2 - margin, 1e-9);
   EXPECT_NEAR(run.final.state.s_h.x(), 0, 1e-9);
   // A start outside the patch is refused.
   SpatialState outside = initial;

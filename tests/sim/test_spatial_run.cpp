@@ -18,8 +18,6 @@
 namespace flatland::sim {
 namespace {
 
-constexpr double kPi = std::numbers::pi;
-
 TEST(SpatialRun, BallOnATurntableCirclesAsWeltnerSays) {
   // Weltner (Am. J. Phys. 47, 984, 1979): dv/dt = (2/7) Omega z x v, so the centre runs on a
   // circle about c = p0 + z x v0 / k with radius |v0| / k at the rate k = (2/7) Omega.
@@ -31,7 +29,7 @@ TEST(SpatialRun, BallOnATurntableCirclesAsWeltnerSays) {
   const Vec3 v0(0.05, 0.03, 0);
   SpatialState initial = ball_on(pb, table.at(0), r, SurfaceParam(0.12, -0.04), v0, 1.0);
   initial.angular_velocity.z() = 1.5;  // a spin about the vertical, which stays
-  const double revolutions = 8, t_end = revolutions * 2 * kPi / k;
+  const double revolutions = 8, t_end = revolutions * 2 * std::numbers::pi / k;
   SpatialRunOptions o;
   o.t_end = t_end;
   o.integrator.rtol = 1e-11;
@@ -76,7 +74,7 @@ TEST(SpatialRun, BallOnAnInclinedTurntableDriftsAcrossTheSlope) {
   const Vec3 v_d = 5.0 / (2.0 * omega) * n.cross(g_t);
   ASSERT_NEAR(v_d.norm(), 2.5 * g / omega * std::sin(theta), 1e-12);
   SpatialRunOptions o;
-  o.t_end = 3 * 2 * kPi / k;  // three circles
+  o.t_end = 3 * 2 * std::numbers::pi / k;  // three circles
   o.integrator.rtol = 1e-11;
   o.integrator.atol = 1e-13;
   o.integrator.max_steps = 200000;
@@ -114,8 +112,9 @@ TEST(SpatialRun, BallRollsStraightOnForManyTurnsAcrossItsChartsPoles) {
     double twist, spin;
     int min_changes, max_changes;
   };
-  const int circles = static_cast<int>(turns / std::sin(kPi / 4));
-  for (const Case& c : {Case{kPi / 2, 0.0, 1, 1}, Case{0.0, speed / r, circles, 1000}}) {
+  const int circles = static_cast<int>(turns / std::sin(std::numbers::pi / 4));
+  for (const Case& c :
+       {Case{std::numbers::pi / 2, 0.0, 1, 1}, Case{0.0, speed / r, circles, 1000}}) {
     SCOPED_TRACE("spin " + std::to_string(c.spin));
     ContactPlacement at;
     at.twist = c.twist;
@@ -124,7 +123,7 @@ TEST(SpatialRun, BallRollsStraightOnForManyTurnsAcrossItsChartsPoles) {
     const SpatialState initial = place_in_contact(pb, hand.at(0), at);
     const Vec3 omega(0, speed / r, c.spin);
     SpatialRunOptions o;
-    o.t_end = turns * 2 * kPi * r / speed;
+    o.t_end = turns * 2 * std::numbers::pi * r / speed;
     o.integrator.rtol = 1e-12;
     o.integrator.atol = 1e-14;
     const SpatialRunResult run = simulate_spatial(pb, hand, initial, 0.0, o);
@@ -161,9 +160,9 @@ BowlRun ball_in_bowl(double R, double r, double angle, double speed) {
   b.pb.object = uniform_ball(r, 0.1);
   // Hand z (the chart's pole axis) along world -y: the bottom, world -z, is at (u, v) =
   // (-pi/2, 0), on the chart's equator.
-  b.hand =
-      std::make_unique<FixedHand3>(Eigen::AngleAxisd(kPi / 2, Vec3::UnitX()).toRotationMatrix());
-  const SurfaceParam s_h(-kPi / 2 + angle, 0.0);  // displaced along world x
+  b.hand = std::make_unique<FixedHand3>(
+      Eigen::AngleAxisd(std::numbers::pi / 2, Vec3::UnitX()).toRotationMatrix());
+  const SurfaceParam s_h(-std::numbers::pi / 2 + angle, 0.0);  // displaced along world x
   // The centre moves on a sphere of radius R - r; the contact on the bowl R / (R - r) as fast.
   b.initial = ball_on(b.pb, b.hand->at(0), r, s_h, Vec3(0, speed, 0), R / (R - r));
   return b;
@@ -196,7 +195,7 @@ TEST(SpatialRun, BallInABowlOscillatesAtTheClosedFormFrequency) {
   // Small oscillations of a uniform ball rolling in a spherical bowl: omega^2 = 5 g / (7 (R - r)).
   const double R = 0.3, r = 0.05, g = 9.8;
   const BowlRun b = ball_in_bowl(R, r, 1e-3, 0.0);
-  const double omega = std::sqrt(5 * g / (7 * (R - r))), period = 2 * kPi / omega;
+  const double omega = std::sqrt(5 * g / (7 * (R - r))), period = 2 * std::numbers::pi / omega;
   SpatialRunOptions o;
   o.t_end = 5.2 * period;
   o.integrator.rtol = 1e-12;
@@ -244,11 +243,12 @@ TEST(SpatialRun, BallInABowlRunsConicalOrbitsAtTheClosedFormRate) {
     const FixedHand3 bowl;  // the chart's poles on the vertical: the orbit follows a latitude
     const Vec3 e(std::sin(beta), 0, -std::cos(beta));  // from the bowl's centre to the ball's
     const Vec3 v = rho * Omega * Vec3::UnitZ().cross(e);
-    SpatialState initial = ball_on(pb, bowl.at(0), r, SurfaceParam(0, beta - kPi / 2), v, R / rho);
+    SpatialState initial =
+        ball_on(pb, bowl.at(0), r, SurfaceParam(0, beta - std::numbers::pi / 2), v, R / rho);
     initial.angular_velocity += omega_n * e;
     // One revolution under the sanitizers (43 s there for five; the same code paths).
     const double revolutions = flatland::test::short_tests() ? 1 : 5;
-    const double t_end = revolutions * 2 * kPi / std::abs(Omega);
+    const double t_end = revolutions * 2 * std::numbers::pi / std::abs(Omega);
     SpatialRunOptions o;
     o.t_end = t_end;
     o.integrator.rtol = 1e-12;
@@ -284,7 +284,7 @@ TEST(SpatialRun, BallInABowlKeepsItsOrbitPastTheProjectionsRankNoise) {
   const FixedHand3 bowl;
   const double speed = rho * std::sqrt(5 * g / (7 * rho * std::cos(beta))) * std::sin(beta);
   ContactPlacement at;
-  at.s_h = SurfaceParam(0, beta - kPi / 2);
+  at.s_h = SurfaceParam(0, beta - std::numbers::pi / 2);
   at.velocity = Vec3(0, speed, 0);
   const SpatialState initial = place_in_contact(pb, bowl.at(0), at);
   SpatialRunOptions o;
@@ -353,7 +353,7 @@ TEST(SpatialRun, AnEllipsoidRocksInAnEllipsoidalDishAtBothClosedFormFrequencies)
     SCOPED_TRACE("axis " + std::to_string(mode.axis));
     const DishRun d = ellipsoid_in_dish(obj, dish, mode.push, 0.0);
     ASSERT_LT((d.initial.position - Vec3(0, 0, a - A)).norm(), 1e-15);
-    const double period = 2 * kPi / mode.expected;
+    const double period = 2 * std::numbers::pi / mode.expected;
     SpatialRunOptions o;
     o.t_end = 6.2 * period;
     o.integrator.rtol = 1e-12;

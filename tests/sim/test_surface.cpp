@@ -14,8 +14,6 @@
 namespace flatland::sim {
 namespace {
 
-constexpr double kPi = std::numbers::pi;
-
 /// Central differences of f along u and v, step h.
 template <class F>
 auto central(const F& f, const SurfaceParam& s, int axis, double h) -> decltype(f(s)) {
@@ -197,14 +195,14 @@ TEST(Surface, SingularChartsAndBadShapesAreRefused) {
   const EllipsoidSurface sphere =
       EllipsoidSurface::sphere(0.05, EllipsoidSurface::Side::kConvexBody);
   try {
-    sphere.geometry({0.0, kPi / 2});  // the pole: c_u = 0
+    sphere.geometry({0.0, std::numbers::pi / 2});  // the pole: c_u = 0
     FAIL() << "no error at the pole";
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("sphere (r 0.05 m): surface: singular chart"),
               std::string::npos)
         << e.what();
   }
-  EXPECT_FALSE(sphere.patch().contains({0.0, kPi / 2}));
+  EXPECT_FALSE(sphere.patch().contains({0.0, std::numbers::pi / 2}));
   EXPECT_TRUE(sphere.patch().contains({100.0, 1.0}));
   EXPECT_THROW(EllipsoidSurface(0.1, -0.1, 0.1, EllipsoidSurface::Side::kDish),
                std::invalid_argument);
