@@ -27,8 +27,8 @@ inline std::shared_ptr<RollingProblem> problem(CurvePtr hand, RigidObject object
 
 /// The paper's hand playing a butterfly (period 2T, dip k) with a uniform disk of radius 5.1 cm.
 inline std::shared_ptr<RollingProblem> butterfly(double period = 1.181, double k = -1.1393) {
-  return problem(std::make_shared<PolynomialHand>(0.18, -0.18, -0.252, 0.216),
-                 make_uniform_disk(0.051), std::make_shared<ButterflyMotion>(period, k));
+  return problem(std::make_shared<PolynomialHand>(paper_hand()), make_uniform_disk(0.051),
+                 std::make_shared<ButterflyMotion>(period, k));
 }
 
 /// Kinetic plus potential energy of `o` in sample `s` under gravity `g` (along -y).

@@ -16,11 +16,6 @@ namespace {
 
 using flatland_test::kG;
 
-std::shared_ptr<RollingProblem> paper_butterfly(double period = 1.181, double k = -1.1393) {
-  return problem(std::make_shared<PolynomialHand>(0.18, -0.18, -0.252, 0.216),
-                 make_uniform_disk(0.051), std::make_shared<ButterflyMotion>(period, k));
-}
-
 RunOptions tight(double t_end, Formulation f) {
   RunOptions o;
   o.t_end = t_end;
@@ -110,7 +105,7 @@ INSTANTIATE_TEST_SUITE_P(Dynamics, BothFormulations,
                          [](const auto& info) { return to_string(info.param); });
 
 TEST(Dynamics, GeneralAndReducedAgreeOnTheButterfly) {
-  auto pb = paper_butterfly();
+  auto pb = butterfly();
   const InitialContact ic;
   const RunResult red = simulate(pb, ic, tight(1.181, Formulation::kReduced));
   const RunResult gen = simulate(pb, ic, tight(1.181, Formulation::kGeneral));
@@ -135,8 +130,8 @@ TEST(Dynamics, GeneralAndReducedAgreeOnTheButterfly) {
 // The general formulation with an ellipse of equal axes is a disk: it must match the reduced
 // disk model (an independent check of the general equations with another object class).
 TEST(Dynamics, EllipseWithEqualAxesMatchesDisk) {
-  auto disk = paper_butterfly();
-  auto round = paper_butterfly();
+  auto disk = butterfly();
+  auto round = butterfly();
   round->object = make_uniform_ellipse(0.051, 0.051);
   InitialContact ic;
   const RunResult a = simulate(disk, ic, tight(1.181, Formulation::kReduced));
@@ -168,7 +163,7 @@ TEST(Dynamics, EllipseRockingConservesEnergy) {
 // Classical RK4 converges with order 4: halving the step divides the error by about 16 (checked
 // on the dip, before the first junction), and it converges through the junctions too.
 TEST(Integrators, Rk4ConvergesWithOrderFour) {
-  auto pb = paper_butterfly();
+  auto pb = butterfly();
   auto rk4 = [&](double t_end, double h) {
     RunOptions o = tight(t_end, Formulation::kReduced);
     o.integrator.method = Method::kRungeKutta4;
@@ -198,7 +193,7 @@ TEST(Integrators, Rk4ConvergesWithOrderFour) {
 
 // Dormand-Prince error decreases with tolerance.
 TEST(Integrators, DormandPrinceErrorFollowsTolerance) {
-  auto pb = paper_butterfly();
+  auto pb = butterfly();
   const double ref = simulate(pb, {}, tight(1.181, Formulation::kReduced)).final.s_h;
   double last = 1.0;
   for (double rtol : {1e-5, 1e-7, 1e-9}) {
@@ -214,7 +209,7 @@ TEST(Integrators, DormandPrinceErrorFollowsTolerance) {
 
 // Too fast a motion throws the disk: the loss of contact is located where f_n reaches 0.
 TEST(Events, ContactLossIsLocated) {
-  auto pb = paper_butterfly(0.9, -1.16);
+  auto pb = butterfly(0.9, -1.16);
   RunOptions o = tight(0.9, Formulation::kReduced);
   o.events.stop_on_contact_loss = true;
   const RunResult r = simulate(pb, {}, o);
@@ -230,7 +225,7 @@ TEST(Events, ContactLossIsLocated) {
 }
 
 TEST(Events, SlipIsLocatedAtTheFrictionLimit) {
-  auto pb = paper_butterfly();
+  auto pb = butterfly();
   RunOptions o = tight(1.181, Formulation::kReduced);
   pb->contact.mu = 0.2;  // the paper's solution needs about 0.306
   const RunResult r = simulate(pb, {}, o);
@@ -242,7 +237,7 @@ TEST(Events, SlipIsLocatedAtTheFrictionLimit) {
 }
 
 TEST(Events, JunctionCrossingsLandOnTheJunction) {
-  auto pb = paper_butterfly();
+  auto pb = butterfly();
   const RunResult r = simulate(pb, {}, tight(1.181, Formulation::kReduced));
   int junctions = 0;
   for (const RecordedEvent& e : r.events)
@@ -255,7 +250,7 @@ TEST(Events, JunctionCrossingsLandOnTheJunction) {
 }
 
 TEST(Integrators, BadSettingsAreRejected) {
-  auto pb = paper_butterfly();
+  auto pb = butterfly();
   RunOptions o = tight(1.0, Formulation::kReduced);
   o.integrator.rtol = -1;
   EXPECT_THROW(simulate(pb, {}, o), std::invalid_argument);

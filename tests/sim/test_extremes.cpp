@@ -24,7 +24,7 @@ using flatland_test::kG;
 constexpr double kPeriod = 1.181;
 
 std::shared_ptr<PolynomialHand> shared_paper_hand() {
-  return std::make_shared<PolynomialHand>(0.18, -0.18, -0.252, 0.216);
+  return std::make_shared<PolynomialHand>(paper_hand());
 }
 
 std::shared_ptr<RollingProblem> palm_well(double radius = 0.051) {
