@@ -28,10 +28,6 @@ struct MonteCarloOptions {
   drivers::Perturbations p;
 };
 
-std::string default_experiment_scene() {
-  return (fs::path(default_scene_path()).parent_path() / "airtable-feedback.yaml").string();
-}
-
 Json perturbations_json(const drivers::Perturbations& p) {
   Json j;
   j["s_h"] = p.s_h;

@@ -437,6 +437,10 @@ void write_solution_outputs(OutputSet& outputs, const fs::path& dir, const sim::
                 "unset multiplot\n"});
 }
 
+std::string default_experiment_scene() {
+  return (fs::path(default_scene_path()).parent_path() / "airtable-feedback.yaml").string();
+}
+
 std::vector<std::string> expand_file_patterns(const std::vector<std::string>& patterns,
                                               const std::string& option) {
   std::vector<std::string> files;

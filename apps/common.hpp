@@ -37,6 +37,10 @@ using api::UsageError;
 std::vector<std::string> expand_file_patterns(const std::vector<std::string>& patterns,
                                               const std::string& option);
 
+/// The closed loop's bundled scene (experiment's, montecarlo's and study closed-loop's default):
+/// airtable-feedback.yaml beside default_scene_path().
+std::string default_experiment_scene();
+
 /// Options every command has; the integrator ones override the scene's `simulator` settings.
 struct CommonOptions {
   std::string scene;  ///< empty: default_scene_path()

@@ -117,10 +117,6 @@ std::string plot_body(const studies::ClosedLoopGrid& grid, int n) {
          "unset multiplot\n";
 }
 
-std::string default_closed_loop_scene() {
-  return (fs::path(default_scene_path()).parent_path() / "airtable-feedback.yaml").string();
-}
-
 std::string percent(double f) { return std::to_string(std::lround(100 * f)); }
 
 }  // namespace
@@ -128,7 +124,7 @@ std::string percent(double f) { return std::to_string(std::lround(100 * f)); }
 void run_closed_loop_study(const StudyOptions& o) {
   // ---- bad input first: nothing is run or written before these checks pass
   CommonOptions common;
-  common.scene = o.scene.empty() ? default_closed_loop_scene() : o.scene;
+  common.scene = o.scene.empty() ? default_experiment_scene() : o.scene;
   const Scene scene = load_scene_with_overrides(common);
   const std::shared_ptr<const model::Model> nominal = model::compile(scene);
   std::vector<std::string> controllers = o.controllers;

@@ -20,7 +20,7 @@ using namespace pybind11::literals;
 
 namespace {
 
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr double kNotGiven = std::numeric_limits<double>::quiet_NaN();
 
 /// A Python object that C++ may copy and destroy without the GIL (the loop runs without it):
 /// only the last owner touches the reference count, with the GIL taken.
@@ -169,7 +169,7 @@ class PythonController final : public control::Controller {
       control::ControlOutput out;
       out.theta_ddot = *value;
       out.mode = name_;
-      out.theta_reference = kNaN;
+      out.theta_reference = kNotGiven;
       return out;
     }
     throw std::invalid_argument("controller '" + name_ + "': step returned " +
@@ -418,7 +418,7 @@ void bind_controller_types(py::module_& m) {
              }
              c.theta_reference =
                  optional_number_argument(theta_reference, "ControlOutput.theta_reference")
-                     .value_or(kNaN);
+                     .value_or(kNotGiven);
              c.done = flag_argument(done, "ControlOutput.done");
              c.t_done = optional_number_argument(t_done, "ControlOutput.t_done");
              if (!stop.is_none()) {

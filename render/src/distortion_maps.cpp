@@ -4,6 +4,7 @@
 // image, project() and a calibration run by OpenCV on the rendered images all agree on where a
 // table point lands.
 #include "flatland/render/distortion_maps.hpp"
+#include "fail.hpp"
 #include "flatland/sim/format.hpp"
 
 #include <opencv2/calib3d.hpp>
@@ -32,10 +33,6 @@ constexpr int kIdealMargin = 2;
 constexpr int kMaxIdealGrowth = 4;
 // Largest tolerated error (supersampled px) of re-distorting a map position onto its pixel centre.
 constexpr double kMaxRoundTripPx = 1e-3;
-
-[[noreturn]] void fail(const std::string& field, const std::string& reason) {
-  throw std::invalid_argument(field + ": " + reason);
-}
 
 }  // namespace
 

@@ -5,6 +5,7 @@
 // a scene renders the same frames for the same seed, and switching one effect off does not change
 // the random numbers the others see.
 #include "flatland/render/effects.hpp"
+#include "fail.hpp"
 #include "flatland/sim/format.hpp"
 
 #include <opencv2/imgproc.hpp>
@@ -25,10 +26,6 @@
 namespace flatland::render {
 
 namespace {
-
-[[noreturn]] void fail(const std::string& what, const std::string& reason) {
-  throw std::invalid_argument(what + ": " + reason);
-}
 
 void require_f32(const cv::Mat& image, const char* what) {
   if (image.empty() || image.depth() != CV_32F)

@@ -1,4 +1,5 @@
 #include "flatland/sim/contact.hpp"
+#include "infinity.hpp"
 
 #include "flatland/sim/format.hpp"
 
@@ -12,7 +13,6 @@
 namespace flatland::sim {
 
 namespace {
-constexpr double kInf = std::numeric_limits<double>::infinity();
 
 void require(bool ok, const std::string& field, const std::string& what, double v) {
   if (!ok)

@@ -1,4 +1,5 @@
 #include "flatland/sim/curve.hpp"
+#include "infinity.hpp"
 
 #include "flatland/sim/format.hpp"
 
@@ -14,7 +15,6 @@
 namespace flatland::sim {
 
 namespace {
-constexpr double kInf = std::numeric_limits<double>::infinity();
 
 // Newton's method on f(s) = (c(s) - p) . c'(s) = 0 from s, each step at most `max_step`, the
 // piece re-chosen at each iterate: the nearest point of a smooth curve from a good start.

@@ -1,4 +1,5 @@
 #include "flatland/sim/hand_shapes.hpp"
+#include "infinity.hpp"
 
 #include "flatland/sim/format.hpp"
 
@@ -21,7 +22,6 @@ namespace flatland::sim {
 
 namespace {
 
-constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kPi = std::numbers::pi;
 constexpr int kDegree = 5;  // quintic: C4, so the jet to d3 (the dynamics' dK/ds) is C1
 constexpr double kFactorial[6] = {1, 1, 2, 6, 24, 120};
@@ -184,7 +184,7 @@ int find_span(const std::vector<double>& knots, const std::vector<int>& cells, d
 }
 
 /// Newton's method on (c(s) - p) . c'(s) = 0 from a sampled start, each step at most `max_step`.
-double refine_nearest(const Curve& curve, const Vec2& p, double s, double max_step) {
+double refine_nearest_on_outline(const Curve& curve, const Vec2& p, double s, double max_step) {
   for (int i = 0; i < 8; ++i) {
     const CurveJet j = curve.jet(s, 0);
     const Vec2 d = j.c - p;
@@ -206,7 +206,8 @@ double nearest_on_outline(const Curve& curve, const std::vector<Vec2>& outline, 
     if (e < best_d2) best_d2 = e, best = i;
   }
   const double step = 4.0 / static_cast<double>(outline.size());
-  const double s = refine_nearest(curve, p, -1.0 + step * static_cast<double>(best), step);
+  const double s =
+      refine_nearest_on_outline(curve, p, -1.0 + step * static_cast<double>(best), step);
   return std::remainder(s - 1.0, 4.0) + 1.0;  // into [-1, 3)
 }
 

@@ -1,6 +1,7 @@
 // Surfaces for spatial rolling: the geometry every surface derives from its jet, and the jets of
 // the plane, the ellipsoid (sphere), the extruded curve and the surface of revolution.
 #include "flatland/sim/surface.hpp"
+#include "infinity.hpp"
 
 #include "flatland/sim/format.hpp"
 
@@ -15,8 +16,6 @@
 namespace flatland::sim {
 
 namespace {
-
-constexpr double kInf = std::numeric_limits<double>::infinity();
 
 std::string at_text(const SurfaceParam& s) {
   return "(u, v) = (" + format_significant(s.x(), 9) + ", " + format_significant(s.y(), 9) + ")";
