@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <memory>
 #include <numbers>
 #include <optional>
 #include <random>
@@ -29,40 +30,29 @@ namespace {
 
 constexpr double kEdgeMarginPx = 12;  // every board corner (with its border) this far inside
 
-// A placed board as a scene's `targets` entry (model::compile_target's inverse): each view is
-// the scene with its boards, compiled again.
-TargetSpec target_spec(const camera::PlacedBoard& p) {
-  TargetSpec t;
-  t.kind = p.board.kind == camera::Board::Kind::kChessboard ? TargetSpec::Kind::kChessboard
-                                                            : TargetSpec::Kind::kCharuco;
-  t.squares_x = p.board.squares_x;
-  t.squares_y = p.board.squares_y;
-  t.square = p.board.square;
-  t.marker = p.board.marker;
-  t.dictionary = p.board.dictionary;
-  t.position = {p.position[0], p.position[1], p.position[2]};
-  t.rotation = {p.rotation[0], p.rotation[1], p.rotation[2]};
-  return t;
-}
-
 struct SessionRenderer {
   const model::Model& model;
   const Scene& scene;  // model.spec
   const camera::CameraModel camera;
   std::uint64_t seed;
   std::uint64_t images = 0;
+  std::unique_ptr<render::Renderer> renderer = nullptr;  // made at the first frame
 
   /// One 8-bit frame: the hand at `hand_angle`, the disk out of view, the given boards, with the
   /// scene's anti-aliasing and sensor noise.
   cv::Mat frame(double hand_angle, const std::vector<camera::PlacedBoard>& boards) {
-    Scene s = scene;
-    s.targets.clear();
-    for (const camera::PlacedBoard& b : boards) s.targets.push_back(target_spec(b));
-    render::Renderer r(model::render_setup(*model::compile(std::move(s))));
+    // One renderer for the session, its boards moved from view to view: a GL context and its
+    // buffers made per view cost more than the view's render.
+    if (!renderer) {
+      Scene s = scene;
+      s.targets.clear();
+      renderer = std::make_unique<render::Renderer>(model::render_setup(*model::compile(s)));
+    }
+    renderer->set_boards(boards);
     render::SceneState st;
     st.hand_angle = hand_angle;
     st.disk_center = {50.0, 50.0};
-    cv::Mat linear = r.render_linear(st);
+    cv::Mat linear = renderer->render_linear(st);
     render::EffectsRng rng(seed * 1000003 + images++);
     render::apply_noise(linear, scene.effects.noise_read_dn, scene.effects.noise_shot_gain, rng);
     return render::quantize(linear);

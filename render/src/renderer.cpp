@@ -175,14 +175,7 @@ struct Renderer::Impl {
     table.id = kMaskTable;
     hand.id = kMaskHand;
     disk.id = disk_top.id = kMaskDisk;
-    for (std::size_t i = 0; i < s.boards.size(); ++i) {
-      const std::size_t first = targets.size();
-      targets.push_back(make_target(s.boards[i]));
-      // Beyond kMaxMaskBoards render_mask refuses; the id only has to fit.
-      const auto id = static_cast<unsigned char>(std::min<std::size_t>(kMaskFirstBoard + i, 255));
-      for (std::size_t j = first; j < targets.size(); ++j) targets[j].id = id;
-    }
-    for (const Drawable& t : targets) textured_targets = textured_targets || t.texture != 0;
+    upload_boards();
     readback.create(fbo_height, fbo_width, CV_8UC4);
     const float shade = static_cast<float>(kAmbient + (1.0 - kAmbient) * std::max(kLight[2], 0.0));
     table_color = kTable * shade;
@@ -195,6 +188,35 @@ struct Renderer::Impl {
                       gl->glGetUniformLocation(p, "specular")};
     if (s.lighting) build_lighting(*s.lighting);
     build_readout(s.readout);
+  }
+
+  // setup.boards as drawables (a chessboard is two: its background and its squares).
+  void upload_boards() {
+    for (std::size_t i = 0; i < setup.boards.size(); ++i) {
+      const std::size_t first = targets.size();
+      targets.push_back(make_target(setup.boards[i]));
+      // Beyond kMaxMaskBoards render_mask refuses; the id only has to fit.
+      const auto id = static_cast<unsigned char>(std::min<std::size_t>(kMaskFirstBoard + i, 255));
+      for (std::size_t j = first; j < targets.size(); ++j) targets[j].id = id;
+    }
+    textured_targets = false;
+    for (const Drawable& t : targets) textured_targets = textured_targets || t.texture != 0;
+  }
+
+  void set_boards(std::vector<camera::PlacedBoard> boards) {
+    // A board the scene file could not name is refused before anything changes.
+    for (std::size_t i = 0; i < boards.size(); ++i) {
+      const std::string field = "boards[" + std::to_string(i) + "]";
+      camera::Board::parse(boards[i].board.notation(), field);
+      if (!cv::checkRange(boards[i].position) || !cv::checkRange(boards[i].rotation))
+        throw std::invalid_argument(field + ": position and rotation must be finite");
+    }
+    context->make_current();
+    for (Drawable& d : targets) release(d);
+    targets.clear();
+    setup.boards = std::move(boards);
+    upload_boards();
+    if (lit) draw_lit_background();
   }
 
   // The readout's fields or bands. The scene's rules (camera_problem) are checked again here for
@@ -885,6 +907,10 @@ Renderer::Renderer(const RenderSetup& setup, std::optional<GlBackend> backend) {
 }
 
 Renderer::~Renderer() = default;
+
+void Renderer::set_boards(std::vector<camera::PlacedBoard> boards) {
+  impl_->set_boards(std::move(boards));
+}
 
 const camera::CameraModel& Renderer::camera() const { return impl_->camera; }
 std::string Renderer::gl_description() const { return impl_->context->description(); }

@@ -67,6 +67,12 @@ RenderedViews render_views(const TargetSpec& board_template, const camera::Board
   std::uniform_real_distribution<double> U(0.0, 1.0);
   const CameraSpec cam = truth_camera();
   const camera::CameraModel model = flatland::model::compile_camera(cam);
+  // One renderer, its board moved from view to view (Renderer::set_boards).
+  Scene s;
+  s.camera = cam;
+  s.effects.supersample = kSupersample;
+  s.effects.noise_read_dn = 1.0;
+  render::Renderer r(flatland_test::render_setup(s));
   const double w = board_template.squares_x * board_template.square;
   const double h = board_template.squares_y * board_template.square;
   const double m = board_template.kind == TargetSpec::Kind::kChessboard ? board_template.square : 0;
@@ -96,12 +102,7 @@ RenderedViews render_views(const TargetSpec& board_template, const camera::Board
     cv::Rodrigues(R, rv);
     t.position = {origin[0], origin[1], origin[2]};
     t.rotation = {rv[0], rv[1], rv[2]};
-    Scene s;
-    s.camera = cam;
-    s.effects.supersample = kSupersample;
-    s.effects.noise_read_dn = 1.0;
-    s.targets = {t};
-    render::Renderer r(flatland_test::render_setup(s));
+    r.set_boards({flatland::model::compile_target(t)});
     render::SceneState state;
     state.disk_center = {5.0, 5.0};  // the disk out of view
     cv::Mat linear = r.render_linear(state);

@@ -126,6 +126,10 @@ class Renderer {
 
   const camera::CameraModel& camera() const;
   std::string gl_description() const;
+  /// Replaces the scene's calibration boards (RenderSetup::boards), as a lab moves its board
+  /// between views: the frames are those of a Renderer made with these boards, without making
+  /// the GL context, programs and buffers again.
+  void set_boards(std::vector<camera::PlacedBoard> boards);
 
   /// One geometric image of the state: anti-aliasing and distortion applied, no noise/blur/
   /// quantisation (CV_32FC3, 0..255 DN).
