@@ -46,7 +46,6 @@ struct ExperimentOptions {
 
 enum class CameraKind { kSynthetic, kRecorded, kLive };
 
-/// The bundled closed-loop scene, next to the default (paper) scene.
 /// The plan as an inline gnuplot data block (t, theta, s_h every 5 ms over [0, duration]; comma
 /// separated like the CSV, as the scripts set), so that the scripts need only log.csv beside them.
 std::string plan_datablock(const control::Plan& plan) {
