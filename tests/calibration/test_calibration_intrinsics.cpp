@@ -8,8 +8,8 @@
 #include "render_support.hpp"
 #include "test_scale.hpp"
 
-#include "flatland/camera/camera_file.hpp"
 #include "flatland/calibration/intrinsics.hpp"
+#include "flatland/camera/camera_file.hpp"
 #include "flatland/render/effects.hpp"
 #include "flatland/render/renderer.hpp"
 
@@ -267,7 +267,8 @@ TEST(CalibrationIntrinsics, ChessboardNotationIsOpenCvsPatternSize) {
   ASSERT_TRUE(view.has_value());
   ASSERT_EQ(view->image_points.size(), 54u);
   const std::vector<cv::Point2d> truth =
-      flatland::model::compile_camera(truth_camera()).project(camera::corners_in_table(flatland::model::compile_target(s.targets[0])));
+      flatland::model::compile_camera(truth_camera())
+          .project(camera::corners_in_table(flatland::model::compile_target(s.targets[0])));
   ASSERT_EQ(truth.size(), 54u);
   // OpenCV may list the grid from either end: match each true corner to its nearest detection.
   for (const cv::Point2d& t : truth) {
@@ -522,11 +523,12 @@ TEST(CalibrationIntrinsics, RenderedCharucoViewsCalibrate) {
   const camera::Board board = camera::Board::parse("charuco:7x5:0.05:0.037");
   const RenderedViews rendered = render_views(t, board, 12, 11);
   const std::vector<BoardView>& views = rendered.views;
-  // The detected ids map to the renderer's truth: corner id k is camera::corners_in_table(flatland::model::compile_target(t))[k].
+  // The detected ids map to the renderer's truth: corner id k is
+  // camera::corners_in_table(flatland::model::compile_target(t))[k].
   {
     const camera::CameraModel model = flatland::model::compile_camera(truth_camera());
-    const std::vector<cv::Point2d> truth =
-        model.project(camera::corners_in_table(flatland::model::compile_target(rendered.targets[0])));
+    const std::vector<cv::Point2d> truth = model.project(
+        camera::corners_in_table(flatland::model::compile_target(rendered.targets[0])));
     const std::vector<cv::Point3f> all = board.corners();
     double sum = 0;
     for (std::size_t k = 0; k < views[0].image_points.size(); ++k) {
