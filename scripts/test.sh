@@ -10,7 +10,8 @@
 #      surface and locus write what one process writes, a killed rank and bad launches give one
 #      line, and mpi4py.futures spreads flatland.experiment calls;
 #   4. the same suite built with AddressSanitizer + UndefinedBehaviorSanitizer (build-asan/,
-#      -O1, no benchmarks): any memory error, leak or undefined behaviour fails the test;
+#      -O1, no benchmarks; built beside stages 2-3b): any memory error, leak or undefined behaviour
+#      fails the test;
 # The libFuzzer targets (fuzz/) run over their seeds and kept reproducers inside the suite
 # (FuzzTargets.*, built with GCC, sanitized in stage 4); fuzzing itself is by hand (docs/DEVELOPING.md).
 # docs/DEVELOPING.md explains each stage and how to run it alone.
@@ -37,6 +38,62 @@ log "stage 1: ctest --test-dir build"
 # Every test has its own temporary directory and no test measures time, so they run in parallel.
 ctest --test-dir build --output-on-failure -j"$jobs"
 
+# The sanitizer stage's options: for its build too, whose test discovery runs the sanitized test
+# programs.
+sanitizer_options() {
+  # Leaks are checked; the suppressions name third-party libraries only (see the file).
+  # intercept_tls_get_addr=0: GCC 12's ASan records each dynamic-TLS block that __tls_get_addr hands
+  # out (e.g. libLLVM's, loaded with OSMesa) and, for a block whose address is 16 mod 4096, trusts a guessed
+  # glibc header in front of it; LeakSanitizer's exit-time check then scans a garbage range and its
+  # tracer crashes after the test has passed ("Tracer caught signal 11 ... LeakSanitizer has encountered
+  # a fatal error"), at random (the heap addresses vary). Without the interception the blocks are
+  # still found: they are heap blocks reachable from each thread's DTV.
+  # detect_stack_use_after_return=0: its fake stack frames cost the sanitizer stage's tests about a
+  # quarter of their time, and call-heavy numerical code more (2026-11-29, GCC 12: a spatial test
+  # 29.2 s with them against 20.4 s without, the closed-loop estimator test 56 s against 41 s, a
+  # rendered calibration 31.0 s either way). Use after scope is still detected, and -Wall's
+  # -Wreturn-local-addr and -Wdangling-pointer catch a returned local's address at compile time.
+  export ASAN_OPTIONS="detect_leaks=1:detect_stack_use_after_return=0:intercept_tls_get_addr=0"
+  export LSAN_OPTIONS="suppressions=$root/tests/sanitizers/lsan.supp:print_suppressions=0"
+  export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
+}
+
+# The sanitizer stage's build (build-asan/).
+build_sanitized() {
+  # -g1: line tables are all the sanitizers' stack traces need, and full debug information would
+  # make this build (the longest step of CI) markedly slower.
+  # UBSan's alignment and null checks are left out everywhere: they double the compile time of
+  # Eigen-heavy code (test_calibration_chain.cpp: 24 s, 13 s without them and vptr, 12 s with ASan
+  # alone; sim/src/spatial_run.cpp: 161 s, 89 s without them, 89 s with ASan alone). A null access
+  # still faults under ASan, and x86 reads misaligned data correctly. The test programs and the
+  # CLI's programs also skip vptr, which checks a polymorphic object's dynamic type: the libraries'
+  # own code is still checked for it.
+  cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+    -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1" -DFLATLAND_SANITIZE=address,undefined \
+    -DFLATLAND_NO_SANITIZE=alignment,null -DFLATLAND_TESTS_AND_APPS_CXX_FLAGS="-fno-sanitize=vptr" \
+    -DFLATLAND_BUILD_BENCHMARKS=OFF -DFLATLAND_BUILD_PYTHON=OFF -DFLATLAND_MPI=OFF || return
+  cmake --build build-asan -j"$jobs"
+}
+
+# The stages below leave a core idle much of the time (one pytest process, pip, a small project's
+# build, MPI jobs that wait for their ranks), so the sanitizer build runs beside them, its output
+# kept until stage 4. It has a process group of its own, so that an early exit stops all of it.
+venv_dir=$(mktemp -d)
+asan_log=$(mktemp)
+asan_pid=
+cleanup() {
+  if [ -n "$asan_pid" ]; then kill -- -"$asan_pid" 2>/dev/null || true; fi
+  rm -rf "$venv_dir" "$asan_log"
+}
+trap cleanup EXIT
+if [ "$sanitizers" -eq 1 ]; then
+  log "stage 4's build: AddressSanitizer + UndefinedBehaviorSanitizer in build-asan/, beside stages 2-3b"
+  set -m
+  (sanitizer_options; build_sanitized) > "$asan_log" 2>&1 &
+  asan_pid=$!
+  set +m
+fi
+
 log "stage 2: the Python module's suite (pytest) and examples, with Debian's python3"
 # Debian's numpy and pybind11 are /usr/bin/python3's (python/CMakeLists.txt); a pyenv or venv
 # python3 earlier on PATH would not find them.
@@ -47,8 +104,6 @@ PYTHONPATH="$root/build/python" MPLBACKEND=Agg "${python:-/usr/bin/python3}" -m 
 log "stage 2: pip install . into a virtual environment, and import flatland from elsewhere"
 # As a Python user installs it (README, docs/PYTHON.md): a venv that sees Debian's numpy, and pip
 # without build isolation. The backend (pyproject.toml) reuses build/: nothing is compiled again.
-venv_dir=$(mktemp -d)
-trap 'rm -rf "$venv_dir"' EXIT
 /usr/bin/python3 -m venv --system-site-packages "$venv_dir/v"
 "$venv_dir/v/bin/pip" install -q --no-build-isolation . >&2
 (cd "$venv_dir" && env -u PYTHONPATH -u FLATLAND_DATA_DIR v/bin/python -c \
@@ -62,35 +117,13 @@ FLATLAND_BUILD_DIR="$root/build" /usr/bin/python3 -m pytest -q -rs -p no:cachepr
 
 [ "$sanitizers" -eq 1 ] || { log "--no-sanitizers: done"; exit 0; }
 
-# Leaks are checked; the suppressions name third-party libraries only (see the file).
-# intercept_tls_get_addr=0: GCC 12's ASan records each dynamic-TLS block that __tls_get_addr hands
-# out (e.g. libLLVM's, loaded with OSMesa) and, for a block whose address is 16 mod 4096, trusts a guessed
-# glibc header in front of it; LeakSanitizer's exit-time check then scans a garbage range and its
-# tracer crashes after the test has passed ("Tracer caught signal 11 ... LeakSanitizer has encountered
-# a fatal error"), at random (the heap addresses vary). Without the interception the blocks are
-# still found: they are heap blocks reachable from each thread's DTV.
-# detect_stack_use_after_return=0: its fake stack frames cost the sanitizer stage's tests about a
-# quarter of their time, and call-heavy numerical code more (2026-11-29, GCC 12: a spatial test
-# 29.2 s with them against 20.4 s without, the closed-loop estimator test 56 s against 41 s, a
-# rendered calibration 31.0 s either way). Use after scope is still detected, and -Wall's
-# -Wreturn-local-addr and -Wdangling-pointer catch a returned local's address at compile time.
-export ASAN_OPTIONS="detect_leaks=1:detect_stack_use_after_return=0:intercept_tls_get_addr=0"
-export LSAN_OPTIONS="suppressions=$root/tests/sanitizers/lsan.supp:print_suppressions=0"
-export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
-
-log "stage 4: AddressSanitizer + UndefinedBehaviorSanitizer build in build-asan/"
-# -g1: line tables are all the sanitizers' stack traces need, and full debug information would
-# make this build (the longest step of CI) markedly slower.
-# The libraries get every UBSan check. The test programs and the CLI's programs (over half of the
-# build's compile time) skip three: vptr, alignment and null, which double their compile time
-# (test_calibration_chain.cpp: 24 s, 13 s without them, 12 s with ASan alone). A null access still
-# faults under ASan; x86 reads misaligned data correctly; vptr checks a polymorphic object's
-# dynamic type, which the libraries' own code is still checked for.
-cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-  -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1" -DFLATLAND_SANITIZE=address,undefined \
-  -DFLATLAND_TESTS_AND_APPS_CXX_FLAGS="-fno-sanitize=vptr,alignment,null" \
-  -DFLATLAND_BUILD_BENCHMARKS=OFF -DFLATLAND_BUILD_PYTHON=OFF -DFLATLAND_MPI=OFF >&2
-cmake --build build-asan -j"$jobs" >&2
+log "stage 4: the AddressSanitizer + UndefinedBehaviorSanitizer build (started before stage 2)"
+status=0
+wait "$asan_pid" || status=$?
+asan_pid=
+cat "$asan_log" >&2
+[ "$status" -eq 0 ] || { log "stage 4: the sanitizer build failed (exit $status)"; exit 1; }
+sanitizer_options
 # Sanitized code is several times slower; the tests are independent (each has its own temporary
 # directory), so they run in parallel. The longest tests run the same code paths for less long
 # here (tests/test_scale.hpp: FLATLAND_TEST_SHORT): the hour-long hold for 6 minutes, the Monte
