@@ -12,6 +12,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <map>
 #include <numbers>
@@ -114,6 +115,12 @@ struct Renderer::Impl {
   // image before quantisation: reused.
   cv::Mat ideal_bgr, ideal_f32, distorted_f32, subframe, linear_scratch;
   cv::Mat downsampled_rgba;  // render_8u's supersampled readback averaged down, reused
+  // render_8u's frames, each reused once nothing else holds it (a closed loop lets go of a frame
+  // once it is tracked). A fresh 640 x 480 frame costs 225 page faults wherever malloc hands large
+  // blocks back to the system (AddressSanitizer's allocator always; the Python module's, measured:
+  // 0.8 ms more per frame).
+  std::array<cv::Mat, 4> frame_pool;
+  std::size_t frame_pool_next = 0;
   // The readout (setup.readout): interlaced fields, or a rolling shutter's bands of rows.
   bool interlaced = false, rolling = false;
   double line_time = 0;     // s, a rolling readout's time from one row to the next
@@ -774,14 +781,27 @@ struct Renderer::Impl {
     if (supersample > 1) downsample(remapped, supersample, rows);
   }
 
+  // A frame buffer of this size and type that no one but the pool holds (its reference count,
+  // read atomically as OpenCV updates it), else a new one in the pool's next slot.
+  cv::Mat pooled_frame(int rows, int cols, int type) {
+    for (cv::Mat& m : frame_pool)
+      if (m.u && CV_XADD(&m.u->refcount, 0) == 1 && m.rows == rows && m.cols == cols &&
+          m.type() == type)
+        return m;
+    cv::Mat& slot = frame_pool[frame_pool_next];
+    frame_pool_next = (frame_pool_next + 1) % frame_pool.size();
+    slot.release();  // held elsewhere still: the holder keeps it, the slot takes a new buffer
+    slot.create(rows, cols, type);
+    return slot;
+  }
+
   // Fast path for 8-bit frames without effects: no float conversion when nothing resamples.
   cv::Mat render_8u(const SceneState& st) {
     if (!camera.distorted()) {
       // Anti-aliasing by area averaging works as well on 8-bit samples (rounded once), and avoids
       // converting the supersampled image to float.
-      // Only the returned frame is a new buffer: a process whose malloc hands large blocks back to
-      // the system every time (the Python module's, measured: 0.8 ms more per 640 x 480 frame)
-      // pays page faults for each one.
+      // The returned frame is the only buffer written that is not the renderer's own scratch,
+      // and it comes from the pool (pooled_frame).
       render_ideal(st);
       const cv::Mat* small = &readback;
       if (supersample > 1) {
@@ -790,7 +810,7 @@ struct Renderer::Impl {
                    cv::INTER_AREA);
         small = &downsampled_rgba;
       }
-      cv::Mat bgr;
+      cv::Mat bgr = pooled_frame(small->rows, small->cols, CV_8UC3);
       cv::cvtColor(*small, bgr, cv::COLOR_RGBA2BGR);
       return bgr;
     }

@@ -157,6 +157,32 @@ TEST(Render, SameSceneAndSeedGiveIdenticalFrames) {
   EXPECT_GT(cv::norm(f42.image, f43.image, cv::NORM_INF), 0.0);
 }
 
+// The renderer reuses a frame's buffer once no one else holds it (its pool), and never one that is
+// held: frames kept alive are still the frames as rendered (each compared with a copy taken when it
+// came), through more captures than the pool has buffers, and again after the others are let go.
+TEST(Render, HeldFramesAreNeverOverwritten) {
+  Scene scene = overhead_scene(1);
+  scene.effects.noise_read_dn = 2.0;
+  scene.effects.seed = 9;
+  const sim::RunResult run = sim::run_spec(scene.sim);
+  Renderer renderer(flatland_test::render_setup(scene));
+  std::vector<cv::Mat> held, copies;
+  for (int i = 0; i < 6; ++i) {
+    const Frame f = renderer.capture(run.trajectory, 0.1 + 0.15 * i);
+    held.push_back(f.image);
+    copies.push_back(f.image.clone());
+  }
+  for (int i = 0; i < 6; ++i) {
+    EXPECT_EQ(cv::norm(held[i], copies[i], cv::NORM_INF), 0.0) << "frame " << i;
+    for (int j = 0; j < i; ++j) EXPECT_NE(held[i].data, held[j].data) << i << ", " << j;
+  }
+  // Keep every other frame; the pool may now reuse the rest.
+  for (int i = 5; i >= 0; i -= 2) held.erase(held.begin() + i);
+  for (int k = 0; k < 8; ++k) renderer.capture(run.trajectory, 0.2 + 0.05 * k);
+  for (int i = 0; i < 3; ++i)
+    EXPECT_EQ(cv::norm(held[i], copies[2 * i], cv::NORM_INF), 0.0) << "frame " << 2 * i;
+}
+
 // A frame with noise and nothing fractional before it (no supersampling, blur, vignetting or
 // distortion) is noised on the 8-bit render directly: the same frame as the float path, the render
 // as floats noised from the same draw of the generator and rounded, for read and shot noise.
