@@ -4,6 +4,7 @@
 #include "flatland/sim/hand_shapes.hpp"
 #include "flatland/sim/rolling.hpp"
 #include "flatland/sim/search.hpp"
+#include "flatland/sim/sensitivity.hpp"
 #include "flatland/sim/simulate.hpp"
 #include "flatland/sim/spatial_run.hpp"
 #include "flatland/sim/spec.hpp"
@@ -68,6 +69,31 @@ void ButterflyRun(benchmark::State& state, sim::Formulation formulation, double 
   state.counters["rhs_evals"] = benchmark::Counter(static_cast<double>(result.stats.rhs_evals));
   // Distance of the final s_h from a reduced run at rtol 1e-13: the accuracy bought.
   state.counters["s_end_err"] = benchmark::Counter(std::abs(result.final.s_h - reference_s_end()));
+}
+
+// One 2T run of the butterfly (reduced, not recorded) with or without the sensitivities of its end
+// to the six parameters (a, b, c, d, k, period): the cost ratio of the two, same tolerance;
+// and with the sensitivities in the step-size control too (SensitivityOptions::control_error).
+void SensitivityRun(benchmark::State& state, bool sensitivities, bool control_error) {
+  sim::SimulationSpec spec = with_tolerance(1e-10, 1e-12);
+  spec.run.formulation = sim::Formulation::kReduced;
+  spec.run.record = false;
+  const auto problem = sim::build_problem(spec);
+  const sim::RunOptions options = sim::run_options(spec);
+  sim::RunResult result;
+  for (auto _ : state) {
+    if (sensitivities) {
+      sim::RunSensitivities s =
+          sim::simulate_with_sensitivities(problem, spec.initial, options, {control_error});
+      benchmark::DoNotOptimize(s);
+      result = s.run;
+    } else {
+      result = sim::simulate(problem, spec.initial, options);
+      benchmark::DoNotOptimize(result);
+    }
+  }
+  state.counters["steps"] = benchmark::Counter(static_cast<double>(result.stats.steps));
+  state.counters["rhs_evals"] = benchmark::Counter(static_cast<double>(result.stats.rhs_evals));
 }
 
 // One right-hand-side evaluation at a mid-roll state.
@@ -318,6 +344,12 @@ void register_all() {
                                  sim::ContactModel::kRolling, record)
         ->Unit(benchmark::kMillisecond);
   }
+  benchmark::RegisterBenchmark("BM_SensitivityRun/without", SensitivityRun, false, false)
+      ->Unit(benchmark::kMillisecond);
+  benchmark::RegisterBenchmark("BM_SensitivityRun/with", SensitivityRun, true, false)
+      ->Unit(benchmark::kMillisecond);
+  benchmark::RegisterBenchmark("BM_SensitivityRun/with_error_control", SensitivityRun, true, true)
+      ->Unit(benchmark::kMillisecond);
   benchmark::RegisterBenchmark("BM_Rhs/general", Rhs<sim::GeneralRolling>);
   benchmark::RegisterBenchmark("BM_Rhs/reduced", Rhs<sim::ReducedDiskRolling>);
   for (const auto& [kind, name] :

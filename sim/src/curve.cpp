@@ -1,5 +1,6 @@
 #include "flatland/sim/curve.hpp"
 #include "infinity.hpp"
+#include "rolling_terms.hpp"
 
 #include "flatland/sim/format.hpp"
 
@@ -46,29 +47,7 @@ constexpr int kOutlineSamples = 1024;  // over the polynomial hand's closed outl
 }  // namespace
 
 CurveGeometry geometry_from_jet(const CurveJet& jet, int normal_side) {
-  CurveGeometry g;
-  g.point = jet.c;
-  g.jacobian = jet.d1;
-  g.jacobian_ds = jet.d2;
-  g.speed = jet.d1.norm();
-  const double inv_speed = 1.0 / g.speed;
-  g.tangent = jet.d1 * inv_speed;
-  g.normal = normal_side * perp(g.tangent);
-  g.speed_ds = jet.d1.dot(jet.d2) * inv_speed;
-  const double inv_speed3 = inv_speed * inv_speed * inv_speed;
-  const double c12 = cross2(jet.d1, jet.d2);
-  // Signed curvature is positive for a left turn; a body traversed with its outside on the left
-  // of travel (normal_side = -1) is convex where it turns left, hence the sign flip.
-  g.curvature = -normal_side * c12 * inv_speed3;
-  g.curvature_ds =
-      -normal_side * (cross2(jet.d1, jet.d3) * inv_speed3 -
-                      3.0 * c12 * jet.d1.dot(jet.d2) * inv_speed3 * inv_speed * inv_speed);
-  const double ks = g.curvature * g.speed;
-  g.normal_ds = ks * g.tangent;
-  const Vec2 tangent_ds = (jet.d2 - g.speed_ds * g.tangent) * inv_speed;
-  g.normal_dss =
-      (g.curvature_ds * g.speed + g.curvature * g.speed_ds) * g.tangent + ks * tangent_ds;
-  return g;
+  return detail::geometry_of(jet, normal_side);
 }
 
 CurveGeometry Curve::geometry(double s, int piece) const {
@@ -133,25 +112,7 @@ PieceInterval PolynomialHand::piece_interval(int piece) const {
 }
 
 CurveJet PolynomialHand::jet(double s, int piece) const {
-  const bool mirrored = (piece % 2) != 0;
-  const double u = mirrored ? 2.0 * piece - s : s - 2.0 * piece;
-  const double du = mirrored ? -1.0 : 1.0;  // du/ds
-  const double mx = mirrored ? -1.0 : 1.0;  // x -> -x on the mirrored half
-  const double u2 = u * u, u3 = u2 * u, u4 = u2 * u2, u5 = u4 * u;
-  const double x0 = a_ + c_ * u2 + e_ * u4;
-  const double x1 = 2.0 * c_ * u + 4.0 * e_ * u3;
-  const double x2 = 2.0 * c_ + 12.0 * e_ * u2;
-  const double x3 = 24.0 * e_ * u;
-  const double y0 = b_ * u + d_ * u3 + f_ * u5;
-  const double y1 = b_ + 3.0 * d_ * u2 + 5.0 * f_ * u4;
-  const double y2 = 6.0 * d_ * u + 20.0 * f_ * u3;
-  const double y3 = 6.0 * d_ + 60.0 * f_ * u2;
-  CurveJet j;
-  j.c = {mx * x0, y0};
-  j.d1 = du * Vec2(mx * x1, y1);
-  j.d2 = Vec2(mx * x2, y2);
-  j.d3 = du * Vec2(mx * x3, y3);
-  return j;
+  return detail::polynomial_hand_jet(a_, b_, c_, d_, s, piece);
 }
 
 std::string PolynomialHand::describe() const {

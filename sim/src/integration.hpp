@@ -89,6 +89,15 @@ class Integration {
   static constexpr int kWorks = kAudited ? 2 : 0;
   using Y = Eigen::Matrix<double, N + kWorks, 1>;
   using Dense = DenseCoefficients<Y>;  // 5 used unless dop853
+  /// The leading components of the state that the step-size control measures: all of the model's
+  /// state, unless the model says fewer (Model::controlled(), e.g. a state with sensitivities
+  /// beside it that may leave them out).
+  int controlled_components() const {
+    if constexpr (requires { model_.controlled(); })
+      return model_.controlled();
+    else
+      return N;
+  }
 
   /// `run_start`: where the whole run (all its segments) began, for the step budget's forecast.
   Integration(const Model& model, const RunOptions& opt, RunResult& res, std::vector<Guard> guards,
@@ -115,6 +124,15 @@ class Integration {
 
  private:
   static State head(const Y& y) { return y.template head<N>(); }
+  /// After a switch of pieces at t (a junction, a motion breakpoint): a model whose state carries
+  /// sensitivities applies their jump there (its `cross`); the others' states are continuous.
+  void cross(double t, Y& y, const Pieces& before) {
+    if constexpr (requires(State & x) { model_.cross(t, x, before, pieces_); }) {
+      State x = head(y);
+      model_.cross(t, x, before, pieces_);
+      y.template head<N>() = x;
+    }
+  }
   Sample sample_at(double t, const Y& y) { return sample(t, State(head(y))); }
   double s_h(const Y& y) const { return Model::s_h(head(y)); }
   /// The model's projection of the state part (the works are not constrained).
@@ -178,15 +196,16 @@ double Integration<Model, kAudited>::attempt(double t, const Y& y, const Y& k1, 
   const auto f = [this](double tt, const Y& yy, Y& dy) { rhs(tt, yy, dy); };
   const double rtol = opt_.integrator.rtol, atol = opt_.integrator.atol;
   if (opt_.integrator.method == Method::kDormandPrince853) {
-    if (!trial) return dop853_step(f, t, y, k1, h, rtol, atol, y1, k7, k853_, N);
+    if (!trial)
+      return dop853_step(f, t, y, k1, h, rtol, atol, y1, k7, k853_, controlled_components());
     Stages853<Y> scratch;
-    return dop853_step(f, t, y, k1, h, rtol, atol, y1, k7, scratch, N);
+    return dop853_step(f, t, y, k1, h, rtol, atol, y1, k7, scratch, controlled_components());
   }
   if (opt_.integrator.method == Method::kRungeKutta4) {
     rk4_step(f, t, y, k1, h, y1, k7, rc);  // k7 is reused as the next step's k1
     return 0.0;
   }
-  return dopri5_step(f, t, y, k1, h, rtol, atol, y1, k7, rc, N);
+  return dopri5_step(f, t, y, k1, h, rtol, atol, y1, k7, rc, controlled_components());
 }
 
 template <class Model, bool kAudited>
@@ -194,7 +213,8 @@ double Integration<Model, kAudited>::initial_step(double t, const Y& y, const Y&
                                                   double t_stop) {
   return starting_step([this](double tt, const Y& yy, Y& dy) { rhs(tt, yy, dy); }, t, y, f0, t_stop,
                        opt_.integrator.rtol, opt_.integrator.atol, opt_.integrator.max_step,
-                       opt_.integrator.method == Method::kDormandPrince853 ? 8.0 : 5.0, N);
+                       opt_.integrator.method == Method::kDormandPrince853 ? 8.0 : 5.0,
+                       controlled_components());
 }
 
 template <class Model, bool kAudited>
@@ -460,9 +480,11 @@ SegmentEnd<typename Model::State> Integration<Model, kAudited>::run_from(double 
           // piece from the junction itself and the direction of crossing.
           const int d = junction == iv.hi ? +1 : -1;
           const int motion = pieces_.motion;
+          const Pieces before = pieces_;
           pieces_ = model_.pieces_for(head(y), d);
           pieces_.hand = model_.problem().hand->piece_at(junction, d);
           pieces_.motion = motion;
+          cross(t, y, before);
           need_k1 = true;
           if (need_force) s_start = sample_at(t, y);
           break;
@@ -478,7 +500,9 @@ SegmentEnd<typename Model::State> Integration<Model, kAudited>::run_from(double 
     if (stopped) break;
     if (t_stop < opt_.t_end) {  // the motion's acceleration jumps here: restart on its next segment
       ++st_.restarts;
+      const Pieces before = pieces_;
       ++pieces_.motion;
+      cross(t, y, before);
       need_k1 = true;
       if (need_force) {
         // The forces jump with the acceleration: a guard the jump violates fires here and now.

@@ -1,5 +1,7 @@
 #include "flatland/sim/motion.hpp"
 
+#include "rolling_terms.hpp"
+
 #include <cmath>
 #include <numbers>
 #include <stdexcept>
@@ -36,21 +38,7 @@ ButterflyMotion::ButterflyMotion(double period, double k) {
 }
 
 HandKinematics ButterflyMotion::at(double t, int segment) const {
-  HandKinematics h;
-  const double T = half_period_;
-  if (segment <= 0) return h;  // resting palm up
-  if (segment >= 2) {
-    h.angle = std::numbers::pi;
-    return h;
-  }
-  const double u = (t - T) / T, u2 = u * u;
-  const double p = u * (1.0 + u2 * (k_ + l_ * u2));
-  const double dp = 1.0 + u2 * (3.0 * k_ + 5.0 * l_ * u2);
-  const double ddp = u * (6.0 * k_ + 20.0 * l_ * u2);
-  h.angle = scale_ * p + 0.5 * std::numbers::pi;
-  h.angular_velocity = scale_ * dp / T;
-  h.angular_acceleration = scale_ * ddp / (T * T);
-  return h;
+  return detail::butterfly_kinematics(half_period_, k_, t, segment);
 }
 
 }  // namespace flatland::sim

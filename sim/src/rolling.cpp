@@ -1,4 +1,5 @@
 #include "flatland/sim/rolling.hpp"
+#include "rolling_terms.hpp"
 
 #include <Eigen/QR>
 
@@ -485,18 +486,13 @@ double ReducedDiskRolling::sddot(const HandKinematics& h, const CurveGeometry& g
                                  Power* power) const {
   if (rest_ && !power) return 0.0;
   const RollingProblem& pb = *problem_;
-  const double one_rk = 1.0 + r_ * g.curvature;
-  const double sigma = g.speed * one_rk;
-  const double sigma_ds = g.speed_ds * one_rk + g.speed * r_ * g.curvature_ds;
-  const Vec2 q = g.point + r_ * g.normal;
-  const double c = std::cos(h.angle), s = std::sin(h.angle);
-  const Vec2 a = h.acceleration - pb.gravity_vector();
-  const Vec2 a_local(c * a.x() + s * a.y(), -s * a.x() + c * a.y());  // R^T (a_h - g)
+  const detail::RollingTerms<double> k = detail::rolling_terms(h, g, r_, pb.gravity_vector());
+  const double sigma = k.sigma, sigma_ds = k.sigma_ds, c = k.cos_angle, s = k.sin_angle;
+  const Vec2& q = k.q;
+  const Vec2& a_local = k.a_local;
   double sdd = 0.0;
   if (!rest_) {
-    const double th2 = h.angular_velocity * h.angular_velocity;
-    double drive = a_local.dot(g.tangent) + h.angular_acceleration * perp(q).dot(g.tangent) -
-                   th2 * q.dot(g.tangent) - side_ * rho2_ / r_ * h.angular_acceleration;
+    double drive = detail::rolling_drive(h, g, k, r_, rho2_, side_);
     if (losses_) {
       // Q / m: drag on the centre along the rolling direction, the drag couple and the
       // rolling-resistance couple eps delta sign(s') f_n, through the lever -eps sigma / r.
@@ -508,7 +504,7 @@ double ReducedDiskRolling::sddot(const HandKinematics& h, const CurveGeometry& g
           pb.contact.drag_angular * omega_o;
       drive += pb.contact.drag / m * d.velocity.dot(d.T) + side_ * couple / (m * r_);
     }
-    sdd = -(sigma_ds * sdot * sdot + drive / (1.0 + rho2_ / (r_ * r_))) / sigma;
+    sdd = detail::rolling_sddot(k, drive, sdot, r_, rho2_);
   }
   if (power) {
     // The energy audit's powers, in the hand's axes (dot products do not care), from the terms

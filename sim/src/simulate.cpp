@@ -5,6 +5,7 @@
 #include "flatland/sim/roots.hpp"
 
 #include "integration.hpp"
+#include "rolling_run.hpp"
 
 #include <algorithm>
 #include <array>
@@ -486,87 +487,16 @@ void finish_run(RunResult& res, const RunOptions& opt) {
   res.contact_lost = res.reason == StopReason::kContactLost || res.fn_min_ratio < 0 || flew;
 }
 
-namespace {
-
-/// The rolling model: one segment from the initial contact; contact loss and slip (when asked)
-/// stop it, at once if the initial state already violates them.
-template <class Model>
-RunResult run_rolling(std::shared_ptr<const RollingProblem> problem, const InitialContact& init,
-                      const RunOptions& options) {
-  if (!std::isfinite(init.s_h) || !std::isfinite(init.sdot_h) || !std::isfinite(init.t0))
-    throw std::invalid_argument("initial: s_h, sdot_h and t0 must be finite");
-  validate_run_options(options, init.t0);
-  if (problem->contact.has_losses())
-    throw std::invalid_argument(
-        "contact: the losses (rolling_resistance, drag, drag_angular) need contact.model: hybrid "
-        "(the rolling model is the paper's lossless simulation)");
-  RunResult res;
-  res.method = options.integrator.method;
-  const Model model(problem);
-  const double weight = problem->object.mass * problem->gravity;
-  std::vector<detail::Guard> guards;
-  if (options.events.stop_on_contact_loss)
-    guards.push_back({EventKind::kContactLost,
-                      [](const Sample& s) { return s.force_normal; }, 0.0});
-  if (options.events.stop_on_slip && problem->contact.mu) {
-    const double mu = *problem->contact.mu;
-    guards.push_back({EventKind::kSlip,
-                      [mu](const Sample& s) { return mu * s.force_normal - std::abs(s.force_tangential); },
-                      1e-12 * weight});
-  }
-  detail::EnergyLedger ledger = detail::planar_ledger(res.audit, *problem, options);
-
-  double t = init.t0;
-  typename Model::State y = model.initial_state(init);
-  // Direction of travel decides which piece is active when starting on a junction; at rest the
-  // initial acceleration decides.
-  int dir = Model::sdot_h(y) < 0 ? -1 : +1;
-  const int motion_segment = problem->motion->segment_at(t);
-  if (Model::sdot_h(y) == 0) {
-    Pieces p = model.pieces_for(y, +1);
-    p.motion = motion_segment;
-    typename Model::State dy;
-    model.derivative(t, y, p, dy);
-    ++res.stats.rhs_evals;
-    dir = Model::sdot_h(dy) < 0 ? -1 : +1;  // the rate slot of the derivative holds sddot_h
-  }
-  Pieces pieces = model.pieces_for(y, dir);
-  pieces.motion = motion_segment;
-  model.project(t, y, pieces);
-  const auto end = options.audit ? detail::Integration<Model, true>(
-                                       model, options, res, std::move(guards), ledger, init.t0)
-                                       .run_from(t, y, pieces)
-                                 : detail::Integration<Model, false>(
-                                       model, options, res, std::move(guards), ledger, init.t0)
-                                       .run_from(t, y, pieces);
-  res.initial = end.first;
-  res.final = end.last;
-  if (end.fired) {
-    res.reason = *end.fired == EventKind::kContactLost        ? StopReason::kContactLost
-                 : *end.fired == EventKind::kSlip             ? StopReason::kSlip
-                 : *end.fired == EventKind::kNumericalFailure ? StopReason::kNumericalFailure
-                                                              : StopReason::kLeftBounds;
-    RecordedEvent e;
-    e.kind = *end.fired;
-    e.t = end.t;
-    e.s_h = Model::s_h(end.y);
-    e.position = end.last.object_position;
-    res.events.push_back(e);
-  }
-  finish_run(res, options);
-  return res;
-}
-
-}  // namespace
-
 RunResult simulate(std::shared_ptr<const RollingProblem> problem, const InitialContact& init,
                    const RunOptions& options) {
   if (!problem) throw std::invalid_argument("simulate: no problem");
   problem->contact.validate();
   const Formulation f = resolve_formulation(*problem, options.formulation);
   if (options.model == ContactModel::kHybrid) return simulate_hybrid(problem, init, options);
-  RunResult r = f == Formulation::kReduced ? run_rolling<ReducedDiskRolling>(problem, init, options)
-                                           : run_rolling<GeneralRolling>(problem, init, options);
+  detail::require_finite(init);
+  RunResult r = f == Formulation::kReduced
+                    ? detail::run_rolling(ReducedDiskRolling(problem), init, options)
+                    : detail::run_rolling(GeneralRolling(problem), init, options);
   r.formulation = f;
   return r;
 }

@@ -23,25 +23,31 @@ inline Vec2 perp(const Vec2& v) { return {-v.y(), v.x()}; }
 /// Planar cross product (z component of a x b).
 inline double cross2(const Vec2& a, const Vec2& b) { return a.x() * b.y() - a.y() * b.x(); }
 
-/// Position and its first three parameter derivatives on one smooth piece.
-struct CurveJet {
-  Vec2 c, d1, d2, d3;
+/// Position and its first three parameter derivatives on one smooth piece. The scalar is a
+/// template parameter so that sensitivities can carry derivatives through it (CurveJet: double).
+template <class T>
+struct BasicCurveJet {
+  Eigen::Matrix<T, 2, 1> c, d1, d2, d3;
 };
+using CurveJet = BasicCurveJet<double>;
 
 /// Differential geometry at one parameter value (everything derived from a CurveJet).
-struct CurveGeometry {
-  Vec2 point;           ///< c(s), m
-  Vec2 jacobian;        ///< J = dc/ds
-  Vec2 jacobian_ds;     ///< dJ/ds
-  double speed;         ///< |J|
-  double speed_ds;      ///< d|J|/ds
-  Vec2 tangent;         ///< unit J
-  Vec2 normal;          ///< unit outward normal
-  double curvature;     ///< 1/m; > 0 where the body is convex, < 0 where concave
-  double curvature_ds;  ///< d(curvature)/ds
-  Vec2 normal_ds;       ///< K = dn/ds = curvature * speed * tangent (the paper's K)
-  Vec2 normal_dss;      ///< dK/ds
+template <class T>
+struct BasicCurveGeometry {
+  using V = Eigen::Matrix<T, 2, 1>;
+  V point;         ///< c(s), m
+  V jacobian;      ///< J = dc/ds
+  V jacobian_ds;   ///< dJ/ds
+  T speed;         ///< |J|
+  T speed_ds;      ///< d|J|/ds
+  V tangent;       ///< unit J
+  V normal;        ///< unit outward normal
+  T curvature;     ///< 1/m; > 0 where the body is convex, < 0 where concave
+  T curvature_ds;  ///< d(curvature)/ds
+  V normal_ds;     ///< K = dn/ds = curvature * speed * tangent (the paper's K)
+  V normal_dss;    ///< dK/ds
 };
+using CurveGeometry = BasicCurveGeometry<double>;
 
 /// Closed interval of the parameter covered by one smooth piece.
 struct PieceInterval {

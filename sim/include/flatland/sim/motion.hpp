@@ -7,15 +7,19 @@
 
 namespace flatland::sim {
 
-/// Pose of the hand frame in the world (pivot position, angle) and its derivatives.
-struct HandKinematics {
-  Vec2 position = Vec2::Zero();
-  Vec2 velocity = Vec2::Zero();
-  Vec2 acceleration = Vec2::Zero();
-  double angle = 0.0;                 ///< rad, 0 = palm up
-  double angular_velocity = 0.0;      ///< rad/s
-  double angular_acceleration = 0.0;  ///< rad/s^2
+/// Pose of the hand frame in the world (pivot position, angle) and its derivatives (the scalar a
+/// template parameter for sensitivities, as BasicCurveJet's).
+template <class T>
+struct BasicHandKinematics {
+  using V = Eigen::Matrix<T, 2, 1>;
+  V position = V::Zero();
+  V velocity = V::Zero();
+  V acceleration = V::Zero();
+  T angle = T(0.0);                 ///< rad, 0 = palm up
+  T angular_velocity = T(0.0);      ///< rad/s
+  T angular_acceleration = T(0.0);  ///< rad/s^2
 };
+using HandKinematics = BasicHandKinematics<double>;
 
 /// A prescribed hand motion. Implementations: the paper's quintic, a fixed hand; tabulated or
 /// controller-driven motions plug in here.
