@@ -56,7 +56,12 @@ CurveGeometry Curve::geometry(double s, int piece) const {
 
 // ---------------------------------------------------------------------------------------------
 PolynomialHand::PolynomialHand(double a, double b, double c, double d)
-    : a_(a), b_(b), c_(c), d_(d), e_(-(a + c)), f_(-(b + 3.0 * d) / 5.0) {
+    : a_(a),
+      b_(b),
+      c_(c),
+      d_(d),
+      e_(detail::polynomial_coefficients(a, b, c, d).e),
+      f_(detail::polynomial_coefficients(a, b, c, d).f) {
   for (double v : {a, b, c, d})
     if (!std::isfinite(v)) throw std::invalid_argument("hand: shape coefficients must be finite");
   outline_.reserve(kOutlineSamples);
@@ -112,7 +117,8 @@ PieceInterval PolynomialHand::piece_interval(int piece) const {
 }
 
 CurveJet PolynomialHand::jet(double s, int piece) const {
-  return detail::polynomial_hand_jet(a_, b_, c_, d_, s, piece);
+  return detail::polynomial_hand_jet(detail::PolynomialCoefficients<double>{a_, b_, c_, d_, e_, f_},
+                                     s, piece);
 }
 
 std::string PolynomialHand::describe() const {

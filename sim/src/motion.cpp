@@ -31,14 +31,16 @@ ButterflyMotion::ButterflyMotion(double period, double k) {
   const double p1 = (4.0 + 2.0 * k) / 5.0;  // P(1) with l = -(1 + 3k)/5
   if (std::abs(p1) < 1e-9)
     throw std::invalid_argument("motion.k: k = -2 makes P(1) = 0 (the motion is undefined)");
-  half_period_ = 0.5 * period;
+  const auto coefficients = detail::butterfly_coefficients(0.5 * period, k);
+  half_period_ = coefficients.half_period;
   k_ = k;
-  l_ = -(1.0 + 3.0 * k) / 5.0;
-  scale_ = std::numbers::pi / (2.0 * p1);
+  l_ = coefficients.l;
+  scale_ = coefficients.scale;
 }
 
 HandKinematics ButterflyMotion::at(double t, int segment) const {
-  return detail::butterfly_kinematics(half_period_, k_, t, segment);
+  return detail::butterfly_kinematics(
+      detail::ButterflyCoefficients<double>{half_period_, k_, l_, scale_}, t, segment);
 }
 
 }  // namespace flatland::sim

@@ -33,9 +33,20 @@ T cross2_t(const Vec2T<T>& a, const Vec2T<T>& b) {
 /// by a, b, c, d), its piece `piece` at s: pieces alternate between the palm's half and its mirror
 /// image (x -> -x), u = s - 2 piece or 2 piece - s.
 template <class T>
-BasicCurveJet<T> polynomial_hand_jet(const T& a, const T& b, const T& c, const T& d, const T& s,
+struct PolynomialCoefficients {
+  T a, b, c, d, e, f;
+};
+
+/// The coefficients with e and f from a, b, c, d (computed once per hand by PolynomialHand).
+template <class T>
+PolynomialCoefficients<T> polynomial_coefficients(const T& a, const T& b, const T& c, const T& d) {
+  return {a, b, c, d, -(a + c), -(b + 3.0 * d) / 5.0};
+}
+
+template <class T>
+BasicCurveJet<T> polynomial_hand_jet(const PolynomialCoefficients<T>& coefficients, const T& s,
                                      int piece) {
-  const T e = -(a + c), f = -(b + 3.0 * d) / 5.0;
+  const auto& [a, b, c, d, e, f] = coefficients;
   const bool mirrored = (piece % 2) != 0;
   const T u = mirrored ? 2.0 * piece - s : s - 2.0 * piece;
   const double du = mirrored ? -1.0 : 1.0;  // du/ds
@@ -85,20 +96,32 @@ BasicCurveGeometry<T> geometry_of(const BasicCurveJet<T>& jet, int normal_side) 
   return g;
 }
 
-/// The paper's butterfly motion (ButterflyMotion) at t on `segment`: 0 resting palm up (t < 0),
-/// 1 the quintic over [0, 2T], 2 resting at pi; half_period = T.
+/// The butterfly motion's coefficients: T = half_period, k, and l and pi / (2 P(1)) from k.
 template <class T>
-BasicHandKinematics<T> butterfly_kinematics(const T& half_period, const T& k, const T& t,
-                                            int segment) {
+struct ButterflyCoefficients {
+  T half_period, k, l, scale;
+};
+
+/// Computed once per motion by ButterflyMotion.
+template <class T>
+ButterflyCoefficients<T> butterfly_coefficients(const T& half_period, const T& k) {
+  const T l = -(1.0 + 3.0 * k) / 5.0;                                  // theta'(0) = theta'(2T) = 0
+  const T scale = std::numbers::pi / (2.0 * ((4.0 + 2.0 * k) / 5.0));  // pi / (2 P(1))
+  return {half_period, k, l, scale};
+}
+
+/// The paper's butterfly motion (ButterflyMotion) at t on `segment`: 0 resting palm up (t < 0),
+/// 1 the quintic over [0, 2T], 2 resting at pi.
+template <class T>
+BasicHandKinematics<T> butterfly_kinematics(const ButterflyCoefficients<T>& coefficients,
+                                            const T& t, int segment) {
   BasicHandKinematics<T> h;
   if (segment <= 0) return h;  // resting palm up
   if (segment >= 2) {
     h.angle = T(std::numbers::pi);
     return h;
   }
-  const T l = -(1.0 + 3.0 * k) / 5.0;                                  // theta'(0) = theta'(2T) = 0
-  const T scale = std::numbers::pi / (2.0 * ((4.0 + 2.0 * k) / 5.0));  // pi / (2 P(1))
-  const T& T_ = half_period;
+  const auto& [T_, k, l, scale] = coefficients;
   const T u = (t - T_) / T_, u2 = u * u;
   const T p = u * (1.0 + u2 * (k + l * u2));
   const T dp = 1.0 + u2 * (3.0 * k + 5.0 * l * u2);

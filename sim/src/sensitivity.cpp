@@ -123,8 +123,10 @@ class ReducedDiskSensitivity {
                            const T& c, const T& d, const T& k, const T& period,
                            const Pieces& p) const {
     const BasicCurveGeometry<T> g = detail::geometry_of(
-        detail::polynomial_hand_jet(a, b, c, d, s, p.hand), hand_.normal_side());
-    const BasicHandKinematics<T> h = detail::butterfly_kinematics(T(0.5) * period, k, t, p.motion);
+        detail::polynomial_hand_jet(detail::polynomial_coefficients(a, b, c, d), s, p.hand),
+        hand_.normal_side());
+    const BasicHandKinematics<T> h = detail::butterfly_kinematics(
+        detail::butterfly_coefficients(T(0.5) * period, k), t, p.motion);
     const detail::RollingTerms<T> terms = detail::rolling_terms(h, g, r_, gravity_);
     const T drive = detail::rolling_drive(h, g, terms, r_, rho2_, side_);
     return detail::rolling_sddot(terms, drive, sdot, r_, rho2_);

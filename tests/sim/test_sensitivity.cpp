@@ -122,7 +122,9 @@ TEST(Sensitivity, TheRunIsSimulatesRunBitForBit) {
     EXPECT_TRUE(s.run.fn_min_ratio == plain.fn_min_ratio ||
                 (std::isnan(s.run.fn_min_ratio) && std::isnan(plain.fn_min_ratio)))
         << s.run.fn_min_ratio << " against " << plain.fn_min_ratio;
-    if (record) EXPECT_FALSE(std::isnan(s.run.fn_min_ratio));
+    if (record) {
+      EXPECT_FALSE(std::isnan(s.run.fn_min_ratio));
+    }
     EXPECT_EQ(s.run.trajectory.empty(), !record);
   }
 }
