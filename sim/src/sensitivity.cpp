@@ -11,6 +11,14 @@
 #include <stdexcept>
 #include <string>
 
+// The sanitizer build leaves the flattening out (sim/CMakeLists.txt): there it only costs compile
+// time.
+#ifdef FLATLAND_SENSITIVITY_NO_FLATTEN
+#define FLATLAND_FLATTEN
+#else
+#define FLATLAND_FLATTEN [[gnu::flatten]]
+#endif
+
 namespace flatland::sim {
 namespace {
 
@@ -119,7 +127,7 @@ class ReducedDiskSensitivity {
   /// the Jets' 8-wide Eigen assignments as calls, half of a run's time (a run with sensitivities
   /// 6.1 ms, 1.6 ms flattened, against 0.37 ms without).
   template <class T>
-  [[gnu::flatten]] T sddot(const T& t, const T& s, const T& sdot, const T& a, const T& b,
+  FLATLAND_FLATTEN T sddot(const T& t, const T& s, const T& sdot, const T& a, const T& b,
                            const T& c, const T& d, const T& k, const T& period,
                            const Pieces& p) const {
     const BasicCurveGeometry<T> g = detail::geometry_of(
