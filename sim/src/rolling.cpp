@@ -487,9 +487,8 @@ double ReducedDiskRolling::sddot(const HandKinematics& h, const CurveGeometry& g
   if (rest_ && !power) return 0.0;
   const RollingProblem& pb = *problem_;
   const detail::RollingTerms<double> k = detail::rolling_terms(h, g, r_, pb.gravity_vector());
-  const double sigma = k.sigma, sigma_ds = k.sigma_ds, c = k.cos_angle, s = k.sin_angle;
+  const double sigma = k.sigma, c = k.cos_angle, s = k.sin_angle;
   const Vec2& q = k.q;
-  const Vec2& a_local = k.a_local;
   double sdd = 0.0;
   if (!rest_) {
     double drive = detail::rolling_drive(h, g, k, r_, rho2_, side_);
@@ -515,10 +514,7 @@ double ReducedDiskRolling::sddot(const HandKinematics& h, const CurveGeometry& g
                        -s * h.velocity.x() + c * h.velocity.y());  // R^T v_h
     const Vec2 v_hand = v_pivot + w * perp(g.point);  // the hand's point at the contact
     const double ssd = sigma * sdot;
-    const Vec2 accel = a_local + h.angular_acceleration * perp(q) - w * w * q +
-                       2.0 * w * ssd * perp(T) +
-                       (sigma_ds * T - sigma * g.curvature * g.speed * g.normal) * sdot * sdot +
-                       sigma * sdd * T;  // R^T (p'' - g)
+    const Vec2 accel = detail::relative_acceleration(h, g, k, sdot, sdd);  // R^T (p'' - g)
     if (!losses_ && !rest_) {  // the paper's rolling: the contact force's work through the hand
       power->hand = pb.object.mass * accel.dot(v_hand);
       power->losses = 0.0;

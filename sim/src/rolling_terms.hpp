@@ -177,4 +177,19 @@ T rolling_sddot(const RollingTerms<T>& k, const T& drive, const T& sdot, double 
   return -(k.sigma_ds * sdot * sdot + drive / (1.0 + rho2 / (r * r))) / k.sigma;
 }
 
+/// R^T (p'' - g): the disk centre's acceleration less gravity, in the hand's axes, for a centre
+/// moving on the offset curve with s_h' = sdot and s_h'' = sdd (docs/DYNAMICS.md). Times the mass
+/// it is the hand's contact force on the rolling disk without drag: its normal and tangential
+/// components are the force's.
+template <class T>
+Vec2T<T> relative_acceleration(const BasicHandKinematics<T>& h, const BasicCurveGeometry<T>& g,
+                               const RollingTerms<T>& k, const T& sdot, const T& sdd) {
+  const T& w = h.angular_velocity;
+  const T ssd = k.sigma * sdot;
+  return k.a_local + perp_t<T>(k.q) * h.angular_acceleration - k.q * (w * w) +
+         perp_t<T>(g.tangent) * (2.0 * w * ssd) +
+         (g.tangent * k.sigma_ds - g.normal * (k.sigma * g.curvature * g.speed)) * sdot * sdot +
+         g.tangent * (k.sigma * sdd);
+}
+
 }  // namespace flatland::sim::detail

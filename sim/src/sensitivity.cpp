@@ -7,9 +7,12 @@
 
 #include <ceres/jet.h>
 
+#include <algorithm>
 #include <cmath>
+#include <map>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 // The sanitizer build leaves the flattening out (sim/CMakeLists.txt): there it only costs compile
 // time.
@@ -53,6 +56,36 @@ class ReducedDiskSensitivity {
   using State = Eigen::Matrix<double, N, 1>;
   using Base = ReducedDiskRolling;
 
+ private:
+  /// `finish(geometry, hand, terms, s_h'')` of the contact's terms at one state, in any scalar:
+  /// what s_h'' and the forces are made of. (A callback, not a returned struct: the hot path's
+  /// Jets are not copied; returning them made a run with sensitivities 1.4 times slower.)
+  template <class T, class Finish>
+  auto with_contact(const T& t, const T& s, const T& sdot, const T& a, const T& b, const T& c,
+                    const T& d, const T& k, const T& period, const Pieces& p,
+                    Finish&& finish) const {
+    const BasicCurveGeometry<T> g = detail::geometry_of(
+        detail::polynomial_hand_jet(detail::polynomial_coefficients(a, b, c, d), s, p.hand),
+        hand_.normal_side());
+    const BasicHandKinematics<T> h = detail::butterfly_kinematics(
+        detail::butterfly_coefficients(T(0.5) * period, k), t, p.motion);
+    const detail::RollingTerms<T> terms = detail::rolling_terms(h, g, r_, gravity_);
+    const T drive = detail::rolling_drive(h, g, terms, r_, rho2_, side_);
+    return finish(g, h, terms, detail::rolling_sddot(terms, drive, sdot, r_, rho2_));
+  }
+
+  /// s_h'' by the run's formulas (rolling_terms.hpp) in any scalar. Flattened: GCC 12 at -O3 left
+  /// the Jets' 8-wide Eigen assignments as calls, half of a run's time (a run with sensitivities
+  /// 6.1 ms, 1.6 ms flattened, against 0.37 ms without).
+  template <class T>
+  FLATLAND_FLATTEN T sddot(const T& t, const T& s, const T& sdot, const T& a, const T& b,
+                           const T& c, const T& d, const T& k, const T& period,
+                           const Pieces& p) const {
+    return with_contact<T>(t, s, sdot, a, b, c, d, k, period, p,
+                           [](const auto&, const auto&, const auto&, const T& sdd) { return sdd; });
+  }
+
+ public:
   ReducedDiskSensitivity(std::shared_ptr<const RollingProblem> problem, bool control_error)
       : base_(problem),
         hand_(polynomial_hand(*problem)),
@@ -61,6 +94,7 @@ class ReducedDiskSensitivity {
         rho2_(problem->object.inertia / problem->object.mass),
         side_(problem->hand->normal_side()),
         gravity_(problem->gravity_vector()),
+        gravity_magnitude_(problem->gravity),
         control_error_(control_error) {}
 
   State initial_state(const InitialContact& init) const {
@@ -87,6 +121,34 @@ class ReducedDiskSensitivity {
     dy.segment<kParameters>(3) = S_v;
     dy.segment<kParameters>(3 + kParameters) =
         sdd.v[0] * S_s + sdd.v[1] * S_v + sdd.v.template tail<kParameters>();
+  }
+
+  /// f_n / (m g) and f_t / (m g) at (t, s_h, sdot_h) on pieces p, and their derivatives in the
+  /// parameters given S = d(s_h, sdot_h)/dp there: the chain rule through the state, plus the
+  /// parameters' own part.
+  struct ForceRatios {
+    double fn = 0, ft = 0;
+    ParameterGradient dfn, dft;
+  };
+  ForceRatios force_ratios(double t, double s_h, double sdot_h, const ButterflyJacobian& S,
+                           const Pieces& p) const {
+    using J = ceres::Jet<double, 2 + kParameters>;
+    const J s(s_h, 0), sdot(sdot_h, 1);
+    const J a(hand_.a(), 2), b(hand_.b(), 3), c(hand_.c(), 4), d(hand_.d(), 5);
+    const J k(motion_.k(), 6), period(motion_.period(), 7);
+    // f / m in the hand's axes, along its normal and tangent.
+    const auto [fn, ft] = with_contact<J>(
+        J(t), s, sdot, a, b, c, d, k, period, p,
+        [&](const BasicCurveGeometry<J>& g, const BasicHandKinematics<J>& h,
+            const detail::RollingTerms<J>& terms, const J& sdd) {
+          const detail::Vec2T<J> accel = detail::relative_acceleration(h, g, terms, sdot, sdd);
+          return std::pair<J, J>(accel.dot(g.normal) / gravity_magnitude_,
+                                 accel.dot(g.tangent) / gravity_magnitude_);
+        });
+    auto total = [&](const J& f) -> ParameterGradient {
+      return f.v[0] * S.row(0) + f.v[1] * S.row(1) + f.v.template tail<kParameters>().transpose();
+    };
+    return {fn.a, ft.a, total(fn), total(ft)};
   }
 
   double project(double, State&, const Pieces&) const { return 0.0; }
@@ -123,23 +185,6 @@ class ReducedDiskSensitivity {
   }
 
  private:
-  /// s_h'' by the run's formulas (rolling_terms.hpp) in any scalar. Flattened: GCC 12 at -O3 left
-  /// the Jets' 8-wide Eigen assignments as calls, half of a run's time (a run with sensitivities
-  /// 6.1 ms, 1.6 ms flattened, against 0.37 ms without).
-  template <class T>
-  FLATLAND_FLATTEN T sddot(const T& t, const T& s, const T& sdot, const T& a, const T& b,
-                           const T& c, const T& d, const T& k, const T& period,
-                           const Pieces& p) const {
-    const BasicCurveGeometry<T> g = detail::geometry_of(
-        detail::polynomial_hand_jet(detail::polynomial_coefficients(a, b, c, d), s, p.hand),
-        hand_.normal_side());
-    const BasicHandKinematics<T> h = detail::butterfly_kinematics(
-        detail::butterfly_coefficients(T(0.5) * period, k), t, p.motion);
-    const detail::RollingTerms<T> terms = detail::rolling_terms(h, g, r_, gravity_);
-    const T drive = detail::rolling_drive(h, g, terms, r_, rho2_, side_);
-    return detail::rolling_sddot(terms, drive, sdot, r_, rho2_);
-  }
-
   double rate_of_sdot(double t, const State& y, const Pieces& p) const {
     Base::State head = y.head<3>(), dhead;
     base_.derivative(t, head, p, dhead);
@@ -151,14 +196,17 @@ class ReducedDiskSensitivity {
   const ButterflyMotion& motion_;
   double r_, rho2_, side_;
   Eigen::Vector2d gravity_;
+  double gravity_magnitude_;  ///< m/s^2 in the table's plane: the ratios' weight per unit mass
   bool control_error_;
 };
 
 }  // namespace
 
-RunSensitivities simulate_with_sensitivities(std::shared_ptr<const RollingProblem> problem,
-                                             const InitialContact& init, const RunOptions& options,
-                                             const SensitivityOptions& sensitivity) {
+namespace {
+
+/// The problems and options sensitivities are defined for; std::invalid_argument otherwise.
+void require_supported(const std::shared_ptr<const RollingProblem>& problem,
+                       const RunOptions& options) {
   if (!problem) throw std::invalid_argument("sensitivities: no problem");
   problem->contact.validate();
   if (options.model != ContactModel::kRolling)
@@ -173,6 +221,15 @@ RunSensitivities simulate_with_sensitivities(std::shared_ptr<const RollingProble
         "sensitivities: integrator.method: an adaptive method (dopri5, dop853): the fixed-step "
         "rk4 does not locate the junctions' crossings to the time tolerance");
   polynomial_hand(*problem);
+  butterfly_motion(*problem);
+}
+
+}  // namespace
+
+RunSensitivities simulate_with_sensitivities(std::shared_ptr<const RollingProblem> problem,
+                                             const InitialContact& init, const RunOptions& options,
+                                             const SensitivityOptions& sensitivity) {
+  require_supported(problem, options);
   const ButterflyMotion& motion = butterfly_motion(*problem);
   RunSensitivities out;
   ReducedDiskSensitivity::State y;
@@ -187,14 +244,140 @@ RunSensitivities simulate_with_sensitivities(std::shared_ptr<const RollingProble
   for (const RecordedEvent& e : out.run.events) {
     if (e.kind == EventKind::kJunction) ++out.junction_jumps;
   }
-  if (out.run.reason == StopReason::kEndTime && options.t_end == motion.period()) {
-    // x(2T(p)): the state at 2T- plus its rate times d(2T)/dp (1 for the period).
+  if (out.run.reason == StopReason::kEndTime && options.t_end > 0) {
+    // x(t_end (2T)' / 2T): the state at t_end (before the motion's end jump, where t_end = 2T) plus
+    // its rate times d t_end / dp (t_end / 2T for the period).
+    const double moves = options.t_end / motion.period();
     ButterflyJacobian m = out.end;
-    m(0, kPeriod) += out.run.final.sdot_h;
-    m(1, kPeriod) += out.run.final.sddot_h;
-    out.motion_end = m;
+    m(0, kPeriod) += moves * out.run.final.sdot_h;
+    m(1, kPeriod) += moves * out.run.final.sddot_h;
+    out.scaled_end = m;
   }
   out.breakpoint_jumps = out.run.final.t > motion.period() ? 1 : 0;
+  return out;
+}
+
+ForceMarginSensitivities force_margin_sensitivities(std::shared_ptr<const RollingProblem> problem,
+                                                    const InitialContact& init,
+                                                    const RunOptions& options, double t_from,
+                                                    double t_to, std::optional<double> mu,
+                                                    int pieces) {
+  require_supported(problem, options);
+  detail::require_finite(init);
+  if (!(std::isfinite(t_from) && std::isfinite(t_to) && t_from < t_to))
+    throw std::invalid_argument("force margins: the window [" + format_significant(t_from, 9) +
+                                ", " + format_significant(t_to, 9) +
+                                "] s must be finite and not empty");
+  if (t_from < init.t0 || t_to > options.t_end)
+    throw std::invalid_argument("force margins: the window [" + format_significant(t_from, 9) +
+                                ", " + format_significant(t_to, 9) + "] s is not inside the run [" +
+                                format_significant(init.t0, 9) + ", " +
+                                format_significant(options.t_end, 9) + "] s");
+  if (pieces < 1 || pieces > 1000)
+    throw std::invalid_argument("force margins: pieces must be in [1, 1000], got " +
+                                std::to_string(pieces));
+  if (mu && !(*mu > 0 && std::isfinite(*mu)))
+    throw std::invalid_argument("force margins: mu must be positive and finite, got " +
+                                format_significant(*mu, 6));
+  ForceMarginSensitivities out;
+  RunOptions recorded = options;
+  recorded.record = true;
+  out.run = simulate(problem, init, recorded);
+  out.runs = 1;
+  out.rhs_evals = out.run.stats.rhs_evals;
+  if (out.run.final.t < t_to)
+    throw std::runtime_error(
+        "force margins: the run ended at t = " + format_significant(out.run.final.t, 9) + " s (" +
+        to_string(out.run.reason) + "), before the window's end " + format_significant(t_to, 9) +
+        " s");
+  const ReducedDiskSensitivity model(problem, false);
+  // The state and its sensitivities at time t: from one more run with sensitivities (none at the
+  // run's start, where the state does not depend on the parameters), each time run once.
+  struct StateAt {
+    double s, sdot;
+    ButterflyJacobian S;
+  };
+  std::map<double, StateAt> states;
+  auto state_at = [&](double t) -> const StateAt& {
+    if (auto it = states.find(t); it != states.end()) return it->second;
+    StateAt x{init.s_h, init.sdot_h, ButterflyJacobian::Zero()};
+    if (t > init.t0) {
+      RunOptions to_t = options;
+      to_t.record = false;
+      to_t.t_end = t;
+      const RunSensitivities r = simulate_with_sensitivities(problem, init, to_t);
+      ++out.runs;
+      out.rhs_evals += r.run.stats.rhs_evals;
+      x = {r.run.final.s_h, r.run.final.sdot_h, r.end};
+    }
+    return states.emplace(t, x).first->second;
+  };
+  // A margin's gradient at its extremum's time. At a motion breakpoint the forces jump; the
+  // recorded run's value there is the earlier segment's or the later one's, and `value_of` picks
+  // the segment that gives the extremum found.
+  using Ratios = ReducedDiskSensitivity::ForceRatios;
+  auto margin = [&](double value, double t, auto value_of, auto gradient_of) {
+    MarginSensitivity m;
+    m.value = value;
+    m.t = t;
+    if (!std::isfinite(value)) return m;
+    const StateAt& x = state_at(t);
+    const int hand_piece = problem->hand->piece_at(x.s, x.sdot < 0 ? -1 : 1);
+    const int segment = problem->motion->segment_at(t);
+    const double tolerance = 1e-6 * std::max(1.0, std::abs(value));
+    for (const int motion_segment : {segment, segment - 1}) {
+      if (motion_segment < 0) break;
+      const Ratios f =
+          model.force_ratios(t, x.s, x.sdot, x.S, {.hand = hand_piece, .motion = motion_segment});
+      if (std::abs(value_of(f) - value) <= tolerance) {
+        m.gradient = gradient_of(f);
+        m.fn_ratio = f.fn;
+        m.ft_ratio = f.ft;
+        return m;
+      }
+    }
+    throw std::runtime_error("force margins: the extremum " + format_significant(value, 9) +
+                             " at t = " + format_significant(t, 9) +
+                             " s is not what the run's formulas give there (segment " +
+                             std::to_string(segment) + ")");
+  };
+  auto abs_ft_gradient = [](const Ratios& f) -> ParameterGradient {
+    return f.ft < 0 ? ParameterGradient(-f.dft) : f.dft;
+  };
+  for (int i = 0; i < pieces; ++i) {
+    WindowMargins w;
+    w.t_from = i == 0 ? t_from : t_from + (t_to - t_from) * i / pieces;
+    w.t_to = i + 1 == pieces ? t_to : t_from + (t_to - t_from) * (i + 1) / pieces;
+    const Extrema x = find_extrema(out.run, w.t_from, w.t_to, options.events.time_tolerance, mu);
+    w.fn_min_ratio = margin(
+        x.fn_min_ratio, x.t_fn_min, [](const Ratios& f) { return f.fn; },
+        [](const Ratios& f) -> ParameterGradient { return f.dfn; });
+    // |f_t| / f_n: d = (sgn(f_t) d f_t f_n - |f_t| d f_n) / f_n^2.
+    w.mu_required = margin(
+        x.mu_required, x.t_mu_required, [](const Ratios& f) { return std::abs(f.ft) / f.fn; },
+        [&](const Ratios& f) -> ParameterGradient {
+          return (abs_ft_gradient(f) * f.fn - std::abs(f.ft) * f.dfn) / (f.fn * f.fn);
+        });
+    if (mu)
+      w.friction_margin = margin(
+          x.friction_margin, x.t_friction_margin,
+          [&](const Ratios& f) { return *mu * f.fn - std::abs(f.ft); },
+          [&](const Ratios& f) -> ParameterGradient { return *mu * f.dfn - abs_ft_gradient(f); });
+    out.windows.push_back(w);
+  }
+  // The whole window's extrema: its parts' (each part's ends are in it).
+  auto pick = [&](MarginSensitivity WindowMargins::*field, bool largest) {
+    const MarginSensitivity* best = nullptr;
+    for (const WindowMargins& w : out.windows) {
+      const MarginSensitivity& m = w.*field;
+      if (std::isnan(m.value)) continue;
+      if (!best || (largest ? m.value > best->value : m.value < best->value)) best = &m;
+    }
+    return best ? *best : MarginSensitivity{};
+  };
+  out.fn_min_ratio = pick(&WindowMargins::fn_min_ratio, false);
+  out.mu_required = pick(&WindowMargins::mu_required, true);
+  if (mu) out.friction_margin = pick(&WindowMargins::friction_margin, false);
   return out;
 }
 
