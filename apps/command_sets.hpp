@@ -15,7 +15,8 @@ inline std::map<std::string, AddCommand> simulator_commands() {
           {"solve", add_solve_command},
           {"locus", add_locus_command},
           {"surface", add_surface_command},
-          {"time-optimal", add_time_optimal_command}};
+          {"time-optimal", add_time_optimal_command},
+          {"design", add_design_command}};
 }
 
 inline std::map<std::string, AddCommand> camera_commands() {

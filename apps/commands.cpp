@@ -33,6 +33,12 @@ constexpr CommandInfo kCommands[] = {
      "coefficient (--mu or the scene's contact.mu), needs no more friction than that (mu = 0.306 "
      "gives the paper's 1.181 s). The binding constraint must be violated at FROM and hold at "
      "TO."},
+    {"design", false,
+     "Design the hand's shape and the butterfly's motion together (docs/DESIGN.md): the "
+     "polynomial hand's a, b, c, d and the dip k that need the least friction for one duration "
+     "2T, keeping s_h(T) = 0 (the disk ends at rest on the back), a margin on the normal force, "
+     "the outline a hand and its wells wider than the disk; exact sensitivities, NLopt's SLSQP. "
+     "Prints the start (the paper's search, k alone), the best design and what binds there."},
     {"render", true,
      "Simulate the scene and film it with the scene's camera (its `camera` section): an MP4 "
      "video or PNG frames at the camera's frame rate from the start to the end of the run, with "

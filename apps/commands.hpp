@@ -41,6 +41,7 @@ Command add_solve_command(CLI::App& app);
 Command add_locus_command(CLI::App& app);
 Command add_surface_command(CLI::App& app);
 Command add_time_optimal_command(CLI::App& app);
+Command add_design_command(CLI::App& app);
 Command add_render_command(CLI::App& app);
 Command add_calibrate_command(CLI::App& app);
 Command add_render_calibration_command(CLI::App& app);

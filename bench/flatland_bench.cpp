@@ -1,6 +1,8 @@
 // Speed (and cost-versus-accuracy) of the simulator and the design search, on the paper's
 // butterfly: sim::SimulationSpec's defaults (2T = 1.181 s, k = -1.1393, disk r = 5.1 cm, g = 9.8).
 // Results and how to rerun: docs/BENCHMARKS.md.
+#include "flatland/design/design.hpp"
+#include "flatland/sim/format.hpp"
 #include "flatland/sim/hand_shapes.hpp"
 #include "flatland/sim/rolling.hpp"
 #include "flatland/sim/search.hpp"
@@ -17,6 +19,7 @@
 #include <string>
 
 namespace sim = flatland::sim;
+namespace design = flatland::design;
 
 namespace {
 
@@ -198,6 +201,23 @@ void Solve(benchmark::State& state, double rtol, double atol) {
   state.counters["k_err"] = benchmark::Counter(std::abs(report.k - reference_k()));
 }
 
+// `design`, objective 1 (the least friction at 2T), from the bundled scene's defaults: the
+// motion-only design (k alone, the paper's search) beside shape and motion, with their
+// evaluations and runs (docs/DESIGN.md).
+void DesignLeastFriction(benchmark::State& state, double period, bool shape_free) {
+  design::LeastFrictionOptions o;
+  o.period = period;
+  o.shape_free = shape_free;
+  design::LeastFrictionResult r;
+  for (auto _ : state) {
+    r = design::least_friction(sim::SimulationSpec{}, o);
+    benchmark::DoNotOptimize(r);
+  }
+  state.counters["evaluations"] = benchmark::Counter(static_cast<double>(r.iterates.size()));
+  state.counters["runs"] = benchmark::Counter(r.simulations);
+  state.counters["mu"] = benchmark::Counter(r.best.mu_required);
+}
+
 // s_h(T) on a 100 x 100 grid of (k, 2T) (paper Fig. 6) on all cores (target: <= 5 s wall).
 void Surface100(benchmark::State& state) {
   const sim::SimulationSpec spec = with_tolerance(1e-7, 1e-9);
@@ -365,6 +385,15 @@ void register_all() {
       ->Unit(benchmark::kMillisecond);
   benchmark::RegisterBenchmark("BM_Solve/rtol:1e-10", Solve, 1e-10, 1e-12)
       ->Unit(benchmark::kMillisecond);
+  for (const double period : {0.9, 1.181}) {
+    const std::string p = sim::format_number(period);
+    benchmark::RegisterBenchmark(("BM_Design/least_friction/motion_only/period:" + p).c_str(),
+                                 DesignLeastFriction, period, false)
+        ->Unit(benchmark::kMillisecond);
+    benchmark::RegisterBenchmark(("BM_Design/least_friction/shape_and_motion/period:" + p).c_str(),
+                                 DesignLeastFriction, period, true)
+        ->Unit(benchmark::kMillisecond);
+  }
   benchmark::RegisterBenchmark("BM_SpatialRhs", SpatialRhs)->Unit(benchmark::kMicrosecond);
   benchmark::RegisterBenchmark("BM_SpatialWeltner10s", SpatialWeltner10s)
       ->ArgNames({"method", "twist_deg"})

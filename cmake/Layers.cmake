@@ -7,8 +7,9 @@
 set(FLATLAND_LAYERS
   "files:"
   "sim:"
+  "design:sim"
   "scene:sim"
-  "api:scene,sim"
+  "api:scene,sim,design"
   "camera:"
   "render:scene,sim,camera"
   "model:render,scene,sim,camera,vision,control"
@@ -20,7 +21,7 @@ set(FLATLAND_LAYERS
   "studies:drivers,control,vision,render,calibration,model,scene,camera,sim,files"
   "cluster:sim")
 # Modules whose headers must not include flatland/scene, flatland/model or flatland/render.
-set(FLATLAND_BELOW_MODEL files sim camera vision calibration control identify cluster)
+set(FLATLAND_BELOW_MODEL files sim camera vision calibration control identify cluster design)
 # Modules that read the scene's sections but sit below the compiled Model: no flatland/model.
 set(FLATLAND_BELOW_MODEL_WITH_SCENE render api)
 

@@ -28,7 +28,7 @@ packages=(
   python3-venv python3-pip
   libmujoco-dev
   libopencv-dev libavutil-dev libavcodec-dev libavformat-dev libswscale-dev libosmesa6-dev mesa-common-dev libegl-dev libegl-mesa0 ffmpeg
-  libceres-dev libboost-dev
+  libceres-dev libboost-dev libnlopt-dev
   clang libclang-rt-14-dev
   openmpi-bin libopenmpi-dev python3-mpi4py
 )

@@ -3,9 +3,11 @@
 #include "flatland/sim/format.hpp"
 #include "flatland/sim/hybrid.hpp"
 #include "flatland/sim/object.hpp"
+#include "flatland/sim/sensitivity.hpp"
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace flatland::api {
 
@@ -128,6 +130,39 @@ Json solve_report_json(const sim::SolveReport& r) {
   j["simulations"] = r.simulations;
   j["rhs_evals"] = r.rhs_evals;
   j["energy"] = energy_json(r.run.audit);
+  return j;
+}
+
+Json design_iterate_json(const design::Iterate& it) {
+  Json j;
+  j["evaluation"] = it.evaluation;
+  for (std::size_t i = 0; i < it.parameters.size(); ++i)
+    j[std::string(sim::kButterflyParameters[i])] = number(it.parameters[i]);
+  j["mu_required"] = number(it.mu_required);
+  j["s_T"] = number(it.s_T);
+  j["fn_min_ratio"] = number(it.fn_min_ratio);
+  j["feasible"] = it.feasible;
+  return j;
+}
+
+Json design_json(const design::LeastFrictionResult& r, const sim::SimulationSpec& spec) {
+  Json j;
+  j["objective"] = "least-friction";
+  j["period"] = number(spec.motion.period);
+  j["start"] = design_iterate_json(r.start_point);
+  j["best"] = design_iterate_json(r.best);
+  j["improvement"] = number(r.best.feasible && r.start_point.feasible
+                                ? r.start_point.mu_required - r.best.mu_required
+                                : std::numeric_limits<double>::quiet_NaN());
+  j["active"] = r.active;
+  j["restored"] = r.restored;
+  j["restore_stop"] = r.restore_stop.empty() ? Json(nullptr) : Json(r.restore_stop);
+  j["stop"] = r.stop;
+  j["evaluations"] = r.iterates.size();
+  j["simulations"] = r.simulations;
+  Json iterates = Json::array();
+  for (const auto& it : r.iterates) iterates.push_back(design_iterate_json(it));
+  j["iterates"] = iterates;
   return j;
 }
 

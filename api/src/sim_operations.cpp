@@ -193,6 +193,60 @@ sim::SimulationSpec prepare_solve(Scene scene, const SolveRequest& r, Spelling s
   return spec;
 }
 
+sim::SimulationSpec prepare_design(Scene scene, const DesignRequest& r, Spelling spelling) {
+  const auto name = [spelling](std::string_view n) { return option_name(n, spelling); };
+  const std::string& objective = require_choice(
+      name("objective"), r.objective, {"least-friction", "shortest-period", "robustness"});
+  if (objective != "least-friction")
+    throw UsageError(name("objective") + ": '" + objective +
+                     "' is not built yet (docs/DESIGN.md, \"Not built yet\"); built: "
+                     "least-friction");
+  apply_integrator_overrides(r.integrator, scene, spelling);
+  sim::SimulationSpec& spec = scene.sim;
+  if (spec.motion.kind != sim::MotionSpec::Kind::kButterfly)
+    throw UsageError("motion.kind: design needs the butterfly motion (its k is designed)");
+  if (r.period) {
+    require_positive(name("period"), *r.period, "2T in s");
+    spec.motion.period = *r.period;
+  }
+  if (spec.hand.shape != sim::HandSpec::Shape::kPolynomial)
+    throw UsageError(std::string("hand.shape: design needs the polynomial hand (its a, b, c, d "
+                                 "are designed); the scene's is ") +
+                     sim::to_string(spec.hand.shape));
+  if (!(std::isfinite(r.shape_range) && r.shape_range > 0 && r.shape_range < 1))
+    throw UsageError(name("shape_range") +
+                     ": must be in (0, 1) (a fraction of each coefficient), "
+                     "got " +
+                     format_number(r.shape_range));
+  require_finite(name("fn_margin"), r.fn_margin);
+  if (r.fn_margin < 0)
+    throw UsageError(name("fn_margin") + ": must be >= 0 (of the weight), got " +
+                     format_number(r.fn_margin));
+  if (r.max_evaluations < 1 || r.max_evaluations > 100000)
+    throw UsageError(name("max_evaluations") + ": must be in [1, 100000], got " +
+                     std::to_string(r.max_evaluations));
+  if (!(std::isfinite(r.tolerance) && r.tolerance > 0 && r.tolerance < 1))
+    throw UsageError(name("tolerance") + ": must be in (0, 1) (relative), got " +
+                     format_number(r.tolerance));
+  std::vector<std::pair<std::string, std::string>> given;
+  if (r.period) given.emplace_back("motion.period", name("period"));
+  const auto problem = build_problem_checked(spec, given);
+  sim::require_palm_and_back(spec.hand, *problem->hand, "design");
+  return spec;
+}
+
+design::LeastFrictionResult design(const sim::SimulationSpec& spec, const DesignRequest& r,
+                                   const std::function<void(const design::Iterate&)>& progress) {
+  design::LeastFrictionOptions o;
+  o.period = spec.motion.period;
+  o.shape_free = !r.motion_only;
+  o.shape_range = r.shape_range;
+  o.fn_margin = r.fn_margin;
+  o.max_evaluations = r.max_evaluations;
+  o.tolerance = r.tolerance;
+  return design::least_friction(spec, o, progress);
+}
+
 sim::SolveReport solve(const sim::SimulationSpec& spec, const SolveRequest& r) {
   sim::SearchSettings settings;
   settings.tolerance = r.tolerance;

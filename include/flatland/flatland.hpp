@@ -15,12 +15,15 @@
 #include "flatland/sim/rolling.hpp"
 #include "flatland/sim/roots.hpp"
 #include "flatland/sim/search.hpp"
+#include "flatland/sim/sensitivity.hpp"
 #include "flatland/sim/simulate.hpp"
 #include "flatland/sim/spatial.hpp"
 #include "flatland/sim/spatial_run.hpp"
 #include "flatland/sim/spec.hpp"
 #include "flatland/sim/surface.hpp"
 #include "flatland/sim/trajectory_csv.hpp"
+
+#include "flatland/design/design.hpp"
 
 #include "flatland/scene/scene.hpp"
 

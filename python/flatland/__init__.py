@@ -3,9 +3,9 @@
 The package binds flatland's C++ library (the same code as the ``flatland`` command line):
 
 * ``load(path)`` compiles a scene into a :class:`Model`;
-* ``solve``, ``simulate``, ``time_optimal``, ``locus`` and ``surface`` run the simulator
-  (paper sections 3-4) and return what ``flatland COMMAND --json`` prints, with trajectories
-  as numpy arrays;
+* ``solve``, ``simulate``, ``time_optimal``, ``locus``, ``surface`` and ``design`` run the
+  simulator (paper sections 3-4; docs/DESIGN.md) and return what ``flatland COMMAND --json``
+  prints, with trajectories as numpy arrays;
 * :class:`Renderer` renders camera frames (H x W x 3 ``uint8`` BGR, OpenCV's convention) with
   their ground truth; :class:`Tracker` finds the disk in a frame; ``calibrate`` calibrates a
   camera from board images or corners;
@@ -47,7 +47,7 @@ from ._flatland import (ControlInput, ControllerContext, ControlOutput, Estimate
 
 __all__ = [
     "Model", "load", "default_scene_path", "solve", "simulate", "Simulation", "time_optimal",
-    "locus", "surface", "Renderer", "Tracker", "calibrate", "render_calibration", "experiment",
+    "design", "locus", "surface", "Renderer", "Tracker", "calibrate", "render_calibration", "experiment",
     "Experiment", "montecarlo", "study", "identify", "validate_world", "read_camera_file", "write_camera_file", "project",
     "Env", "Box", "success_reward", "Plan", "ControllerContext", "ControlInput", "ControlOutput", "JointReading",
     "Measurement", "Estimate", "HandInput", "UpdateReport", "EstimatorCounts",
@@ -241,6 +241,24 @@ def time_optimal(scene: SceneLike = None, *, mu: Optional[float] = None, from_: 
         _scene("scene", scene), _number("mu", mu, True), _number("from_", from_),
         _number("to", to), _number("period_tolerance", period_tolerance),
         _number("tolerance", tolerance),
+        *_integrator(method, rtol, atol, step, energy_tolerance, formulation))
+
+
+def design(scene: SceneLike = None, *, objective: str = "least-friction",
+           period: Optional[float] = None, motion_only: bool = False, shape_range: float = 0.25,
+           fn_margin: float = 0.05, max_evaluations: int = 100, tolerance: float = 1e-7,
+           method: Optional[str] = None, rtol: Optional[float] = None,
+           atol: Optional[float] = None, step: Optional[float] = None,
+           energy_tolerance: Optional[float] = None,
+           formulation: Optional[str] = None) -> Dict[str, Any]:
+    """The hand's shape (a, b, c, d) and the butterfly's k designed together for the least
+    friction at the period 2T (docs/DESIGN.md); ``motion_only`` holds the scene's hand. The keys
+    of ``flatland design --json``: start, best, active (what binds), stop, iterates, ..."""
+    return _flatland.design(
+        _scene("scene", scene), _text("objective", objective), _number("period", period, True),
+        _flag("motion_only", motion_only), _number("shape_range", shape_range),
+        _number("fn_margin", fn_margin),
+        _integer("max_evaluations", max_evaluations, 1, 100000), _number("tolerance", tolerance),
         *_integrator(method, rtol, atol, step, energy_tolerance, formulation))
 
 

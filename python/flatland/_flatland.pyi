@@ -34,6 +34,11 @@ def time_optimal(scene: SceneArg, mu: Optional[float], from_: float, to: float,
                  period_tolerance: float, tolerance: float, method: Optional[str],
                  rtol: Optional[float], atol: Optional[float], step: Optional[float],
                  energy_tolerance: Optional[float], formulation: Optional[str]) -> Dict[str, Any]: ...
+def design(scene: SceneArg, objective: str, period: Optional[float], motion_only: bool,
+           shape_range: float, fn_margin: float, max_evaluations: int, tolerance: float,
+           method: Optional[str], rtol: Optional[float], atol: Optional[float],
+           step: Optional[float], energy_tolerance: Optional[float],
+           formulation: Optional[str]) -> Dict[str, Any]: ...
 def locus(scene: SceneArg, from_: float, to: float, n: int, mu: Optional[float],
           tolerance: float, method: Optional[str], rtol: Optional[float], atol: Optional[float],
           step: Optional[float], energy_tolerance: Optional[float],

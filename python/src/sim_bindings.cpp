@@ -1,4 +1,5 @@
-// flatland.load and the simulator's operations: solve, simulate, time_optimal, locus, surface.
+// flatland.load and the simulator's operations: solve, simulate, time_optimal, locus, surface,
+// design.
 // The options are checked by flatland::api as the CLI's are, with messages naming the keyword.
 #include "convert.hpp"
 
@@ -142,6 +143,28 @@ py::dict time_optimal_binding(const py::object& scene, std::optional<double> mu,
   return to_python(api::time_optimal_json(r, spec));
 }
 
+py::dict design_binding(const py::object& scene, const std::string& objective,
+                        std::optional<double> period, bool motion_only, double shape_range,
+                        double fn_margin, int max_evaluations, double tolerance,
+                        const std::optional<std::string>& method, std::optional<double> rtol,
+                        std::optional<double> atol, std::optional<double> step,
+                        std::optional<double> energy_tolerance,
+                        const std::optional<std::string>& formulation) {
+  api::DesignRequest request;
+  request.integrator = integrator(method, rtol, atol, step, energy_tolerance, formulation);
+  request.objective = objective;
+  request.period = period;
+  request.motion_only = motion_only;
+  request.shape_range = shape_range;
+  request.fn_margin = fn_margin;
+  request.max_evaluations = max_evaluations;
+  request.tolerance = tolerance;
+  const sim::SimulationSpec spec = api::prepare_design(scene_argument(scene), request, kPy);
+  const design::LeastFrictionResult r =
+      run_interruptible([&] { return api::design(spec, request); });
+  return to_python(api::design_json(r, spec));
+}
+
 py::dict locus_binding(const py::object& scene, double from, double to, int n,
                        std::optional<double> mu, double tolerance,
                        const std::optional<std::string>& method, std::optional<double> rtol,
@@ -244,6 +267,9 @@ void bind_sim(py::module_& m) {
   m.def("time_optimal", &time_optimal_binding, "scene"_a, "mu"_a, "from_"_a, "to"_a,
         "period_tolerance"_a, "tolerance"_a, "method"_a, "rtol"_a, "atol"_a, "step"_a,
         "energy_tolerance"_a, "formulation"_a);
+  m.def("design", &design_binding, "scene"_a, "objective"_a, "period"_a, "motion_only"_a,
+        "shape_range"_a, "fn_margin"_a, "max_evaluations"_a, "tolerance"_a, "method"_a, "rtol"_a,
+        "atol"_a, "step"_a, "energy_tolerance"_a, "formulation"_a);
   m.def("locus", &locus_binding, "scene"_a, "from_"_a, "to"_a, "n"_a, "mu"_a, "tolerance"_a,
         "method"_a, "rtol"_a, "atol"_a, "step"_a, "energy_tolerance"_a, "formulation"_a);
   m.def("surface", &surface_binding, "scene"_a, "k_from"_a, "k_to"_a, "nk"_a, "period_from"_a,

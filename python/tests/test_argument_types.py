@@ -84,6 +84,10 @@ PUBLIC = {
     "time_optimal": (lambda: flatland.time_optimal, {}, {
         "scene": "scene", "mu": "optional_number", "from_": "number", "to": "number",
         "period_tolerance": "number", "tolerance": "number", **INTEGRATOR}),
+    "design": (lambda: flatland.design, {}, {
+        "scene": "scene", "objective": "text", "period": "optional_number", "motion_only": "flag",
+        "shape_range": "number", "fn_margin": "number", "max_evaluations": "integer",
+        "tolerance": "number", **INTEGRATOR}),
     "locus": (lambda: flatland.locus, {}, {
         "scene": "scene", "from_": "number", "to": "number", "n": "integer",
         "mu": "optional_number", "tolerance": "number", **INTEGRATOR}),
@@ -141,7 +145,7 @@ PUBLIC = {
 CALLABLES = {
     "load": flatland.load, "solve": flatland.solve, "simulate": flatland.simulate,
     "time_optimal": flatland.time_optimal, "locus": flatland.locus, "surface": flatland.surface,
-    "Renderer": flatland.Renderer.__init__, "Renderer.render": flatland.Renderer.render,
+    "design": flatland.design, "Renderer": flatland.Renderer.__init__, "Renderer.render": flatland.Renderer.render,
     "Tracker": flatland.Tracker.__init__, "Tracker.track": flatland.Tracker.track,
     "calibrate": flatland.calibrate, "render_calibration": flatland.render_calibration,
     "experiment": flatland.experiment, "montecarlo": flatland.montecarlo,

@@ -102,6 +102,17 @@ def test_time_optimal_equals_the_cli(cli):
     same(flatland.time_optimal(from_=1.0, to=1.3), expected)
 
 
+def test_design_equals_the_cli_and_its_motion_only_design_is_the_solution(cli):
+    expected = cli_json("design", "--motion-only")
+    del expected["files"]
+    got = flatland.design(motion_only=True)
+    same(got, expected)
+    solved = flatland.solve()
+    assert got["best"]["feasible"]
+    assert abs(got["best"]["k"] - solved["k"]) < 1e-6
+    assert abs(got["best"]["mu_required"] - solved["mu_required"]) < 1e-6
+
+
 def test_locus_equals_the_cli_and_gives_arrays(cli):
     expected = cli_json("locus", "--n", "3", "--from", "1.1", "--to", "1.5")
     got = flatland.locus(n=3, from_=1.1, to=1.5)

@@ -94,6 +94,7 @@ using CliSolve = CliFixture;
 using CliLocus = CliFixture;
 using CliSurface = CliFixture;
 using CliTimeOptimal = CliFixture;
+using CliDesign = CliFixture;
 using CliBadInput = CliFixture;
 using CliRuntimeFailure = CliFixture;
 
@@ -108,7 +109,7 @@ const char* const kTrajectoryHeader =
 TEST_F(CliHelp, TopLevelListsCommandsAndUnits) {
   const Result r = run("--help");
   EXPECT_EQ(r.code, 0);
-  for (const char* cmd : {"simulate", "solve", "locus", "surface", "time-optimal"})
+  for (const char* cmd : {"simulate", "solve", "locus", "surface", "time-optimal", "design"})
     EXPECT_NE(r.out.find(cmd), std::string::npos) << cmd;
   EXPECT_NE(r.out.find("lengths in m"), std::string::npos);
   EXPECT_NE(r.out.find("times in s"), std::string::npos);
@@ -116,7 +117,7 @@ TEST_F(CliHelp, TopLevelListsCommandsAndUnits) {
 }
 
 TEST_F(CliHelp, EveryCommandExplainsUnitsAndDefaults) {
-  for (const char* cmd : {"simulate", "solve", "locus", "surface", "time-optimal"}) {
+  for (const char* cmd : {"simulate", "solve", "locus", "surface", "time-optimal", "design"}) {
     const Result r = run(std::string(cmd) + " --help");
     EXPECT_EQ(r.code, 0) << cmd;
     EXPECT_NE(r.out.find("2T"), std::string::npos) << cmd;
@@ -409,8 +410,50 @@ TEST_F(CliTimeOptimal, MatchesPaper) {
   EXPECT_NEAR(j["fn_min_ratio"].get<double>(), 0.0, 1e-4);
 }
 
+// ---- design (docs/DESIGN.md) ------------------------------------------------------------------
+
+// The motion-only design is `solve`'s solution (k alone, fixed by s_h(T) = 0); with the shape
+// free, the design needs less friction, and its files hold the best design's own run and every
+// evaluation.
+TEST_F(CliDesign, MotionOnlyIsSolvesSolutionAndTheShapeNeedsLessFriction) {
+  const Result solve = run("solve --json");
+  ASSERT_EQ(solve.code, 0) << solve.err;
+  const json solved = parse_json(solve);
+  const Result motion = run("design --motion-only --json");
+  ASSERT_EQ(motion.code, 0) << motion.err;
+  const json m = parse_json(motion);
+  expect_keys(m,
+              {"objective", "period", "start", "best", "improvement", "active", "restored",
+               "restore_stop", "stop", "evaluations", "simulations", "iterates", "files"},
+              {});
+  EXPECT_TRUE(m["best"]["feasible"].get<bool>());
+  EXPECT_NEAR(m["best"]["k"].get<double>(), solved["k"].get<double>(), 1e-6);
+  EXPECT_NEAR(m["best"]["mu_required"].get<double>(), solved["mu_required"].get<double>(), 1e-6);
+  EXPECT_EQ(m["iterates"].size(), m["evaluations"].get<std::size_t>());
+
+  const Result both = run("design --json --no-plot --out best");
+  ASSERT_EQ(both.code, 0) << both.err;
+  const json d = parse_json(both);
+  EXPECT_TRUE(d["best"]["feasible"].get<bool>());
+  EXPECT_LT(d["best"]["mu_required"].get<double>(), m["best"]["mu_required"].get<double>());
+  EXPECT_GT(d["improvement"].get<double>(), 0.0);
+  // Each evaluation's line on stderr (progress), none on stdout but the JSON.
+  EXPECT_GE(lines_of(both.err).size(), d["evaluations"].get<std::size_t>());
+  EXPECT_EQ(read_text(dir_ / "best" / "trajectory.csv").rfind(kTrajectoryHeader, 0), 0u);
+  const auto rows = lines_of(read_text(dir_ / "best" / "iterates.csv"));
+  EXPECT_EQ(rows.size(), d["evaluations"].get<std::size_t>() + 1);  // and the header
+}
+
 // ---- bad input: exit 2, one line, no files
 // -------------------------------------------------------
+
+TEST_F(CliBadInput, DesignOptions) {
+  expect_bad_input("design --objective robustness --out out", "--objective", "out");
+  expect_bad_input("design --shape-range 1 --out out", "--shape-range", "out");
+  expect_bad_input("design --fn-margin -0.1 --out out", "--fn-margin", "out");
+  expect_bad_input("design --period 0 --out out", "--period", "out");
+  expect_bad_input("design --max-evaluations 0 --out out", "--max-evaluations", "out");
+}
 
 TEST_F(CliBadInput, MissingSceneFile) {
   expect_bad_input("solve --scene no-such-scene.yaml --out out", "no-such-scene.yaml", "out");

@@ -3,6 +3,7 @@
 // not finite is null (JSON has no inf or NaN).
 #pragma once
 
+#include "flatland/design/design.hpp"
 #include "flatland/sim/hybrid.hpp"
 #include "flatland/sim/search.hpp"
 #include "flatland/sim/simulate.hpp"
@@ -38,6 +39,12 @@ Json energy_json(const sim::EnergyAudit& audit);
 /// The one line that says where and by how much a broken energy balance broke.
 std::string energy_failure_text(const sim::EnergyAudit& audit);
 Json solve_report_json(const sim::SolveReport& r);
+/// `design --json`: the start, the best design, what binds there, every evaluation and why the
+/// search stopped.
+Json design_json(const design::LeastFrictionResult& r, const sim::SimulationSpec& spec);
+/// One evaluation of a design (its parameters by name, the objective and the constraints).
+Json design_iterate_json(const design::Iterate& it);
+
 /// `time-optimal --json` without its files.
 Json time_optimal_json(const sim::TimeOptimalReport& r, const sim::SimulationSpec& spec);
 

@@ -5,11 +5,13 @@
 // the command line, `sample_dt` in Python; the reason is the same text.
 #pragma once
 
+#include "flatland/design/design.hpp"
 #include "flatland/scene/scene.hpp"
 #include "flatland/sim/search.hpp"
 #include "flatland/sim/simulate.hpp"
 #include "flatland/sim/spatial_spec.hpp"
 
+#include <functional>
 #include <memory>
 #include <optional>
 #include <stdexcept>
@@ -126,6 +128,25 @@ sim::SimulationSpec prepare_time_optimal(Scene scene, const TimeOptimalRequest& 
                                          Spelling spelling);
 sim::TimeOptimalReport time_optimal(const sim::SimulationSpec& spec,
                                     const TimeOptimalRequest& request);
+
+/// `design`: the hand's shape and the butterfly's motion designed together (docs/DESIGN.md).
+/// Objective 1, least-friction, is built; shortest-period and robustness are refused, saying so.
+struct DesignRequest {
+  IntegratorOverrides integrator;
+  std::string objective = "least-friction";
+  std::optional<double> period;  ///< 2T, s; default: the scene's motion.period
+  bool motion_only = false;      ///< the scene's hand held, k alone free
+  double shape_range = 0.25;
+  double fn_margin = 0.05;
+  int max_evaluations = 100;
+  double tolerance = 1e-7;
+};
+/// The scene with the request checked (a polynomial hand and the butterfly motion, options in
+/// range; UsageError naming the option).
+sim::SimulationSpec prepare_design(Scene scene, const DesignRequest& request, Spelling spelling);
+design::LeastFrictionResult design(
+    const sim::SimulationSpec& spec, const DesignRequest& request,
+    const std::function<void(const design::Iterate&)>& progress = {});
 
 /// `locus`: the butterfly solutions k(2T) at n periods evenly spaced over [from, to] (Fig. 7).
 struct LocusRequest {
