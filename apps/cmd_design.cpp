@@ -5,6 +5,7 @@
 #include "flatland/sim/format.hpp"
 #include "flatland/sim/sensitivity.hpp"
 
+#include <cmath>
 #include <iostream>
 #include <memory>
 #include <sstream>
@@ -18,6 +19,7 @@ struct DesignOptions {
   api::DesignRequest request;
   double period = 0;
   CLI::Option* period_opt = nullptr;
+  MuOption mu;
 };
 
 std::string iterate_line(const design::Iterate& it) {
@@ -25,13 +27,14 @@ std::string iterate_line(const design::Iterate& it) {
   s << "  " << it.evaluation << ":";
   for (std::size_t i = 0; i < it.parameters.size(); ++i)
     s << " " << sim::kButterflyParameters[i] << " " << sim::format_significant(it.parameters[i], 6);
-  s << " | mu " << sim::format_significant(it.mu_required, 6) << ", s_h(T) "
-    << sim::format_significant(it.s_T, 3) << ", min f_n/mg "
+  s << " | mu " << sim::format_significant(it.mu_required, 6);
+  if (!std::isnan(it.robustness)) s << ", robustness " << sim::format_significant(it.robustness, 6);
+  s << ", s_h(T) " << sim::format_significant(it.s_T, 3) << ", min f_n/mg "
     << sim::format_significant(it.fn_min_ratio, 4) << (it.feasible ? "" : " (infeasible)");
   return s.str();
 }
 
-std::string iterates_csv(const design::LeastFrictionResult& r) {
+std::string iterates_csv(const design::DesignResult& r) {
   std::ostringstream s;
   s << "evaluation";
   for (auto name : sim::kButterflyParameters) s << "," << name;
@@ -49,16 +52,21 @@ void run_design(const DesignOptions& o) {
   api::DesignRequest request = o.request;
   request.integrator = integrator_overrides(o.common);
   if (o.period_opt->count()) request.period = o.period;
+  if (o.mu.opt->count()) request.mu = o.mu.value;
   const Scene scene = load_scene_option(o.common);
   const sim::SimulationSpec spec = api::prepare_design(scene, request, api::Spelling::kCommandLine);
   const fs::path dir = o.common.out;
   if (!dir.empty()) check_output_directory("--out", dir, o.common.force);
   if (!dir.empty() && !o.common.no_plot) require_gnuplot();
 
+  const bool robustness = request.objective == "robustness";
+  const std::string goal =
+      robustness ? "the largest robustness margin at mu = " + format_number(*spec.contact.mu)
+                 : std::string("the least friction");
   std::cerr << "flatland: designing " << (request.motion_only ? "the motion" : "shape and motion")
-            << " for the least friction at 2T = " << format_number(spec.motion.period) << " s ("
+            << " for " << goal << " at 2T = " << format_number(spec.motion.period) << " s ("
             << scene.origin << ")\n";
-  const design::LeastFrictionResult r = api::design(
+  const design::DesignResult r = api::design(
       spec, request, [](const design::Iterate& it) { std::cerr << iterate_line(it) << "\n"; });
 
   OutputSet outputs(o.common.force);
@@ -76,7 +84,7 @@ void run_design(const DesignOptions& o) {
     emit_json(j);
     return;
   }
-  std::cout << "flatland design: least friction at 2T = " << format_number(spec.motion.period)
+  std::cout << "flatland design: " << goal << " at 2T = " << format_number(spec.motion.period)
             << " s, " << (request.motion_only ? "motion only" : "shape and motion") << " ("
             << scene.origin << ")\n"
             << "  start (k solved)  " << iterate_line(r.start_point) << "\n"
@@ -103,8 +111,13 @@ Command add_design_command(CLI::App& app) {
                      true);
   cmd->add_option("--objective", o->request.objective,
                   "What to optimise: least-friction (the least mu a butterfly of the period "
-                  "needs). shortest-period and robustness are not built yet. Default: "
+                  "needs, keeping --fn-margin) or robustness (the largest margin, over the "
+                  "motion until T, of (mu f_n - |f_t|) and f_n per in-plane weight m g "
+                  "sin(tilt), at --mu). shortest-period is not built yet. Default: "
                   "least-friction");
+  add_mu_option(*cmd, o->mu,
+                "Static friction coefficient (> 0) for --objective robustness. Default: the "
+                "scene's contact.mu");
   o->period_opt = cmd->add_option("--period", o->period,
                                   "Butterfly duration 2T, s (> 0), held. Default: the scene's "
                                   "motion.period (paper: 1.181 s)");
@@ -114,8 +127,8 @@ Command add_design_command(CLI::App& app) {
                   "Each of a, b, c, d stays within this fraction of the scene's value, in (0, 1). "
                   "Default: 0.25");
   cmd->add_option("--fn-margin", o->request.fn_margin,
-                  "Keep the normal force >= this fraction of the in-plane weight m g sin(tilt) "
-                  "until T (>= 0). Default: 0.05");
+                  "least-friction: keep the normal force >= this fraction of the in-plane weight "
+                  "m g sin(tilt) until T (>= 0). Default: 0.05");
   cmd->add_option("--max-evaluations", o->request.max_evaluations,
                   "Most evaluations of each search (each one run set with sensitivities), in "
                   "[1, 100000]. Default: 100");

@@ -141,19 +141,24 @@ Json design_iterate_json(const design::Iterate& it) {
   j["mu_required"] = number(it.mu_required);
   j["s_T"] = number(it.s_T);
   j["fn_min_ratio"] = number(it.fn_min_ratio);
+  j["robustness"] = number(it.robustness);
   j["feasible"] = it.feasible;
   return j;
 }
 
-Json design_json(const design::LeastFrictionResult& r, const sim::SimulationSpec& spec) {
+Json design_json(const design::DesignResult& r, const sim::SimulationSpec& spec) {
   Json j;
-  j["objective"] = "least-friction";
+  j["objective"] = design::to_string(r.objective);
   j["period"] = number(spec.motion.period);
+  j["mu"] = r.objective == design::Objective::kRobustness ? number(r.mu) : Json(nullptr);
   j["start"] = design_iterate_json(r.start_point);
   j["best"] = design_iterate_json(r.best);
-  j["improvement"] = number(r.best.feasible && r.start_point.feasible
-                                ? r.start_point.mu_required - r.best.mu_required
-                                : std::numeric_limits<double>::quiet_NaN());
+  // How much better the best design is than the start: mu needed less, or robustness more.
+  const bool robustness = r.objective == design::Objective::kRobustness;
+  j["improvement"] =
+      number(!(r.best.feasible && r.start_point.feasible) ? std::numeric_limits<double>::quiet_NaN()
+             : robustness ? r.best.robustness - r.start_point.robustness
+                          : r.start_point.mu_required - r.best.mu_required);
   j["active"] = r.active;
   j["restored"] = r.restored;
   j["restore_stop"] = r.restore_stop.empty() ? Json(nullptr) : Json(r.restore_stop);

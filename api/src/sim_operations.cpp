@@ -197,10 +197,10 @@ sim::SimulationSpec prepare_design(Scene scene, const DesignRequest& r, Spelling
   const auto name = [spelling](std::string_view n) { return option_name(n, spelling); };
   const std::string& objective = require_choice(
       name("objective"), r.objective, {"least-friction", "shortest-period", "robustness"});
-  if (objective != "least-friction")
+  if (objective == "shortest-period")
     throw UsageError(name("objective") + ": '" + objective +
                      "' is not built yet (docs/DESIGN.md, \"Not built yet\"); built: "
-                     "least-friction");
+                     "least-friction, robustness");
   apply_integrator_overrides(r.integrator, scene, spelling);
   sim::SimulationSpec& spec = scene.sim;
   if (spec.motion.kind != sim::MotionSpec::Kind::kButterfly)
@@ -209,6 +209,22 @@ sim::SimulationSpec prepare_design(Scene scene, const DesignRequest& r, Spelling
     require_positive(name("period"), *r.period, "2T in s");
     spec.motion.period = *r.period;
   }
+  if (r.mu) {
+    if (objective != "robustness")
+      throw UsageError(name("mu") +
+                       ": only the robustness objective takes a friction coefficient "
+                       "(least-friction finds the least one)");
+    apply_mu(*r.mu, spec, spelling);
+  }
+  if (objective == "robustness" && !spec.contact.mu)
+    throw UsageError(name("mu") +
+                     ": the robustness objective needs a friction coefficient (or "
+                     "the scene's contact.mu)");
+  if (objective == "robustness" && !(*spec.contact.mu > 0))
+    throw UsageError(name("mu") +
+                     ": the robustness objective needs a positive friction "
+                     "coefficient, got " +
+                     format_number(*spec.contact.mu));
   if (spec.hand.shape != sim::HandSpec::Shape::kPolynomial)
     throw UsageError(std::string("hand.shape: design needs the polynomial hand (its a, b, c, d "
                                  "are designed); the scene's is ") +
@@ -235,16 +251,19 @@ sim::SimulationSpec prepare_design(Scene scene, const DesignRequest& r, Spelling
   return spec;
 }
 
-design::LeastFrictionResult design(const sim::SimulationSpec& spec, const DesignRequest& r,
-                                   const std::function<void(const design::Iterate&)>& progress) {
-  design::LeastFrictionOptions o;
+design::DesignResult design(const sim::SimulationSpec& spec, const DesignRequest& r,
+                            const std::function<void(const design::Iterate&)>& progress) {
+  design::DesignOptions o;
+  o.objective = r.objective == "robustness" ? design::Objective::kRobustness
+                                            : design::Objective::kLeastFriction;
+  if (o.objective == design::Objective::kRobustness) o.mu = *spec.contact.mu;
   o.period = spec.motion.period;
   o.shape_free = !r.motion_only;
   o.shape_range = r.shape_range;
   o.fn_margin = r.fn_margin;
   o.max_evaluations = r.max_evaluations;
   o.tolerance = r.tolerance;
-  return design::least_friction(spec, o, progress);
+  return design::optimise(spec, o, progress);
 }
 
 sim::SolveReport solve(const sim::SimulationSpec& spec, const SolveRequest& r) {

@@ -245,17 +245,21 @@ def time_optimal(scene: SceneLike = None, *, mu: Optional[float] = None, from_: 
 
 
 def design(scene: SceneLike = None, *, objective: str = "least-friction",
-           period: Optional[float] = None, motion_only: bool = False, shape_range: float = 0.25,
+           period: Optional[float] = None, mu: Optional[float] = None,
+           motion_only: bool = False, shape_range: float = 0.25,
            fn_margin: float = 0.05, max_evaluations: int = 100, tolerance: float = 1e-7,
            method: Optional[str] = None, rtol: Optional[float] = None,
            atol: Optional[float] = None, step: Optional[float] = None,
            energy_tolerance: Optional[float] = None,
            formulation: Optional[str] = None) -> Dict[str, Any]:
-    """The hand's shape (a, b, c, d) and the butterfly's k designed together for the least
-    friction at the period 2T (docs/DESIGN.md); ``motion_only`` holds the scene's hand. The keys
-    of ``flatland design --json``: start, best, active (what binds), stop, iterates, ..."""
+    """The hand's shape (a, b, c, d) and the butterfly's k designed together at the period 2T
+    (docs/DESIGN.md): ``objective`` "least-friction" (the least mu it needs) or "robustness" (the
+    largest margin of mu f_n - |f_t| and f_n at ``mu``, default the scene's contact.mu);
+    ``motion_only`` holds the scene's hand. The keys of ``flatland design --json``: start, best,
+    active (what binds), stop, iterates, ..."""
     return _flatland.design(
         _scene("scene", scene), _text("objective", objective), _number("period", period, True),
+        _number("mu", mu, True),
         _flag("motion_only", motion_only), _number("shape_range", shape_range),
         _number("fn_margin", fn_margin),
         _integer("max_evaluations", max_evaluations, 1, 100000), _number("tolerance", tolerance),

@@ -144,8 +144,8 @@ py::dict time_optimal_binding(const py::object& scene, std::optional<double> mu,
 }
 
 py::dict design_binding(const py::object& scene, const std::string& objective,
-                        std::optional<double> period, bool motion_only, double shape_range,
-                        double fn_margin, int max_evaluations, double tolerance,
+                        std::optional<double> period, std::optional<double> mu, bool motion_only,
+                        double shape_range, double fn_margin, int max_evaluations, double tolerance,
                         const std::optional<std::string>& method, std::optional<double> rtol,
                         std::optional<double> atol, std::optional<double> step,
                         std::optional<double> energy_tolerance,
@@ -154,14 +154,14 @@ py::dict design_binding(const py::object& scene, const std::string& objective,
   request.integrator = integrator(method, rtol, atol, step, energy_tolerance, formulation);
   request.objective = objective;
   request.period = period;
+  request.mu = mu;
   request.motion_only = motion_only;
   request.shape_range = shape_range;
   request.fn_margin = fn_margin;
   request.max_evaluations = max_evaluations;
   request.tolerance = tolerance;
   const sim::SimulationSpec spec = api::prepare_design(scene_argument(scene), request, kPy);
-  const design::LeastFrictionResult r =
-      run_interruptible([&] { return api::design(spec, request); });
+  const design::DesignResult r = run_interruptible([&] { return api::design(spec, request); });
   return to_python(api::design_json(r, spec));
 }
 
@@ -267,7 +267,7 @@ void bind_sim(py::module_& m) {
   m.def("time_optimal", &time_optimal_binding, "scene"_a, "mu"_a, "from_"_a, "to"_a,
         "period_tolerance"_a, "tolerance"_a, "method"_a, "rtol"_a, "atol"_a, "step"_a,
         "energy_tolerance"_a, "formulation"_a);
-  m.def("design", &design_binding, "scene"_a, "objective"_a, "period"_a, "motion_only"_a,
+  m.def("design", &design_binding, "scene"_a, "objective"_a, "period"_a, "mu"_a, "motion_only"_a,
         "shape_range"_a, "fn_margin"_a, "max_evaluations"_a, "tolerance"_a, "method"_a, "rtol"_a,
         "atol"_a, "step"_a, "energy_tolerance"_a, "formulation"_a);
   m.def("locus", &locus_binding, "scene"_a, "from_"_a, "to"_a, "n"_a, "mu"_a, "tolerance"_a,

@@ -85,7 +85,8 @@ PUBLIC = {
         "scene": "scene", "mu": "optional_number", "from_": "number", "to": "number",
         "period_tolerance": "number", "tolerance": "number", **INTEGRATOR}),
     "design": (lambda: flatland.design, {}, {
-        "scene": "scene", "objective": "text", "period": "optional_number", "motion_only": "flag",
+        "scene": "scene", "objective": "text", "period": "optional_number",
+        "mu": "optional_number", "motion_only": "flag",
         "shape_range": "number", "fn_margin": "number", "max_evaluations": "integer",
         "tolerance": "number", **INTEGRATOR}),
     "locus": (lambda: flatland.locus, {}, {

@@ -423,7 +423,7 @@ TEST_F(CliDesign, MotionOnlyIsSolvesSolutionAndTheShapeNeedsLessFriction) {
   ASSERT_EQ(motion.code, 0) << motion.err;
   const json m = parse_json(motion);
   expect_keys(m,
-              {"objective", "period", "start", "best", "improvement", "active", "restored",
+              {"objective", "period", "mu", "start", "best", "improvement", "active", "restored",
                "restore_stop", "stop", "evaluations", "simulations", "iterates", "files"},
               {});
   EXPECT_TRUE(m["best"]["feasible"].get<bool>());
@@ -444,11 +444,28 @@ TEST_F(CliDesign, MotionOnlyIsSolvesSolutionAndTheShapeNeedsLessFriction) {
   EXPECT_EQ(rows.size(), d["evaluations"].get<std::size_t>() + 1);  // and the header
 }
 
+// The robustness objective at the paper's mu: the margin grows from the paper's (almost none: its
+// 1.181 s butterfly needs mu = 0.303) by the improvement reported.
+TEST_F(CliDesign, RobustnessGrowsTheMargin) {
+  const Result r = run("design --objective robustness --mu 0.306 --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const json j = parse_json(r);
+  EXPECT_EQ(j["objective"].get<std::string>(), "robustness");
+  EXPECT_DOUBLE_EQ(j["mu"].get<double>(), 0.306);
+  const double start = j["start"]["robustness"].get<double>();
+  const double best = j["best"]["robustness"].get<double>();
+  EXPECT_LT(start, 0.01);
+  EXPECT_GT(best, start + 0.1);
+  EXPECT_NEAR(j["improvement"].get<double>(), best - start, 1e-12);
+}
+
 // ---- bad input: exit 2, one line, no files
 // -------------------------------------------------------
 
 TEST_F(CliBadInput, DesignOptions) {
-  expect_bad_input("design --objective robustness --out out", "--objective", "out");
+  expect_bad_input("design --objective shortest-period --out out", "--objective", "out");
+  expect_bad_input("design --objective robustness --mu 0 --out out", "--mu", "out");
+  expect_bad_input("design --mu 0.5 --out out", "--mu", "out");  // least-friction finds mu
   expect_bad_input("design --shape-range 1 --out out", "--shape-range", "out");
   expect_bad_input("design --fn-margin -0.1 --out out", "--fn-margin", "out");
   expect_bad_input("design --period 0 --out out", "--period", "out");

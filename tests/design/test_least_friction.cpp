@@ -32,10 +32,10 @@ sim::SimulationSpec spec_of(const design::Parameters& p) {
 // With the hand held, the only free variable is k and s_h(T) = 0 fixes it: the design is the
 // paper's solution for 2T = 1.181 s, the one `solve` finds, and needs the friction it reports.
 TEST(LeastFriction, WithTheShapeHeldIsThePapersSolution) {
-  design::LeastFrictionOptions o;
+  design::DesignOptions o;
   o.period = 1.181;
   o.shape_free = false;
-  const design::LeastFrictionResult r = design::least_friction(papers_spec(), o);
+  const design::DesignResult r = design::optimise(papers_spec(), o);
   const sim::SolveReport paper = sim::solve_k(papers_spec(), 1.181);
   ASSERT_TRUE(r.best.feasible) << r.stop;
   EXPECT_NEAR(r.best.parameters[4], paper.k, 1e-6) << r.stop;
@@ -47,11 +47,11 @@ TEST(LeastFriction, WithTheShapeHeldIsThePapersSolution) {
 // With the shape free the friction needed falls, and the design, run on its own through the
 // searches' evaluation (a recorded, audited run), is a solution that needs what it says.
 TEST(LeastFriction, WithTheShapeFreeNeedsLessFrictionAndIsASolution) {
-  design::LeastFrictionOptions o;
+  design::DesignOptions o;
   o.period = 1.181;
   int progress_calls = 0;
-  const design::LeastFrictionResult r =
-      design::least_friction(papers_spec(), o, [&](const design::Iterate&) { ++progress_calls; });
+  const design::DesignResult r =
+      design::optimise(papers_spec(), o, [&](const design::Iterate&) { ++progress_calls; });
   std::fprintf(stderr, "[ design ] %s after %zu evaluations, %d runs: mu %.6f -> %.6f\n",
                r.stop.c_str(), r.iterates.size(), r.simulations, r.start_point.mu_required,
                r.best.mu_required);
@@ -73,9 +73,9 @@ TEST(LeastFriction, WithTheShapeFreeNeedsLessFrictionAndIsASolution) {
 // the back without a slip or a flight over the whole 2T (the design constrained [0, T] and
 // relied on the symmetry for the rest); the paper's butterfly, in the same world, slips.
 TEST(LeastFriction, TheDesignRollsWithoutSlippingInTheHybridWorldWhereThePapersSlips) {
-  design::LeastFrictionOptions o;
+  design::DesignOptions o;
   o.period = 1.181;
-  const design::LeastFrictionResult r = design::least_friction(papers_spec(), o);
+  const design::DesignResult r = design::optimise(papers_spec(), o);
   ASSERT_TRUE(r.best.feasible) << r.stop;
   const double mu = 0.15;
   ASSERT_LT(r.best.mu_required, mu);
@@ -99,9 +99,9 @@ TEST(LeastFriction, TheDesignRollsWithoutSlippingInTheHybridWorldWhereThePapersS
 // paper's fastest is 1.095 s). With the shape free, the margin is restored first, and the design
 // is a solution that keeps contact, checked by a run of its own.
 TEST(LeastFriction, WithTheShapeFreeIsFasterThanThePapersHandCanBe) {
-  design::LeastFrictionOptions o;
+  design::DesignOptions o;
   o.period = 0.9;
-  const design::LeastFrictionResult r = design::least_friction(papers_spec(), o);
+  const design::DesignResult r = design::optimise(papers_spec(), o);
   EXPECT_LT(r.start_point.fn_min_ratio, 0.0) << "the paper's hand loses contact at 0.9 s";
   EXPECT_FALSE(r.start_point.feasible);
   EXPECT_TRUE(r.restored) << r.restore_stop;
@@ -116,19 +116,19 @@ TEST(LeastFriction, WithTheShapeFreeIsFasterThanThePapersHandCanBe) {
 }
 
 TEST(LeastFriction, RefusesBadOptionsWithOneLine) {
-  const auto refused = [](design::LeastFrictionOptions o, sim::SimulationSpec s, const char* what) {
+  const auto refused = [](design::DesignOptions o, sim::SimulationSpec s, const char* what) {
     try {
-      design::least_friction(s, o);
+      design::optimise(s, o);
       ADD_FAILURE() << "accepted; expected a refusal naming " << what;
     } catch (const std::invalid_argument& e) {
       EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
       EXPECT_EQ(std::string(e.what()).find('\n'), std::string::npos) << e.what();
     }
   };
-  design::LeastFrictionOptions ok;
+  design::DesignOptions ok;
   ok.period = 1.181;
   auto with = [&](auto change) {
-    design::LeastFrictionOptions o = ok;
+    design::DesignOptions o = ok;
     change(o);
     return o;
   };

@@ -41,7 +41,7 @@ std::string energy_failure_text(const sim::EnergyAudit& audit);
 Json solve_report_json(const sim::SolveReport& r);
 /// `design --json`: the start, the best design, what binds there, every evaluation and why the
 /// search stopped.
-Json design_json(const design::LeastFrictionResult& r, const sim::SimulationSpec& spec);
+Json design_json(const design::DesignResult& r, const sim::SimulationSpec& spec);
 /// One evaluation of a design (its parameters by name, the objective and the constraints).
 Json design_iterate_json(const design::Iterate& it);
 

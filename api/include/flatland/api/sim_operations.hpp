@@ -130,11 +130,13 @@ sim::TimeOptimalReport time_optimal(const sim::SimulationSpec& spec,
                                     const TimeOptimalRequest& request);
 
 /// `design`: the hand's shape and the butterfly's motion designed together (docs/DESIGN.md).
-/// Objective 1, least-friction, is built; shortest-period and robustness are refused, saying so.
+/// Objectives 1, least-friction, and 3, robustness (at `mu`, or the scene's contact.mu), are
+/// built; shortest-period is refused, saying so.
 struct DesignRequest {
   IntegratorOverrides integrator;
   std::string objective = "least-friction";
   std::optional<double> period;  ///< 2T, s; default: the scene's motion.period
+  std::optional<double> mu;      ///< robustness: the friction coefficient; default contact.mu
   bool motion_only = false;      ///< the scene's hand held, k alone free
   double shape_range = 0.25;
   double fn_margin = 0.05;
@@ -144,9 +146,8 @@ struct DesignRequest {
 /// The scene with the request checked (a polynomial hand and the butterfly motion, options in
 /// range; UsageError naming the option).
 sim::SimulationSpec prepare_design(Scene scene, const DesignRequest& request, Spelling spelling);
-design::LeastFrictionResult design(
-    const sim::SimulationSpec& spec, const DesignRequest& request,
-    const std::function<void(const design::Iterate&)>& progress = {});
+design::DesignResult design(const sim::SimulationSpec& spec, const DesignRequest& request,
+                            const std::function<void(const design::Iterate&)>& progress = {});
 
 /// `locus`: the butterfly solutions k(2T) at n periods evenly spaced over [from, to] (Fig. 7).
 struct LocusRequest {

@@ -26,7 +26,7 @@ using sim::format_significant;
 /// on the equality constraint and the feasibility test of an iterate.
 constexpr double kSolutionTolerance = 1e-7;
 
-void check_options(const sim::SimulationSpec& spec, const LeastFrictionOptions& o) {
+void check_options(const sim::SimulationSpec& spec, const DesignOptions& o) {
   auto require = [](bool ok, const std::string& line) {
     if (!ok) throw std::invalid_argument("design: " + line);
   };
@@ -42,6 +42,9 @@ void check_options(const sim::SimulationSpec& spec, const LeastFrictionOptions& 
   require(std::isfinite(o.k_min) && std::isfinite(o.k_max) && -2 < o.k_min && o.k_min < o.k_max,
           "k bounds: need -2 < k_min < k_max, finite; got [" + format_significant(o.k_min, 6) +
               ", " + format_significant(o.k_max, 6) + "]");
+  require(o.objective != Objective::kRobustness || (std::isfinite(o.mu) && o.mu > 0),
+          "mu: the robustness objective needs the friction coefficient, positive and finite; got " +
+              format_significant(o.mu, 6));
   require(std::isfinite(o.fn_margin) && o.fn_margin >= 0,
           "fn_margin: must be >= 0 and finite, got " + format_significant(o.fn_margin, 6));
   require(o.pieces >= 1 && o.pieces <= 100,
@@ -67,10 +70,10 @@ struct Evaluation {
 /// more variable, the epigraph's (the friction coefficient minimised, or the contact-loss margin
 /// maximised first); evaluations cached by point (NLopt asks for the objective and each
 /// constraint separately).
-class LeastFriction {
+class Design {
  public:
-  LeastFriction(const sim::SimulationSpec& spec, const LeastFrictionOptions& options,
-                const Parameters& start, const std::function<void(const Iterate&)>& progress)
+  Design(const sim::SimulationSpec& spec, const DesignOptions& options, const Parameters& start,
+         const std::function<void(const Iterate&)>& progress)
       : spec_(sim::paper_model(spec)), options_(options), start_(start), progress_(progress) {
     if (options.shape_free)
       free_ = {0, 1, 2, 3, 4};
@@ -126,8 +129,12 @@ class LeastFriction {
     e.iterate.mu_required = margins.mu_required.value;
     e.iterate.fn_min_ratio = margins.fn_min_ratio.value;
     e.iterate.s_T = end.run.final.s_h;
-    e.iterate.feasible = std::abs(e.iterate.s_T) <= kSolutionTolerance &&
-                         e.iterate.fn_min_ratio >= options_.fn_margin - kSolutionTolerance;
+    const bool robustness = options_.objective == Objective::kRobustness;
+    e.iterate.feasible =
+        std::abs(e.iterate.s_T) <= kSolutionTolerance &&
+        (robustness || e.iterate.fn_min_ratio >= options_.fn_margin - kSolutionTolerance);
+    if (robustness && mu)
+      e.iterate.robustness = std::min(margins.friction_margin.value, margins.fn_min_ratio.value);
     e.d_s_T = end.end.row(0);  // T is held (the period is)
     e.windows = margins.windows;
     return e;
@@ -142,7 +149,7 @@ class LeastFriction {
 
  private:
   sim::SimulationSpec spec_;
-  LeastFrictionOptions options_;
+  DesignOptions options_;
   Parameters start_;
   std::function<void(const Iterate&)> progress_;
   std::vector<int> free_;
@@ -154,7 +161,7 @@ class LeastFriction {
 /// NLopt's callbacks: C functions, so nothing may be thrown through them. An exception (an
 /// invalid hand, a run that rolled off) stops the search and is reported.
 template <class F>
-auto guarded(LeastFriction& lf, nlopt_opt opt, F&& f) -> decltype(f()) {
+auto guarded(Design& lf, nlopt_opt opt, F&& f) -> decltype(f()) {
   try {
     return f();
   } catch (const std::exception& e) {
@@ -164,12 +171,25 @@ auto guarded(LeastFriction& lf, nlopt_opt opt, F&& f) -> decltype(f()) {
   }
 }
 
+/// What a search's epigraph variable y (the last) is: the friction coefficient minimised (the
+/// least friction), the contact-loss margin maximised until it is restored, or the robustness
+/// margin maximised.
+enum class Goal { kLeastFriction, kRestoreMargin, kRobustness };
+
 struct Context {
-  LeastFriction* problem;
+  Design* problem;
   nlopt_opt opt;
   double fn_margin;
   double disk_radius;  ///< m
-  bool friction;       ///< the epigraph's variable is mu (else the contact-loss margin)
+  Goal goal;
+  double mu;  ///< kRobustness's friction coefficient
+
+  /// The mu the friction margins are taken at, at x: the variable y, the fixed mu, or none.
+  std::optional<double> margins_mu(const double* x, unsigned n) const {
+    if (goal == Goal::kLeastFriction) return x[n - 1];
+    if (goal == Goal::kRobustness) return mu;
+    return std::nullopt;
+  }
 };
 
 /// The epigraph's variable: the last.
@@ -177,16 +197,15 @@ double epigraph_objective(unsigned n, const double* x, double* grad, void* data)
   const auto& c = *static_cast<Context*>(data);
   if (grad) {
     std::fill(grad, grad + n, 0.0);
-    grad[n - 1] = c.friction ? 1.0 : -1.0;  // minimise mu, or maximise the margin
+    grad[n - 1] = c.goal == Goal::kLeastFriction ? 1.0 : -1.0;  // minimise mu, maximise a margin
   }
-  return c.friction ? x[n - 1] : -x[n - 1];
+  return c.goal == Goal::kLeastFriction ? x[n - 1] : -x[n - 1];
 }
 
 double solution_constraint(unsigned n, const double* x, double* grad, void* data) {
   auto& c = *static_cast<Context*>(data);
   return guarded(*c.problem, c.opt, [&] {
-    const Evaluation& e =
-        c.problem->at(x, c.friction ? std::optional<double>(x[n - 1]) : std::nullopt);
+    const Evaluation& e = c.problem->at(x, c.margins_mu(x, n));
     if (grad) c.problem->row(e.d_s_T, 0.0, grad);
     return e.iterate.s_T;
   });
@@ -198,29 +217,31 @@ void normal_force_constraints(unsigned m, double* result, unsigned n, const doub
                               void* data) {
   auto& c = *static_cast<Context*>(data);
   guarded(*c.problem, c.opt, [&] {
-    const Evaluation& e =
-        c.problem->at(x, c.friction ? std::optional<double>(x[n - 1]) : std::nullopt);
+    const Evaluation& e = c.problem->at(x, c.margins_mu(x, n));
+    const bool fixed = c.goal == Goal::kLeastFriction;  // else f_n >= y, the variable
     for (unsigned i = 0; i < m; ++i) {
       const sim::MarginSensitivity& fn = e.windows[i].fn_min_ratio;
-      const double bound = c.friction ? c.fn_margin : x[n - 1];
-      result[i] = bound - fn.value;
-      if (grad) c.problem->row(-fn.gradient, c.friction ? 0.0 : 1.0, grad + i * n);
+      result[i] = (fixed ? c.fn_margin : x[n - 1]) - fn.value;
+      if (grad) c.problem->row(-fn.gradient, fixed ? 0.0 : 1.0, grad + i * n);
     }
     return 0.0;
   });
 }
 
-/// Over each part of the window: mu f_n - |f_t| >= 0 at the epigraph's mu, whose derivative in
-/// mu is f_n at the part's extremum: m results <= 0.
+/// Over each part of the window: mu f_n - |f_t| >= 0 at the variable mu (the least friction; its
+/// derivative in mu is f_n at the part's extremum), or >= the variable y at the fixed mu (the
+/// robustness): m results <= 0.
 void friction_constraints(unsigned m, double* result, unsigned n, const double* x, double* grad,
                           void* data) {
   auto& c = *static_cast<Context*>(data);
   guarded(*c.problem, c.opt, [&] {
-    const Evaluation& e = c.problem->at(x, x[n - 1]);
+    const Evaluation& e = c.problem->at(x, c.margins_mu(x, n));
+    const bool variable_mu = c.goal == Goal::kLeastFriction;
     for (unsigned i = 0; i < m; ++i) {
       const sim::MarginSensitivity& margin = e.windows[i].friction_margin;
-      result[i] = -margin.value;
-      if (grad) c.problem->row(-margin.gradient, -margin.fn_ratio, grad + i * n);
+      result[i] = (variable_mu ? 0.0 : x[n - 1]) - margin.value;
+      if (grad)
+        c.problem->row(-margin.gradient, variable_mu ? -margin.fn_ratio : 1.0, grad + i * n);
     }
     return 0.0;
   });
@@ -307,16 +328,16 @@ namespace {
 /// friction's search starts strictly inside it.
 constexpr double kRestoreSpare = 0.02;
 
-/// One SLSQP search from x (the free parameters and the epigraph's variable, last): the least
-/// friction (`friction`), or the contact-loss margin restored to fn_margin + kRestoreSpare.
-nlopt_result optimise(LeastFriction& problem, const LeastFrictionOptions& options,
-                      double disk_radius, bool friction, std::vector<double>& x,
-                      const std::vector<double>& lower, const std::vector<double>& upper) {
+/// One SLSQP search from x (the free parameters and the epigraph's variable, last) for `goal`;
+/// restoring the margin stops at fn_margin + kRestoreSpare.
+nlopt_result search(Design& problem, const DesignOptions& options, double disk_radius, Goal goal,
+                    std::vector<double>& x, const std::vector<double>& lower,
+                    const std::vector<double>& upper) {
   const unsigned n = problem.variables();
   std::unique_ptr<std::remove_pointer_t<nlopt_opt>, decltype(&nlopt_destroy)> opt(
       nlopt_create(NLOPT_LD_SLSQP, n), &nlopt_destroy);
   if (!opt) throw std::runtime_error("design: NLopt could not create its SLSQP optimiser");
-  Context context{&problem, opt.get(), options.fn_margin, disk_radius, friction};
+  Context context{&problem, opt.get(), options.fn_margin, disk_radius, goal, options.mu};
   nlopt_set_lower_bounds(opt.get(), lower.data());
   nlopt_set_upper_bounds(opt.get(), upper.data());
   nlopt_set_min_objective(opt.get(), epigraph_objective, &context);
@@ -324,11 +345,11 @@ nlopt_result optimise(LeastFriction& problem, const LeastFrictionOptions& option
   const std::vector<double> tolerances(options.pieces, kSolutionTolerance);
   nlopt_add_inequality_mconstraint(opt.get(), options.pieces, normal_force_constraints, &context,
                                    tolerances.data());
-  if (friction)
+  if (goal == Goal::kRestoreMargin)
+    nlopt_set_stopval(opt.get(), -(options.fn_margin + kRestoreSpare));
+  else
     nlopt_add_inequality_mconstraint(opt.get(), options.pieces, friction_constraints, &context,
                                      tolerances.data());
-  else
-    nlopt_set_stopval(opt.get(), -(options.fn_margin + kRestoreSpare));
   if (options.shape_free) {
     nlopt_add_inequality_constraint(opt.get(), outline_constraint, &context, 0.0);
     nlopt_add_inequality_constraint(opt.get(), well_constraint, &context, 0.0);
@@ -341,7 +362,7 @@ nlopt_result optimise(LeastFriction& problem, const LeastFrictionOptions& option
 
 /// The constraints and bounds that hold with equality at p (to 1e-6 of their scale).
 std::vector<std::string> active_at(const Parameters& p, const Iterate& at,
-                                   const LeastFrictionOptions& options, const Parameters& start,
+                                   const DesignOptions& options, const Parameters& start,
                                    double disk_radius) {
   std::vector<std::string> active;
   for (int j = 0; j < 5; ++j) {
@@ -353,7 +374,8 @@ std::vector<std::string> active_at(const Parameters& p, const Iterate& at,
     if (p[j] - lo <= tol) active.push_back(name + " at its lower bound");
     if (hi - p[j] <= tol) active.push_back(name + " at its upper bound");
   }
-  if (at.fn_min_ratio - options.fn_margin <= 1e-6) active.push_back("the contact-loss margin");
+  if (options.objective == Objective::kLeastFriction && at.fn_min_ratio - options.fn_margin <= 1e-6)
+    active.push_back("the contact-loss margin");
   if (options.shape_free) {
     const double w = 2 * p[0] + p[2], v = 4 * p[1] + 6 * p[3];
     if (w - kMinimumWidth <= 1e-6) active.push_back("the outline's width (2a + c)");
@@ -369,6 +391,10 @@ constexpr double kMaxMu = 1e3, kMarginRange = 1e3;
 
 }  // namespace
 
+std::string to_string(Objective o) {
+  return o == Objective::kRobustness ? "robustness" : "least-friction";
+}
+
 sim::SimulationSpec spec_with(sim::SimulationSpec spec, const Parameters& p) {
   spec.hand.a = p[0];
   spec.hand.b = p[1];
@@ -379,12 +405,11 @@ sim::SimulationSpec spec_with(sim::SimulationSpec spec, const Parameters& p) {
   return spec;
 }
 
-LeastFrictionResult least_friction(const sim::SimulationSpec& spec,
-                                   const LeastFrictionOptions& options,
-                                   const std::function<void(const Iterate&)>& progress) {
+DesignResult optimise(const sim::SimulationSpec& spec, const DesignOptions& options,
+                      const std::function<void(const Iterate&)>& progress) {
   check_options(spec, options);
   const double disk_radius = *sim::build_problem(spec)->object.disk_radius;
-  LeastFrictionResult out;
+  DesignResult out;
   // The start: the spec's hand, and the k that brings the disk to s_h(T) = 0 (the paper's
   // motion-only search).
   const sim::SolveReport solved = sim::solve_k(spec, options.period);
@@ -395,7 +420,9 @@ LeastFrictionResult least_friction(const sim::SimulationSpec& spec,
         " is outside [" + format_significant(options.k_min, 6) + ", " +
         format_significant(options.k_max, 6) + "]");
 
-  LeastFriction problem(spec, options, out.start, progress);
+  out.objective = options.objective;
+  out.mu = options.mu;
+  Design problem(spec, options, out.start, progress);
   problem.add_simulations(solved.simulations);
   const std::vector<int>& free = problem.free();
   const std::size_t n = problem.variables();
@@ -412,39 +439,61 @@ LeastFrictionResult least_friction(const sim::SimulationSpec& spec,
       upper[i] = out.start[j] + half;
     }
   }
-  out.start_point = problem.at(x.data(), std::nullopt).iterate;
+  const bool robustness = options.objective == Objective::kRobustness;
+  const std::optional<double> mu = robustness ? std::optional<double>(options.mu) : std::nullopt;
+  out.start_point = problem.at(x.data(), mu).iterate;
 
-  Iterate from = out.start_point;
-  if (out.start_point.fn_min_ratio < options.fn_margin) {
-    // The motion-only solution comes too near contact loss (or loses contact): restore the
-    // margin first, if the free variables can: maximise y with f_n >= y over every part.
-    x[n - 1] = out.start_point.fn_min_ratio;
+  if (robustness) {
+    // Maximise y with mu f_n - |f_t| >= y and f_n >= y over every part; the start is a solution.
+    x[n - 1] = out.start_point.robustness;
     lower[n - 1] = -kMarginRange;
     upper[n - 1] = kMarginRange;
-    const nlopt_result r = optimise(problem, options, disk_radius, false, x, lower, upper);
-    out.restore_stop = nlopt_reason(r);
-    if (!problem.failure.empty()) out.restore_stop += ": " + problem.failure;
-    from = problem.at(x.data(), std::nullopt).iterate;
-    out.restored = from.feasible;
-  }
-  if (from.feasible) {
-    problem.failure.clear();
-    x[n - 1] = from.mu_required;  // finite: f_n > 0 throughout
-    lower[n - 1] = 0.0;
-    upper[n - 1] = std::max(kMaxMu, from.mu_required);
-    const nlopt_result r = optimise(problem, options, disk_radius, true, x, lower, upper);
+    const nlopt_result r =
+        search(problem, options, disk_radius, Goal::kRobustness, x, lower, upper);
     out.stop = nlopt_reason(r);
     if (!problem.failure.empty()) out.stop += ": " + problem.failure;
   } else {
-    out.stop = "no feasible start: the contact-loss margin could not be restored (" +
-               out.restore_stop + ")";
+    Iterate from = out.start_point;
+    if (out.start_point.fn_min_ratio < options.fn_margin) {
+      // The motion-only solution comes too near contact loss (or loses contact): restore the
+      // margin first, if the free variables can: maximise y with f_n >= y over every part.
+      x[n - 1] = out.start_point.fn_min_ratio;
+      lower[n - 1] = -kMarginRange;
+      upper[n - 1] = kMarginRange;
+      const nlopt_result r =
+          search(problem, options, disk_radius, Goal::kRestoreMargin, x, lower, upper);
+      out.restore_stop = nlopt_reason(r);
+      if (!problem.failure.empty()) out.restore_stop += ": " + problem.failure;
+      from = problem.at(x.data(), std::nullopt).iterate;
+      out.restored = from.feasible;
+    }
+    if (from.feasible) {
+      problem.failure.clear();
+      x[n - 1] = from.mu_required;  // finite: f_n > 0 throughout
+      lower[n - 1] = 0.0;
+      upper[n - 1] = std::max(kMaxMu, from.mu_required);
+      const nlopt_result r =
+          search(problem, options, disk_radius, Goal::kLeastFriction, x, lower, upper);
+      out.stop = nlopt_reason(r);
+      if (!problem.failure.empty()) out.stop += ": " + problem.failure;
+    } else {
+      out.stop = "no feasible start: the contact-loss margin could not be restored (" +
+                 out.restore_stop + ")";
+    }
   }
 
   out.iterates = problem.iterates();
   out.simulations = problem.simulations();
+  // The best feasible iterate; a robustness iterate counts only with its margins at the fixed mu
+  // (those of the restoring search have none).
+  auto better = [&](const Iterate& a, const Iterate& b) {
+    return robustness ? a.robustness > b.robustness : a.mu_required < b.mu_required;
+  };
   out.best = out.start_point;
   for (const Iterate& it : out.iterates)
-    if (it.feasible && (!out.best.feasible || it.mu_required < out.best.mu_required)) out.best = it;
+    if (it.feasible && (!robustness || !std::isnan(it.robustness)) &&
+        (!out.best.feasible || better(it, out.best)))
+      out.best = it;
   if (out.best.feasible)
     out.active = active_at(out.best.parameters, out.best, options, out.start, disk_radius);
   return out;
