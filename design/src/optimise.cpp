@@ -443,43 +443,35 @@ DesignResult optimise(const sim::SimulationSpec& spec, const DesignOptions& opti
   const std::optional<double> mu = robustness ? std::optional<double>(options.mu) : std::nullopt;
   out.start_point = problem.at(x.data(), mu).iterate;
 
+  // One search for `goal` from x, its variable y starting at y0 within [lo, hi]; why it stopped.
+  auto run_search = [&](Goal goal, double y0, double lo, double hi) {
+    problem.failure.clear();
+    x[n - 1] = y0;
+    lower[n - 1] = lo;
+    upper[n - 1] = hi;
+    std::string stop = nlopt_reason(search(problem, options, disk_radius, goal, x, lower, upper));
+    return problem.failure.empty() ? stop : stop + ": " + problem.failure;
+  };
   if (robustness) {
     // Maximise y with mu f_n - |f_t| >= y and f_n >= y over every part; the start is a solution.
-    x[n - 1] = out.start_point.robustness;
-    lower[n - 1] = -kMarginRange;
-    upper[n - 1] = kMarginRange;
-    const nlopt_result r =
-        search(problem, options, disk_radius, Goal::kRobustness, x, lower, upper);
-    out.stop = nlopt_reason(r);
-    if (!problem.failure.empty()) out.stop += ": " + problem.failure;
+    out.stop =
+        run_search(Goal::kRobustness, out.start_point.robustness, -kMarginRange, kMarginRange);
   } else {
     Iterate from = out.start_point;
     if (out.start_point.fn_min_ratio < options.fn_margin) {
       // The motion-only solution comes too near contact loss (or loses contact): restore the
       // margin first, if the free variables can: maximise y with f_n >= y over every part.
-      x[n - 1] = out.start_point.fn_min_ratio;
-      lower[n - 1] = -kMarginRange;
-      upper[n - 1] = kMarginRange;
-      const nlopt_result r =
-          search(problem, options, disk_radius, Goal::kRestoreMargin, x, lower, upper);
-      out.restore_stop = nlopt_reason(r);
-      if (!problem.failure.empty()) out.restore_stop += ": " + problem.failure;
+      out.restore_stop = run_search(Goal::kRestoreMargin, out.start_point.fn_min_ratio,
+                                    -kMarginRange, kMarginRange);
       from = problem.at(x.data(), std::nullopt).iterate;
       out.restored = from.feasible;
     }
-    if (from.feasible) {
-      problem.failure.clear();
-      x[n - 1] = from.mu_required;  // finite: f_n > 0 throughout
-      lower[n - 1] = 0.0;
-      upper[n - 1] = std::max(kMaxMu, from.mu_required);
-      const nlopt_result r =
-          search(problem, options, disk_radius, Goal::kLeastFriction, x, lower, upper);
-      out.stop = nlopt_reason(r);
-      if (!problem.failure.empty()) out.stop += ": " + problem.failure;
-    } else {
+    if (from.feasible)  // mu_required is finite: f_n > 0 throughout
+      out.stop = run_search(Goal::kLeastFriction, from.mu_required, 0.0,
+                            std::max(kMaxMu, from.mu_required));
+    else
       out.stop = "no feasible start: the contact-loss margin could not be restored (" +
                  out.restore_stop + ")";
-    }
   }
 
   out.iterates = problem.iterates();
