@@ -120,22 +120,21 @@ class Design {
     o.events.s_h_bounds = std::make_pair(-3.0, 3.0);
     const sim::ForceMarginSensitivities margins = sim::force_margin_sensitivities(
         problem, s.initial, o, s.initial.t0, T, mu, options_.pieces);
-    const sim::RunSensitivities end = sim::simulate_with_sensitivities(problem, s.initial, o);
-    simulations_ += margins.runs + 1;
+    simulations_ += margins.runs;
     Evaluation e;
     e.mu = mu;
     e.iterate.evaluation = static_cast<int>(iterates_.size()) + 1;
     e.iterate.parameters = p;
     e.iterate.mu_required = margins.mu_required.value;
     e.iterate.fn_min_ratio = margins.fn_min_ratio.value;
-    e.iterate.s_T = end.run.final.s_h;
+    e.iterate.s_T = margins.run.final.s_h;
     const bool robustness = options_.objective == Objective::kRobustness;
     e.iterate.feasible =
         std::abs(e.iterate.s_T) <= kSolutionTolerance &&
         (robustness || e.iterate.fn_min_ratio >= options_.fn_margin - kSolutionTolerance);
     if (robustness && mu)
       e.iterate.robustness = std::min(margins.friction_margin.value, margins.fn_min_ratio.value);
-    e.d_s_T = end.end.row(0);  // T is held (the period is)
+    e.d_s_T = margins.end.row(0);  // T is held (the period is)
     e.windows = margins.windows;
     return e;
   }

@@ -282,7 +282,11 @@ ForceMarginSensitivities force_margin_sensitivities(std::shared_ptr<const Rollin
   ForceMarginSensitivities out;
   RunOptions recorded = options;
   recorded.record = true;
-  out.run = simulate(problem, init, recorded);
+  // The recorded run carries its sensitivities: the same run simulate() gives, and d(s_h,
+  // sdot_h)/dp at its end without a run of its own (a design needs them at T).
+  RunSensitivities whole = simulate_with_sensitivities(problem, init, recorded);
+  out.run = std::move(whole.run);
+  out.end = whole.end;
   out.runs = 1;
   out.rhs_evals = out.run.stats.rhs_evals;
   if (out.run.final.t < t_to)
@@ -298,6 +302,7 @@ ForceMarginSensitivities force_margin_sensitivities(std::shared_ptr<const Rollin
     ButterflyJacobian S;
   };
   std::map<double, StateAt> states;
+  states.emplace(out.run.final.t, StateAt{out.run.final.s_h, out.run.final.sdot_h, out.end});
   auto state_at = [&](double t) -> const StateAt& {
     if (auto it = states.find(t); it != states.end()) return it->second;
     StateAt x{init.s_h, init.sdot_h, ButterflyJacobian::Zero()};

@@ -115,6 +115,19 @@ TEST(LeastFriction, WithTheShapeFreeIsFasterThanThePapersHandCanBe) {
   EXPECT_TRUE(std::isfinite(check.mu_required));
 }
 
+// With the hand held at 0.9 s, k alone cannot keep contact: no design is feasible, and the result
+// says so instead of reporting the start as a design.
+TEST(LeastFriction, WithTheShapeHeldAtAPeriodTooShortNothingIsFeasible) {
+  design::DesignOptions o;
+  o.period = 0.9;
+  o.shape_free = false;
+  const design::DesignResult r = design::optimise(papers_spec(), o);
+  EXPECT_FALSE(r.best.feasible);
+  EXPECT_FALSE(r.restored);
+  EXPECT_NE(r.stop.find("no feasible start"), std::string::npos) << r.stop;
+  EXPECT_TRUE(r.active.empty());
+}
+
 TEST(LeastFriction, RefusesBadOptionsWithOneLine) {
   const auto refused = [](design::DesignOptions o, sim::SimulationSpec s, const char* what) {
     try {

@@ -18,7 +18,7 @@ namespace flatland::design {
 /// and the motion's k and period 2T (s).
 using Parameters = std::array<double, 6>;
 
-/// What a design optimises (the objectives; the shortest period is not built yet).
+/// What a design optimises (docs/DESIGN.md; the shortest period, objective 2, is not built yet).
 enum class Objective {
   /// 1: the least friction coefficient a butterfly of the period needs, keeping fn_margin.
   kLeastFriction,

@@ -99,7 +99,9 @@ struct ForceMarginSensitivities {
   /// constraint stays smooth where the whole window's extremum jumps from one local extremum to
   /// another (the friction the paper's butterflies need peaks twice before T).
   std::vector<WindowMargins> windows;
-  RunResult run;       ///< the recorded run they were found on
+  RunResult run;  ///< the recorded run they were found on
+  /// d(s_h, sdot_h)/dp at the run's end, its time held (RunSensitivities::end of that run).
+  ButterflyJacobian end = ButterflyJacobian::Zero();
   int runs = 0;        ///< runs integrated: the recorded one and one to each extremum's time
   long rhs_evals = 0;  ///< over all of them
 };
